@@ -1,0 +1,31 @@
+# Settings for vmap's own tests and examples only; nothing here reaches consumers of
+# vmap::vmap (the library sets no global flags).
+
+option(VMAP_WARNINGS_AS_ERRORS "Treat warnings in vmap's own tests and examples as errors" OFF)
+
+set(VMAP_SHARED_DIR "${PROJECT_SOURCE_DIR}/../shared" CACHE PATH
+    "Folder with the shared test data (data/) and models (models/)")
+# Default from the environment so CI can require the data while running the README's
+# exact command; absence of the folder is then a configure error, never a skipped test.
+if(DEFINED ENV{VMAP_REQUIRE_SHARED_DATA} AND "$ENV{VMAP_REQUIRE_SHARED_DATA}")
+  set(_vmap_require_default ON)
+else()
+  set(_vmap_require_default OFF)
+endif()
+option(VMAP_REQUIRE_SHARED_DATA "Fail instead of skipping when VMAP_SHARED_DIR is missing" ${_vmap_require_default})
+
+get_filename_component(VMAP_SHARED_DIR "${VMAP_SHARED_DIR}" ABSOLUTE)
+if(EXISTS "${VMAP_SHARED_DIR}/data" AND EXISTS "${VMAP_SHARED_DIR}/models")
+  set(VMAP_HAVE_SHARED_DATA ON)
+else()
+  set(VMAP_HAVE_SHARED_DATA OFF)
+  if(VMAP_REQUIRE_SHARED_DATA)
+    message(FATAL_ERROR "VMAP_REQUIRE_SHARED_DATA is ON but ${VMAP_SHARED_DIR} has no data/ and models/. "
+                        "Point -DVMAP_SHARED_DIR=... at the shared folder.")
+  endif()
+  message(STATUS "vmap: ${VMAP_SHARED_DIR} not found: tests on real data and models will be skipped")
+endif()
+
+add_library(vmap_dev_flags INTERFACE)
+target_compile_options(vmap_dev_flags INTERFACE -Wall -Wextra -Wpedantic -Wshadow -Wnon-virtual-dtor
+  $<$<BOOL:${VMAP_WARNINGS_AS_ERRORS}>:-Werror>)

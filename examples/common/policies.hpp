@@ -1,0 +1,35 @@
+#pragma once
+
+// Run-time choice of the compile-time policies for the command line and benchmarks:
+// the name of a descriptor or estimator picks the concrete type once, and the work
+// runs inside a generic lambda instantiated for each type (no virtual call per feature).
+
+#include <vmap/core/error.hpp>
+#include <vmap/features/akaze.hpp>
+#include <vmap/features/orb.hpp>
+#include <vmap/features/sift.hpp>
+#include <vmap/geometry/fundamental.hpp>
+
+#include <string>
+#include <utility>
+
+namespace vmap::examples {
+
+inline RobustMethod parse_method(const std::string& name) {
+  if (name == "magsac") return RobustMethod::magsac;
+  if (name == "ransac") return RobustMethod::ransac;
+  if (name == "lmeds") return RobustMethod::lmeds;
+  if (name == "8point") return RobustMethod::eight_point;
+  detail::fail("--estimator: unknown method '" + name + "' (choose magsac, ransac, lmeds or 8point)");
+}
+
+/// Calls f(descriptor) with the Descriptor named `name` ("orb", "akaze", "sift").
+template <class F>
+decltype(auto) with_descriptor(const std::string& name, int features, F&& f) {
+  if (name == "orb") return std::forward<F>(f)(OrbDescriptor({.features = features}));
+  if (name == "akaze") return std::forward<F>(f)(AkazeDescriptor{});
+  if (name == "sift") return std::forward<F>(f)(SiftDescriptor({.features = features}));
+  detail::fail("--features: unknown descriptor '" + name + "' (choose orb, akaze or sift)");
+}
+
+}  // namespace vmap::examples

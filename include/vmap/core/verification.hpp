@@ -1,0 +1,55 @@
+#pragma once
+
+#include <opencv2/core.hpp>
+
+#include <cstdint>
+#include <string_view>
+#include <vector>
+
+namespace vmap {
+
+/// Why a verification did or did not produce a model. Verification failures are values,
+/// not exceptions: "too few matches" is an everyday outcome of a fast-moving camera.
+enum class VerificationStatus : std::uint8_t {
+  verified,         ///< a model was estimated and at least `min_inliers` support it
+  too_few_matches,  ///< fewer correspondences than the method's minimal sample
+  no_model,         ///< the estimator found no model (e.g. all points identical)
+  too_few_inliers,  ///< a model was found but fewer inliers than the configured floor
+};
+
+/// A configuration in which the epipolar geometry is not determined even though the
+/// fundamental matrix fits: all points on one plane, or a camera that only rotated.
+/// Both are explained by a single homography (Hartley & Zisserman, sec. 11.9).
+enum class Degeneracy : std::uint8_t {
+  none,
+  homography,  ///< a homography explains (nearly) all model inliers
+};
+
+[[nodiscard]] constexpr std::string_view to_string(VerificationStatus s) noexcept {
+  switch (s) {
+    case VerificationStatus::verified: return "verified";
+    case VerificationStatus::too_few_matches: return "too few matches";
+    case VerificationStatus::no_model: return "no model";
+    case VerificationStatus::too_few_inliers: return "too few inliers";
+  }
+  return "unknown";
+}
+
+[[nodiscard]] constexpr std::string_view to_string(Degeneracy d) noexcept {
+  return d == Degeneracy::none ? "none" : "homography (planar scene or pure rotation)";
+}
+
+/// The result of geometric verification of a set of matches.
+struct Verification {
+  VerificationStatus status = VerificationStatus::too_few_matches;
+  cv::Matx33d model = cv::Matx33d::zeros();  ///< F (x2^T F x1 = 0) or H (x2 ~ H x1)
+  std::vector<std::uint8_t> inlier_mask;     ///< one entry per match, 1 = inlier
+  int inliers = 0;                           ///< number of ones in inlier_mask
+  int matches = 0;                           ///< correspondences that were given
+  Degeneracy degeneracy = Degeneracy::none;
+  int homography_inliers = 0;  ///< model inliers a homography also explains (0 if unchecked)
+
+  [[nodiscard]] bool ok() const noexcept { return status == VerificationStatus::verified; }
+};
+
+}  // namespace vmap

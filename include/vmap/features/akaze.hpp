@@ -1,0 +1,55 @@
+#pragma once
+
+#include <vmap/core/concepts.hpp>
+#include <vmap/core/error.hpp>
+#include <vmap/features/detail/grey.hpp>
+
+#include <opencv2/features2d.hpp>
+
+#include <cmath>
+#include <string>
+
+namespace vmap {
+
+/// Options of A-KAZE (Alcantarilla et al. 2013) with the binary M-LDB descriptor.
+struct AkazeOptions {
+  float threshold = 0.001f;  ///< detector response threshold, > 0
+  int octaves = 4;           ///< maximum octave evolution, >= 1
+  int octave_layers = 4;     ///< sublevels per octave, >= 1
+};
+
+/// A-KAZE keypoints + 486-bit M-LDB descriptors, compared by Hamming distance; the
+/// feature of the GCS localization paper (Trujillo-Romero 2024).
+class AkazeDescriptor {
+ public:
+  explicit AkazeDescriptor(const AkazeOptions& options = {}) : options_(options) {
+    const auto& o = options_;
+    detail::check(std::isfinite(o.threshold) && o.threshold > 0.0f,
+                  "AkazeOptions.threshold must be a finite number > 0, got " + std::to_string(o.threshold));
+    detail::check(o.octaves >= 1, "AkazeOptions.octaves must be >= 1, got " + std::to_string(o.octaves));
+    detail::check(o.octave_layers >= 1,
+                  "AkazeOptions.octave_layers must be >= 1, got " + std::to_string(o.octave_layers));
+    akaze_ = cv::AKAZE::create(cv::AKAZE::DESCRIPTOR_MLDB, 0, 3, o.threshold, o.octaves,
+                               o.octave_layers, cv::KAZE::DIFF_PM_G2);
+  }
+
+  [[nodiscard]] Features extract(const cv::Mat& image) {
+    detail::to_grey8(image, grey_, "A-KAZE extract");
+    Features f;
+    f.norm = cv::NORM_HAMMING;
+    f.image_size = grey_.size();
+    akaze_->detectAndCompute(grey_, cv::noArray(), f.keypoints, f.descriptors);
+    return f;
+  }
+
+  [[nodiscard]] const AkazeOptions& options() const noexcept { return options_; }
+
+ private:
+  AkazeOptions options_;
+  cv::Ptr<cv::AKAZE> akaze_;
+  cv::Mat grey_;
+};
+
+static_assert(Descriptor<AkazeDescriptor>);
+
+}  // namespace vmap

@@ -1,0 +1,41 @@
+#pragma once
+
+#include <vmap/core/error.hpp>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <string>
+#include <string_view>
+
+namespace vmap::detail {
+
+/// Human-readable cv::Mat type ("CV_8UC2") for error messages.
+inline std::string type_name(int type) { return cv::typeToString(type); }
+
+/// Converts any supported image to the 8-bit single-channel image the detectors want.
+/// Supported: 8-bit or 16-bit, 1 (grey), 3 (BGR) or 4 (BGRA) channels. 16-bit is scaled
+/// by 1/257 so 65535 maps to 255. `who` names the caller for the error message.
+inline void to_grey8(const cv::Mat& image, cv::Mat& grey, std::string_view who) {
+  if (image.empty())
+    fail(std::string(who) + ": the image is empty (0 x 0); was the frame read?");
+  const int depth = image.depth();
+  const int channels = image.channels();
+  if (depth != CV_8U && depth != CV_16U)
+    fail(std::string(who) + ": unsupported image depth " + type_name(image.type()) +
+         "; expected 8-bit or 16-bit unsigned");
+  if (channels != 1 && channels != 3 && channels != 4)
+    fail(std::string(who) + ": unsupported image with " + std::to_string(channels) +
+         " channels (" + type_name(image.type()) + "); expected 1 (grey), 3 (BGR) or 4 (BGRA)");
+  cv::Mat eight;
+  if (depth == CV_16U)
+    image.convertTo(eight, CV_MAKETYPE(CV_8U, channels), 1.0 / 257.0);
+  else
+    eight = image;
+  if (channels == 1)
+    grey = eight;
+  else
+    cv::cvtColor(eight, grey, channels == 3 ? cv::COLOR_BGR2GRAY : cv::COLOR_BGRA2GRAY);
+}
+
+}  // namespace vmap::detail

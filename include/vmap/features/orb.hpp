@@ -1,0 +1,59 @@
+#pragma once
+
+#include <vmap/core/concepts.hpp>
+#include <vmap/core/error.hpp>
+#include <vmap/features/detail/grey.hpp>
+
+#include <opencv2/features2d.hpp>
+
+#include <cmath>
+#include <string>
+
+namespace vmap {
+
+/// Options of the ORB detector/descriptor (Rublee et al. 2011), OpenCV's defaults
+/// except the feature count, which follows the visual-map paper's experiments (1000).
+struct OrbOptions {
+  int features = 1000;        ///< maximum number of keypoints kept
+  float scale_factor = 1.2f;  ///< pyramid decimation ratio, > 1
+  int levels = 8;             ///< pyramid levels, >= 1
+  int edge_threshold = 31;    ///< border where no keypoint is detected, in pixels
+  int fast_threshold = 20;    ///< FAST corner threshold (intensity difference)
+};
+
+/// ORB keypoints + 256-bit binary descriptors, compared by Hamming distance.
+/// One object per thread: cv::ORB keeps scratch buffers between calls.
+class OrbDescriptor {
+ public:
+  explicit OrbDescriptor(const OrbOptions& options = {}) : options_(options) {
+    const auto& o = options_;
+    detail::check(o.features > 0, "OrbOptions.features must be > 0, got " + std::to_string(o.features));
+    detail::check(std::isfinite(o.scale_factor) && o.scale_factor > 1.0f,
+                  "OrbOptions.scale_factor must be a finite number > 1, got " + std::to_string(o.scale_factor));
+    detail::check(o.levels >= 1, "OrbOptions.levels must be >= 1, got " + std::to_string(o.levels));
+    detail::check(o.edge_threshold >= 0, "OrbOptions.edge_threshold must be >= 0");
+    detail::check(o.fast_threshold > 0, "OrbOptions.fast_threshold must be > 0");
+    orb_ = cv::ORB::create(o.features, o.scale_factor, o.levels, o.edge_threshold, 0, 2,
+                           cv::ORB::HARRIS_SCORE, o.edge_threshold, o.fast_threshold);
+  }
+
+  [[nodiscard]] Features extract(const cv::Mat& image) {
+    detail::to_grey8(image, grey_, "ORB extract");
+    Features f;
+    f.norm = cv::NORM_HAMMING;
+    f.image_size = grey_.size();
+    orb_->detectAndCompute(grey_, cv::noArray(), f.keypoints, f.descriptors);
+    return f;
+  }
+
+  [[nodiscard]] const OrbOptions& options() const noexcept { return options_; }
+
+ private:
+  OrbOptions options_;
+  cv::Ptr<cv::ORB> orb_;
+  cv::Mat grey_;  // reused between frames
+};
+
+static_assert(Descriptor<OrbDescriptor>);
+
+}  // namespace vmap

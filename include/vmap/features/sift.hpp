@@ -1,0 +1,58 @@
+#pragma once
+
+#include <vmap/core/concepts.hpp>
+#include <vmap/core/error.hpp>
+#include <vmap/features/detail/grey.hpp>
+
+#include <opencv2/features2d.hpp>
+
+#include <cmath>
+#include <string>
+
+namespace vmap {
+
+/// Options of SIFT (Lowe 2004), OpenCV's defaults except a bounded feature count.
+struct SiftOptions {
+  int features = 1000;                ///< keypoints kept (best first); 0 keeps all
+  int octave_layers = 3;              ///< layers per octave, >= 1
+  double contrast_threshold = 0.04;   ///< > 0
+  double edge_threshold = 10.0;       ///< > 0
+  double sigma = 1.6;                 ///< Gaussian of the first octave, > 0
+};
+
+/// SIFT keypoints + 128-float descriptors, compared by L2 distance.
+class SiftDescriptor {
+ public:
+  explicit SiftDescriptor(const SiftOptions& options = {}) : options_(options) {
+    const auto& o = options_;
+    detail::check(o.features >= 0, "SiftOptions.features must be >= 0, got " + std::to_string(o.features));
+    detail::check(o.octave_layers >= 1, "SiftOptions.octave_layers must be >= 1");
+    detail::check(std::isfinite(o.contrast_threshold) && o.contrast_threshold > 0,
+                  "SiftOptions.contrast_threshold must be a finite number > 0");
+    detail::check(std::isfinite(o.edge_threshold) && o.edge_threshold > 0,
+                  "SiftOptions.edge_threshold must be a finite number > 0");
+    detail::check(std::isfinite(o.sigma) && o.sigma > 0, "SiftOptions.sigma must be a finite number > 0");
+    sift_ = cv::SIFT::create(o.features, o.octave_layers, o.contrast_threshold, o.edge_threshold,
+                             o.sigma);
+  }
+
+  [[nodiscard]] Features extract(const cv::Mat& image) {
+    detail::to_grey8(image, grey_, "SIFT extract");
+    Features f;
+    f.norm = cv::NORM_L2;
+    f.image_size = grey_.size();
+    sift_->detectAndCompute(grey_, cv::noArray(), f.keypoints, f.descriptors);
+    return f;
+  }
+
+  [[nodiscard]] const SiftOptions& options() const noexcept { return options_; }
+
+ private:
+  SiftOptions options_;
+  cv::Ptr<cv::SIFT> sift_;
+  cv::Mat grey_;
+};
+
+static_assert(Descriptor<SiftDescriptor>);
+
+}  // namespace vmap

@@ -1,0 +1,120 @@
+#pragma once
+
+#include <vmap/core/concepts.hpp>
+#include <vmap/core/error.hpp>
+#include <vmap/geometry/detail/robust.hpp>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace vmap {
+
+/// Robust estimation methods for the two-view models.
+enum class RobustMethod {
+  magsac,       ///< MAGSAC++ (cv::USAC_MAGSAC), Barath et al. 2020
+  ransac,       ///< classic RANSAC (cv::FM_RANSAC / cv::RANSAC)
+  lmeds,        ///< least median of squares
+  eight_point,  ///< plain 8-point (fundamental only), every match is an inlier
+};
+
+struct FundamentalOptions {
+  RobustMethod method = RobustMethod::magsac;
+  double threshold_px = 1.0;  ///< max. distance to the epipolar line, pixels (RANSAC/MAGSAC)
+  double confidence = 0.99;   ///< desired probability of an all-inlier sample, in (0, 1)
+  int max_iterations = 1000;  ///< OpenCV's default for findFundamentalMat
+  int min_inliers = 8;        ///< floor below which the model is not trusted
+  /// Fit a homography to the inliers and report Degeneracy::homography when it explains
+  /// at least `degeneracy_ratio` of them (planar scene or pure rotation). Costs one
+  /// homography RANSAC on the inliers (which, being mostly consistent, ends early).
+  bool check_degeneracy = true;
+  double degeneracy_ratio = 0.9;
+  std::uint64_t seed = 0;  ///< 0: matches in the given order; otherwise a seeded shuffle
+};
+
+/// Fundamental-matrix verification: x_b^T F x_a = 0 for every inlier correspondence.
+/// Fewer than 8 matches yields `too_few_matches` for every method: OpenCV 4.6's USAC
+/// throws below 7 points and returns stacked 7-point solutions at exactly 7, so 8 is the
+/// smallest count at which all methods return one model. Const and thread-safe.
+class FundamentalEstimator {
+ public:
+  static constexpr int minimal_matches = 8;
+
+  explicit FundamentalEstimator(const FundamentalOptions& options = {}) : options_(options) {
+    detail::check_threshold_options(options_.threshold_px, options_.confidence, options_.max_iterations,
+                                    options_.min_inliers, "FundamentalOptions");
+    detail::check(std::isfinite(options_.degeneracy_ratio) && options_.degeneracy_ratio > 0 &&
+                      options_.degeneracy_ratio <= 1,
+                  "FundamentalOptions.degeneracy_ratio must be in (0, 1], got " +
+                      std::to_string(options_.degeneracy_ratio));
+  }
+
+  [[nodiscard]] Verification verify(const Features& a, const Features& b, const Matches& matches) const {
+    Verification v;
+    v.matches = static_cast<int>(matches.size());
+    if (v.matches < minimal_matches) return v;  // status: too_few_matches
+    std::vector<cv::Point2f> pa, pb;
+    std::vector<int> order;
+    detail::gather_points(a, b, matches, options_.seed, pa, pb, order);
+    cv::Mat mask;
+    cv::Mat F;
+    try {
+      F = cv::findFundamentalMat(pa, pb, opencv_method(), options_.threshold_px, options_.confidence,
+                                 options_.max_iterations, mask);
+    } catch (const cv::Exception&) {
+      // OpenCV throws on inputs it cannot fit at all (e.g. every point identical):
+      // an expected outcome for a verifier, reported as "no model".
+      v.status = VerificationStatus::no_model;
+      return v;
+    }
+    detail::fill_from_estimate(F, mask, order, options_.min_inliers, v);
+    if (v.ok() && options_.check_degeneracy) check_degeneracy(pa, pb, order, v);
+    return v;
+  }
+
+  [[nodiscard]] const FundamentalOptions& options() const noexcept { return options_; }
+
+ private:
+  [[nodiscard]] int opencv_method() const noexcept {
+    switch (options_.method) {
+      case RobustMethod::magsac: return cv::USAC_MAGSAC;
+      case RobustMethod::ransac: return cv::FM_RANSAC;
+      case RobustMethod::lmeds: return cv::FM_LMEDS;
+      case RobustMethod::eight_point: return cv::FM_8POINT;
+    }
+    return cv::USAC_MAGSAC;
+  }
+
+  void check_degeneracy(const std::vector<cv::Point2f>& pa, const std::vector<cv::Point2f>& pb,
+                        const std::vector<int>& order, Verification& v) const {
+    std::vector<cv::Point2f> ia, ib;
+    ia.reserve(static_cast<std::size_t>(v.inliers));
+    ib.reserve(static_cast<std::size_t>(v.inliers));
+    for (std::size_t k = 0; k < order.size(); ++k)
+      if (v.inlier_mask[static_cast<std::size_t>(order[k])] != 0) {
+        ia.push_back(pa[k]);
+        ib.push_back(pb[k]);
+      }
+    if (ia.size() < 4) return;
+    cv::Mat hmask;
+    cv::Mat H;
+    try {
+      H = cv::findHomography(ia, ib, cv::RANSAC, options_.threshold_px, hmask, 2000, options_.confidence);
+    } catch (const cv::Exception&) {
+      return;  // no homography fits: certainly not degenerate
+    }
+    if (H.empty()) return;
+    v.homography_inliers = cv::countNonZero(hmask);
+    if (v.homography_inliers >= options_.degeneracy_ratio * v.inliers) v.degeneracy = Degeneracy::homography;
+  }
+
+  FundamentalOptions options_;
+};
+
+static_assert(Estimator<FundamentalEstimator>);
+
+}  // namespace vmap

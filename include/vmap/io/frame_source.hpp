@@ -1,0 +1,299 @@
+#pragma once
+
+// Frame sources: a video file, a folder of images, a text list of image paths, or a TUM
+// RGB-D `rgb.txt`, read one frame at a time with optional start/end/stride/resize.
+
+#include <vmap/core/error.hpp>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <algorithm>
+#include <cctype>
+#include <cstddef>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace vmap {
+
+/// One frame of a sequence. `index` is the frame's position in the whole sequence
+/// (before start/stride are applied), so it lines up with ground-truth files.
+struct Frame {
+  cv::Mat image;
+  std::size_t index = 0;
+  std::string name;        ///< file name, or "<video>#<index>"
+  double timestamp = 0.0;  ///< TUM timestamp, video position in seconds, else the index
+};
+
+/// A frame that could not be decoded and was skipped.
+struct SkippedFrame {
+  std::size_t index = 0;
+  std::string name;
+  std::string reason;
+};
+
+enum class SourceKind { video, image_folder, image_list, tum_rgb };
+
+struct FrameSourceOptions {
+  std::size_t start = 0;                                     ///< first frame index read
+  std::size_t end = std::numeric_limits<std::size_t>::max();  ///< one past the last index
+  std::size_t stride = 1;                                    ///< read every stride-th frame, >= 1
+  cv::Size resize{};        ///< output size; (0, 0) keeps the input size
+  bool grey = false;        ///< decode straight to 8-bit grey (faster for ORB/A-KAZE/SIFT)
+  /// Called for each unreadable frame inside a sequence before it is skipped;
+  /// `FrameSource::skipped()` keeps the same list.
+  std::function<void(const SkippedFrame&)> on_skip;
+};
+
+namespace detail {
+
+/// "img2.png" < "img10.png": digit runs compare by value, the rest byte-wise.
+inline bool natural_less(const std::string& a, const std::string& b) {
+  std::size_t i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    const auto ca = static_cast<unsigned char>(a[i]);
+    const auto cb = static_cast<unsigned char>(b[j]);
+    if (std::isdigit(ca) && std::isdigit(cb)) {
+      std::size_t ie = i, je = j;
+      while (ie < a.size() && std::isdigit(static_cast<unsigned char>(a[ie]))) ++ie;
+      while (je < b.size() && std::isdigit(static_cast<unsigned char>(b[je]))) ++je;
+      std::size_t iz = i, jz = j;  // skip leading zeros, then compare by length and digits
+      while (iz + 1 < ie && a[iz] == '0') ++iz;
+      while (jz + 1 < je && b[jz] == '0') ++jz;
+      if (ie - iz != je - jz) return ie - iz < je - jz;
+      const int c = a.compare(iz, ie - iz, b, jz, je - jz);
+      if (c != 0) return c < 0;
+      if (ie - i != je - j) return ie - i < je - j;  // "01" after "1": stable, total order
+      i = ie;
+      j = je;
+    } else {
+      if (ca != cb) return ca < cb;
+      ++i;
+      ++j;
+    }
+  }
+  return a.size() - i < b.size() - j;
+}
+
+inline bool is_image_file(const std::filesystem::path& p) {
+  std::string ext = p.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  static const char* const known[] = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm", ".webp"};
+  return std::any_of(std::begin(known), std::end(known), [&](const char* k) { return ext == k; });
+}
+
+inline std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t\r\n");
+  if (b == std::string::npos) return {};
+  const auto e = s.find_last_not_of(" \t\r\n");
+  return s.substr(b, e - b + 1);
+}
+
+struct ListEntry {
+  std::filesystem::path path;
+  double timestamp = 0.0;
+};
+
+/// Reads a list file: either one image path a line, or TUM's "timestamp path" lines.
+/// Relative paths are relative to the list's folder; '#' starts a comment line.
+inline std::vector<ListEntry> read_list(const std::filesystem::path& file, SourceKind& kind) {
+  std::ifstream in(file);
+  if (!in) fail("frame source: cannot open list file '" + file.string() + "'");
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) {
+    line = trim(line);
+    if (line.empty() || line[0] == '#') continue;
+    lines.push_back(line);
+  }
+  if (lines.empty()) fail("frame source: list file '" + file.string() + "' names no image");
+  // TUM rgb.txt: every line is "<number> <path>".
+  const bool tum = std::all_of(lines.begin(), lines.end(), [](const std::string& l) {
+    std::istringstream ss(l);
+    double t = 0;
+    std::string p, rest;
+    return static_cast<bool>(ss >> t >> p) && !(ss >> rest);
+  });
+  kind = tum ? SourceKind::tum_rgb : SourceKind::image_list;
+  const auto base = file.parent_path();
+  std::vector<ListEntry> out;
+  out.reserve(lines.size());
+  for (std::size_t k = 0; k < lines.size(); ++k) {
+    ListEntry e;
+    std::string p = lines[k];
+    if (tum) {
+      std::istringstream ss(lines[k]);
+      ss >> e.timestamp >> p;
+    } else {
+      e.timestamp = static_cast<double>(k);
+    }
+    std::filesystem::path path(p);
+    e.path = path.is_absolute() ? path : base / path;
+    out.push_back(std::move(e));
+  }
+  return out;
+}
+
+}  // namespace detail
+
+/// Reads frames one at a time. Not thread-safe; move-only.
+///
+/// Errors (vmap::Error naming the path): a missing input, a folder without images, an
+/// empty or unreadable list, a video that cannot be opened or has no frame, invalid
+/// options, and a sequence in which no frame at all could be decoded. A single
+/// unreadable image inside a sequence is reported (on_skip, skipped()) and skipped.
+class FrameSource {
+ public:
+  static FrameSource open(const std::filesystem::path& input, FrameSourceOptions options = {}) {
+    detail::check(options.stride >= 1, "frame source: stride must be >= 1");
+    detail::check(options.start < options.end, "frame source: start (" + std::to_string(options.start) +
+                                                   ") must be before end (" + std::to_string(options.end) + ")");
+    detail::check(options.resize.width >= 0 && options.resize.height >= 0 &&
+                      (options.resize.width > 0) == (options.resize.height > 0),
+                  "frame source: resize must be (0, 0) or a positive size");
+    std::error_code ec;
+    if (!std::filesystem::exists(input, ec)) fail_missing(input);
+    FrameSource s;
+    s.input_ = input;
+    s.options_ = std::move(options);
+    if (std::filesystem::is_directory(input, ec)) {
+      s.kind_ = SourceKind::image_folder;
+      std::vector<std::string> names;
+      for (const auto& entry : std::filesystem::directory_iterator(input))
+        if (entry.is_regular_file() && detail::is_image_file(entry.path())) names.push_back(entry.path().filename().string());
+      if (names.empty()) detail::fail("frame source: folder '" + input.string() + "' contains no image file");
+      std::sort(names.begin(), names.end(), detail::natural_less);
+      for (std::size_t k = 0; k < names.size(); ++k)
+        s.entries_.push_back({input / names[k], static_cast<double>(k)});
+    } else if (input.extension() == ".txt" || input.extension() == ".lst") {
+      s.entries_ = detail::read_list(input, s.kind_);
+    } else {
+      s.kind_ = SourceKind::video;
+      s.open_video();
+    }
+    s.next_index_ = s.options_.start;
+    return s;
+  }
+
+  /// The next frame, or nullopt at the end of the sequence (or at options.end).
+  [[nodiscard]] std::optional<Frame> next() {
+    std::optional<Frame> f = kind_ == SourceKind::video ? next_video() : next_image();
+    if (f) {
+      ++delivered_;
+      if (options_.resize.width > 0 && f->image.size() != options_.resize)
+        cv::resize(f->image, f->image, options_.resize, 0, 0, cv::INTER_AREA);
+    } else if (delivered_ == 0 && !skipped_.empty()) {
+      detail::fail("frame source: no frame of '" + input_.string() + "' could be read (" +
+                   std::to_string(skipped_.size()) + " unreadable, first: " + skipped_.front().name + ")");
+    }
+    return f;
+  }
+
+  [[nodiscard]] SourceKind kind() const noexcept { return kind_; }
+  [[nodiscard]] const std::filesystem::path& input() const noexcept { return input_; }
+  /// Total frames in the underlying sequence if known (lists and folders; videos that
+  /// report a frame count), before start/end/stride.
+  [[nodiscard]] std::optional<std::size_t> total() const noexcept {
+    if (kind_ != SourceKind::video) return entries_.size();
+    return video_frames_ > 0 ? std::optional<std::size_t>(video_frames_) : std::nullopt;
+  }
+  [[nodiscard]] const std::vector<SkippedFrame>& skipped() const noexcept { return skipped_; }
+  /// Image paths of a list, folder or TUM source (empty for a video).
+  [[nodiscard]] std::vector<std::filesystem::path> paths() const {
+    std::vector<std::filesystem::path> out;
+    out.reserve(entries_.size());
+    for (const auto& e : entries_) out.push_back(e.path);
+    return out;
+  }
+
+ private:
+  FrameSource() = default;
+
+  [[noreturn]] static void fail_missing(const std::filesystem::path& p) {
+    detail::fail("frame source: '" + p.string() + "' does not exist");
+  }
+
+  void open_video() {
+    capture_ = cv::VideoCapture(input_.string());
+    if (!capture_.isOpened())
+      detail::fail("frame source: cannot open '" + input_.string() +
+                   "' as a video (and it is not a folder or a .txt list)");
+    const double count = capture_.get(cv::CAP_PROP_FRAME_COUNT);
+    video_frames_ = count > 0 ? static_cast<std::size_t>(count) : 0;
+    cv::Mat first;
+    if (!capture_.read(first) || first.empty())
+      detail::fail("frame source: video '" + input_.string() + "' has no frame");
+    pending_ = first;
+    video_pos_ = 0;
+  }
+
+  std::optional<Frame> next_video() {
+    while (next_index_ < options_.end) {
+      cv::Mat img;
+      if (!pending_.empty()) {
+        img = pending_;
+        pending_.release();
+      } else if (!capture_.read(img) || img.empty()) {
+        return std::nullopt;  // end of stream
+      }
+      const std::size_t idx = video_pos_++;
+      if (idx < next_index_) continue;  // before start or between strides
+      next_index_ = idx + options_.stride;
+      Frame f;
+      f.index = idx;
+      f.name = input_.filename().string() + "#" + std::to_string(idx);
+      f.timestamp = capture_.get(cv::CAP_PROP_POS_MSEC) / 1000.0;
+      if (options_.grey && img.channels() != 1)
+        cv::cvtColor(img, f.image, img.channels() == 4 ? cv::COLOR_BGRA2GRAY : cv::COLOR_BGR2GRAY);
+      else
+        f.image = img;
+      return f;
+    }
+    return std::nullopt;
+  }
+
+  std::optional<Frame> next_image() {
+    while (next_index_ < options_.end && next_index_ < entries_.size()) {
+      const std::size_t idx = next_index_;
+      next_index_ += options_.stride;
+      const auto& e = entries_[idx];
+      Frame f;
+      f.index = idx;
+      f.name = e.path.filename().string();
+      f.timestamp = e.timestamp;
+      f.image = cv::imread(e.path.string(), options_.grey ? cv::IMREAD_GRAYSCALE : cv::IMREAD_UNCHANGED);
+      if (f.image.empty()) {
+        std::error_code ec;
+        SkippedFrame s{idx, e.path.string(),
+                       std::filesystem::exists(e.path, ec) ? "cannot be decoded as an image" : "file does not exist"};
+        if (options_.on_skip) options_.on_skip(s);
+        skipped_.push_back(std::move(s));
+        continue;
+      }
+      return f;
+    }
+    return std::nullopt;
+  }
+
+  std::filesystem::path input_;
+  FrameSourceOptions options_;
+  SourceKind kind_ = SourceKind::image_list;
+  std::vector<detail::ListEntry> entries_;
+  cv::VideoCapture capture_;
+  cv::Mat pending_;
+  std::size_t video_frames_ = 0;
+  std::size_t video_pos_ = 0;
+  std::size_t next_index_ = 0;
+  std::size_t delivered_ = 0;
+  std::vector<SkippedFrame> skipped_;
+};
+
+}  // namespace vmap

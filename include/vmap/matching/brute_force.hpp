@@ -1,0 +1,97 @@
+#pragma once
+
+#include <vmap/core/concepts.hpp>
+#include <vmap/core/error.hpp>
+
+#include <opencv2/core.hpp>
+
+#include <cmath>
+#include <string>
+
+namespace vmap {
+
+/// How brute-force matches are filtered.
+enum class MatchMode {
+  mutual,  ///< keep a -> b only if b's nearest neighbour in a is a (cross-check)
+  ratio,   ///< Lowe's ratio test: nearest distance < ratio * second-nearest distance
+};
+
+struct BruteForceOptions {
+  MatchMode mode = MatchMode::mutual;
+  float ratio = 0.8f;  ///< used by MatchMode::ratio, in (0, 1]; Lowe 2004 suggests 0.8
+};
+
+/// Exhaustive nearest-neighbour matching under the norm the Features carry (Hamming
+/// for binary descriptors, L2 for float ones). Holds only options: `match` is const
+/// and safe to call from several threads at once.
+class BruteForceMatcher {
+ public:
+  explicit BruteForceMatcher(const BruteForceOptions& options = {}) : options_(options) {
+    detail::check(std::isfinite(options_.ratio) && options_.ratio > 0.0f && options_.ratio <= 1.0f,
+                  "BruteForceOptions.ratio must be in (0, 1], got " + std::to_string(options_.ratio));
+  }
+
+  /// Empty inputs give empty matches; descriptors of different kinds are an Error.
+  [[nodiscard]] Matches match(const Features& a, const Features& b) const {
+    Matches out;
+    if (a.descriptors.empty() || b.descriptors.empty()) return out;
+    check_compatible(a, b);
+    cv::Mat dist, idx;
+    const int dtype = a.descriptors.depth() == CV_8U ? CV_32S : CV_32F;
+    if (options_.mode == MatchMode::mutual) {
+      // One pass over the distance matrix with OpenCV's cross-check (what BFMatcher's
+      // crossCheck does, without cloning a matcher per call).
+      cv::batchDistance(a.descriptors, b.descriptors, dist, dtype, idx, a.norm, 1, cv::noArray(), 0,
+                        true);
+      out.reserve(static_cast<std::size_t>(idx.rows));
+      for (int i = 0; i < idx.rows; ++i) {
+        const int j = idx.at<int>(i, 0);
+        if (j < 0) continue;
+        out.emplace_back(i, j, distance_at(dist, i, 0));
+      }
+    } else {
+      if (b.descriptors.rows < 2) return out;  // no second neighbour to compare with
+      cv::batchDistance(a.descriptors, b.descriptors, dist, dtype, idx, a.norm, 2);
+      out.reserve(static_cast<std::size_t>(idx.rows));
+      for (int i = 0; i < idx.rows; ++i) {
+        const int j = idx.at<int>(i, 0);
+        if (j < 0) continue;
+        const float d1 = distance_at(dist, i, 0);
+        const float d2 = distance_at(dist, i, 1);
+        if (d1 < options_.ratio * d2) out.emplace_back(i, j, d1);
+      }
+    }
+    return out;
+  }
+
+  [[nodiscard]] const BruteForceOptions& options() const noexcept { return options_; }
+
+ private:
+  static float distance_at(const cv::Mat& dist, int row, int col) {
+    return dist.depth() == CV_32S ? static_cast<float>(dist.at<int>(row, col)) : dist.at<float>(row, col);
+  }
+
+  static void check_compatible(const Features& a, const Features& b) {
+    if (a.descriptors.type() != b.descriptors.type() || a.descriptors.cols != b.descriptors.cols)
+      detail::fail("BruteForceMatcher: descriptors differ in kind (" + cv::typeToString(a.descriptors.type()) +
+                   " x " + std::to_string(a.descriptors.cols) + " vs " + cv::typeToString(b.descriptors.type()) +
+                   " x " + std::to_string(b.descriptors.cols) + "); were both extracted by the same Descriptor?");
+    if (a.norm != b.norm)
+      detail::fail("BruteForceMatcher: the two Features carry different norms (" + std::to_string(a.norm) +
+                   " vs " + std::to_string(b.norm) + ")");
+    const bool binary = a.descriptors.depth() == CV_8U;
+    const bool hamming = a.norm == cv::NORM_HAMMING || a.norm == cv::NORM_HAMMING2;
+    if (binary != hamming)
+      detail::fail("BruteForceMatcher: norm " + std::to_string(a.norm) + " does not fit descriptors of type " +
+                   cv::typeToString(a.descriptors.type()) + " (binary descriptors need Hamming, float ones L1/L2)");
+    if (a.descriptors.rows != static_cast<int>(a.keypoints.size()) ||
+        b.descriptors.rows != static_cast<int>(b.keypoints.size()))
+      detail::fail("BruteForceMatcher: descriptor rows and keypoint count differ");
+  }
+
+  BruteForceOptions options_;
+};
+
+static_assert(Matcher<BruteForceMatcher>);
+
+}  // namespace vmap

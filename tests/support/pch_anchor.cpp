@@ -1,0 +1,1 @@
+// Compiles the test targets' precompiled header once; the tests reuse it.
