@@ -23,13 +23,21 @@ inline RobustMethod parse_method(const std::string& name) {
   detail::fail("--estimator: unknown method '" + name + "' (choose magsac, ransac, lmeds or 8point)");
 }
 
-/// Calls f(descriptor) with the Descriptor named `name` ("orb", "akaze", "sift").
+/// What the command line says about the descriptor to use.
+struct DescriptorChoice {
+  std::string name = "orb";  ///< orb, akaze, sift
+  int features = 1000;       ///< keypoint budget (ORB, SIFT)
+  std::string model;         ///< model file, for learned descriptors
+};
+
+/// Calls f(descriptor) with the Descriptor the choice names; every branch instantiates
+/// f for one concrete type, so the per-feature work is statically dispatched.
 template <class F>
-decltype(auto) with_descriptor(const std::string& name, int features, F&& f) {
-  if (name == "orb") return std::forward<F>(f)(OrbDescriptor({.features = features}));
-  if (name == "akaze") return std::forward<F>(f)(AkazeDescriptor{});
-  if (name == "sift") return std::forward<F>(f)(SiftDescriptor({.features = features}));
-  detail::fail("--features: unknown descriptor '" + name + "' (choose orb, akaze or sift)");
+decltype(auto) with_descriptor(const DescriptorChoice& c, F&& f) {
+  if (c.name == "orb") return std::forward<F>(f)(OrbDescriptor({.features = c.features}));
+  if (c.name == "akaze") return std::forward<F>(f)(AkazeDescriptor{});
+  if (c.name == "sift") return std::forward<F>(f)(SiftDescriptor({.features = c.features}));
+  detail::fail("--features: unknown descriptor '" + c.name + "' (choose orb, akaze or sift)");
 }
 
 }  // namespace vmap::examples
