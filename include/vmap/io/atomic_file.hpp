@@ -58,8 +58,13 @@ inline void write_file_atomically(const std::filesystem::path& target, std::stri
 /// Encodes `image` by the extension of `target` (.png, .jpg, ...) and writes it atomically.
 inline void write_image_atomically(const std::filesystem::path& target, const cv::Mat& image) {
   std::vector<unsigned char> buf;
-  if (image.empty() || !cv::imencode(target.extension().string(), image, buf))
-    detail::fail("cannot encode an image for '" + target.string() + "' (empty image or unknown extension)");
+  bool encoded = false;
+  try {
+    encoded = !image.empty() && cv::imencode(target.extension().string(), image, buf);
+  } catch (const cv::Exception&) {
+    encoded = false;  // OpenCV throws for an extension it has no encoder for
+  }
+  if (!encoded) detail::fail("cannot encode an image for '" + target.string() + "' (empty image or unknown extension)");
   write_file_atomically(target, std::string_view(reinterpret_cast<const char*>(buf.data()), buf.size()));
 }
 

@@ -9,6 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
+#include <opencv2/videoio/registry.hpp>
 
 #include <algorithm>
 #include <cctype>
@@ -51,7 +52,7 @@ struct FrameSourceOptions {
   bool grey = false;        ///< decode straight to 8-bit grey (faster for ORB/A-KAZE/SIFT)
   /// Called for each unreadable frame inside a sequence before it is skipped;
   /// `FrameSource::skipped()` keeps the same list.
-  std::function<void(const SkippedFrame&)> on_skip;
+  std::function<void(const SkippedFrame&)> on_skip{};
 };
 
 namespace detail {
@@ -222,7 +223,17 @@ class FrameSource {
   }
 
   void open_video() {
-    capture_ = cv::VideoCapture(input_.string());
+    // Try OpenCV's file backends one by one, skipping CAP_IMAGES (folders and lists are
+    // handled above) and CAP_GPHOTO2 (it probes USB cameras for every file name, which
+    // is slow and leaks in libgphoto2).
+    for (const cv::VideoCaptureAPIs api : cv::videoio_registry::getStreamBackends()) {
+      if (api == cv::CAP_IMAGES || api == cv::CAP_GPHOTO2) continue;
+      try {
+        if (capture_.open(input_.string(), api)) break;
+      } catch (const cv::Exception&) {
+        capture_.release();  // a backend that throws on this file: try the next one
+      }
+    }
     if (!capture_.isOpened())
       detail::fail("frame source: cannot open '" + input_.string() +
                    "' as a video (and it is not a folder or a .txt list)");

@@ -1,0 +1,111 @@
+// Descriptor conformance: every Descriptor model runs the same suite.
+#include <vmap/features/akaze.hpp>
+#include <vmap/features/orb.hpp>
+#include <vmap/features/sift.hpp>
+
+#include "support/images.hpp"
+
+#include <doctest/doctest.h>
+#include <opencv2/imgproc.hpp>
+
+#include <cmath>
+#include <limits>
+#include <string>
+
+namespace {
+
+template <class D>
+int expected_norm() {
+  return std::is_same_v<D, vmap::SiftDescriptor> ? cv::NORM_L2 : cv::NORM_HAMMING;
+}
+
+void check_same_features(const vmap::Features& a, const vmap::Features& b) {
+  REQUIRE(a.size() == b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    CHECK(a.keypoints[i].pt == b.keypoints[i].pt);
+  }
+  CHECK(cv::norm(a.descriptors, b.descriptors, cv::NORM_INF) == 0.0);
+}
+
+}  // namespace
+
+TEST_CASE_TEMPLATE("Descriptor conformance", D, vmap::OrbDescriptor, vmap::AkazeDescriptor, vmap::SiftDescriptor) {
+  D descriptor;
+  const cv::Mat grey = vmap::test::textured_image();
+  const vmap::Features f = descriptor.extract(grey);
+
+  SUBCASE("features are consistent") {
+    CHECK(f.size() > 100);
+    CHECK(f.descriptors.rows == static_cast<int>(f.size()));
+    CHECK(f.norm == expected_norm<D>());
+    CHECK(f.image_size == grey.size());
+    for (const auto& kp : f.keypoints) {
+      CHECK(kp.pt.x >= 0);
+      CHECK(kp.pt.y >= 0);
+      CHECK(kp.pt.x < grey.cols);
+      CHECK(kp.pt.y < grey.rows);
+    }
+  }
+
+  SUBCASE("deterministic: the same image gives the same features") {
+    D other;
+    check_same_features(f, other.extract(grey));
+    check_same_features(f, descriptor.extract(grey));  // and the same object again
+  }
+
+  SUBCASE("BGR, BGRA and 16-bit inputs give exactly the grey result") {
+    cv::Mat bgr, bgra, grey16, bgr16;
+    cv::cvtColor(grey, bgr, cv::COLOR_GRAY2BGR);
+    cv::cvtColor(grey, bgra, cv::COLOR_GRAY2BGRA);
+    grey.convertTo(grey16, CV_16U, 257.0);  // 255 -> 65535; /257 maps back exactly
+    bgr.convertTo(bgr16, CV_16UC3, 257.0);
+    check_same_features(f, descriptor.extract(bgr));
+    check_same_features(f, descriptor.extract(bgra));
+    check_same_features(f, descriptor.extract(grey16));
+    check_same_features(f, descriptor.extract(bgr16));
+  }
+
+  SUBCASE("a blank image has no features, which is a value, not an error") {
+    const vmap::Features blank = descriptor.extract(cv::Mat(480, 640, CV_8UC1, cv::Scalar(128)));
+    CHECK(blank.empty());
+    CHECK(blank.descriptors.rows == 0);
+  }
+
+  SUBCASE("bad images are errors that say what is wrong") {
+    CHECK_THROWS_WITH_AS((void)descriptor.extract(cv::Mat()), doctest::Contains("empty"), vmap::Error);
+    CHECK_THROWS_WITH_AS((void)descriptor.extract(cv::Mat(0, 10, CV_8UC1)), doctest::Contains("empty"), vmap::Error);
+    CHECK_THROWS_WITH_AS((void)descriptor.extract(cv::Mat(48, 64, CV_8UC2, cv::Scalar::all(3))),
+                         doctest::Contains("2 channels"), vmap::Error);
+    CHECK_THROWS_WITH_AS((void)descriptor.extract(cv::Mat(48, 64, CV_32FC1, cv::Scalar(0.5))),
+                         doctest::Contains("CV_32F"), vmap::Error);
+    CHECK_THROWS_WITH_AS((void)descriptor.extract(cv::Mat(48, 64, CV_8SC1, cv::Scalar(1))), doctest::Contains("depth"),
+                         vmap::Error);
+  }
+}
+
+TEST_CASE("descriptor options are validated") {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  CHECK_THROWS_WITH_AS(vmap::OrbDescriptor({.features = 0}), doctest::Contains("features"), vmap::Error);
+  CHECK_THROWS_WITH_AS(vmap::OrbDescriptor({.scale_factor = nan}), doctest::Contains("scale_factor"), vmap::Error);
+  CHECK_THROWS_WITH_AS(vmap::OrbDescriptor({.scale_factor = 1.0f}), doctest::Contains("scale_factor"), vmap::Error);
+  CHECK_THROWS_WITH_AS(vmap::OrbDescriptor({.levels = 0}), doctest::Contains("levels"), vmap::Error);
+  CHECK_THROWS_WITH_AS(vmap::AkazeDescriptor({.threshold = nan}), doctest::Contains("threshold"), vmap::Error);
+  CHECK_THROWS_WITH_AS(vmap::AkazeDescriptor({.threshold = -1.0f}), doctest::Contains("threshold"), vmap::Error);
+  CHECK_THROWS_WITH_AS(vmap::AkazeDescriptor({.octaves = 0}), doctest::Contains("octaves"), vmap::Error);
+  CHECK_THROWS_WITH_AS(vmap::SiftDescriptor({.features = -1}), doctest::Contains("features"), vmap::Error);
+  CHECK_THROWS_WITH_AS(vmap::SiftDescriptor({.sigma = std::nan("")}), doctest::Contains("sigma"), vmap::Error);
+}
+
+TEST_CASE("ORB options reach the detector") {
+  const cv::Mat grey = vmap::test::textured_image();
+  vmap::OrbDescriptor few({.features = 100});
+  vmap::OrbDescriptor many({.features = 2000});
+  const auto a = few.extract(grey);
+  const auto b = many.extract(grey);
+  // OpenCV's ORB splits the budget over pyramid levels and rounds per level, so it can
+  // return a few more keypoints than asked.
+  CHECK(a.size() <= 105);
+  CHECK(a.size() >= 90);
+  CHECK(b.size() > a.size());
+  CHECK(a.descriptors.cols == 32);  // 256 bits
+}
