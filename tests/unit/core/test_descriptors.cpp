@@ -31,7 +31,8 @@ void check_same_features(const vmap::Features& a, const vmap::Features& b) {
 
 TEST_CASE_TEMPLATE("Descriptor conformance", D, vmap::OrbDescriptor, vmap::AkazeDescriptor, vmap::SiftDescriptor) {
   D descriptor;
-  const cv::Mat grey = vmap::test::textured_image();
+  // 320x240 keeps the suite quick (doctest runs the body once per SUBCASE).
+  const cv::Mat grey = vmap::test::textured_image(3, {320, 240});
   const vmap::Features f = descriptor.extract(grey);
 
   SUBCASE("features are consistent") {
