@@ -34,12 +34,7 @@ class AkazeDescriptor {
   }
 
   [[nodiscard]] Features extract(const cv::Mat& image) {
-    detail::to_grey8(image, grey_, "A-KAZE extract");
-    Features f;
-    f.norm = cv::NORM_HAMMING;
-    f.image_size = grey_.size();
-    akaze_->detectAndCompute(grey_, cv::noArray(), f.keypoints, f.descriptors);
-    return f;
+    return detail::detect_and_compute(*akaze_, image, grey_, cv::NORM_HAMMING, "A-KAZE extract");
   }
 
   [[nodiscard]] const AkazeOptions& options() const noexcept { return options_; }

@@ -38,12 +38,7 @@ class OrbDescriptor {
   }
 
   [[nodiscard]] Features extract(const cv::Mat& image) {
-    detail::to_grey8(image, grey_, "ORB extract");
-    Features f;
-    f.norm = cv::NORM_HAMMING;
-    f.image_size = grey_.size();
-    orb_->detectAndCompute(grey_, cv::noArray(), f.keypoints, f.descriptors);
-    return f;
+    return detail::detect_and_compute(*orb_, image, grey_, cv::NORM_HAMMING, "ORB extract");
   }
 
   [[nodiscard]] const OrbOptions& options() const noexcept { return options_; }

@@ -37,12 +37,7 @@ class SiftDescriptor {
   }
 
   [[nodiscard]] Features extract(const cv::Mat& image) {
-    detail::to_grey8(image, grey_, "SIFT extract");
-    Features f;
-    f.norm = cv::NORM_L2;
-    f.image_size = grey_.size();
-    sift_->detectAndCompute(grey_, cv::noArray(), f.keypoints, f.descriptors);
-    return f;
+    return detail::detect_and_compute(*sift_, image, grey_, cv::NORM_L2, "SIFT extract");
   }
 
   [[nodiscard]] const SiftOptions& options() const noexcept { return options_; }

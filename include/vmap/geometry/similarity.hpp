@@ -7,41 +7,37 @@
 
 namespace vmap {
 
-/// Eq. 5 of García-Pintos et al. 2023: S(I_i, I_j) = f_match(D_i, D_j) / max(|D_i|, |D_j|),
-/// f_match being the matches that survive geometric verification (0 when it failed).
-struct InlierRatio {
+/// Which feature count normalises the verified matches.
+enum class RatioBase {
+  larger,   ///< max(|D_i|, |D_j|): eq. 5 of García-Pintos et al. 2023
+  smaller,  ///< min(|D_i|, |D_j|): the share of the poorer image's features re-found
+};
+
+/// Verified matches over a feature count: S(I_i, I_j) = f_match(D_i, D_j) / N, f_match
+/// being the matches that survive geometric verification (0 when it failed).
+template <RatioBase Base>
+struct BasicInlierRatio {
   [[nodiscard]] double operator()(const Features& a, const Features& b, const Verification& v) const noexcept {
     return v.ok() ? ratio(a, b, v.inliers) : 0.0;
   }
-  /// Verification only removes matches, so raw matches / max bound S from above.
+  /// Verification only removes matches, so the raw matches over N bound S from above.
   [[nodiscard]] double upper_bound(const Features& a, const Features& b, int raw_matches) const noexcept {
     return ratio(a, b, raw_matches);
   }
 
  private:
   static double ratio(const Features& a, const Features& b, int count) noexcept {
-    const std::size_t denom = std::max(a.size(), b.size());
-    return denom == 0 ? 0.0 : static_cast<double>(count) / static_cast<double>(denom);
+    const std::size_t n = Base == RatioBase::larger ? std::max(a.size(), b.size()) : std::min(a.size(), b.size());
+    return n == 0 ? 0.0 : std::min(1.0, static_cast<double>(count) / static_cast<double>(n));
   }
 };
 
-/// Normalised by the smaller feature set instead: the share of the poorer image's
-/// features that are re-found. Kinder when one image is nearly blank (a wall), so it
-/// keeps fewer key images in texture-poor stretches.
-struct InlierRatioMin {
-  [[nodiscard]] double operator()(const Features& a, const Features& b, const Verification& v) const noexcept {
-    return v.ok() ? ratio(a, b, v.inliers) : 0.0;
-  }
-  [[nodiscard]] double upper_bound(const Features& a, const Features& b, int raw_matches) const noexcept {
-    return ratio(a, b, raw_matches);
-  }
+/// Eq. 5 of García-Pintos et al. 2023: S = f_match / max(|D_i|, |D_j|).
+using InlierRatio = BasicInlierRatio<RatioBase::larger>;
 
- private:
-  static double ratio(const Features& a, const Features& b, int count) noexcept {
-    const std::size_t denom = std::min(a.size(), b.size());
-    return denom == 0 ? 0.0 : std::min(1.0, static_cast<double>(count) / static_cast<double>(denom));
-  }
-};
+/// Normalised by the smaller feature set instead: kinder when one image is nearly blank
+/// (a wall), so it keeps fewer key images in texture-poor stretches.
+using InlierRatioMin = BasicInlierRatio<RatioBase::smaller>;
 
 static_assert(Similarity<InlierRatio>);
 static_assert(Similarity<InlierRatioMin>);

@@ -1,8 +1,10 @@
 #pragma once
 
 #include <vmap/core/error.hpp>
+#include <vmap/core/features.hpp>
 
 #include <opencv2/core.hpp>
+#include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <string>
@@ -36,6 +38,18 @@ inline void to_grey8(const cv::Mat& image, cv::Mat& grey, std::string_view who) 
     grey = eight;
   else
     cv::cvtColor(eight, grey, channels == 3 ? cv::COLOR_BGR2GRAY : cv::COLOR_BGRA2GRAY);
+}
+
+/// The body every OpenCV-backed Descriptor shares: convert, detect and describe.
+/// `grey` is the caller's buffer, reused between frames.
+inline Features detect_and_compute(cv::Feature2D& detector, const cv::Mat& image, cv::Mat& grey, int norm,
+                                   std::string_view who) {
+  to_grey8(image, grey, who);
+  Features f;
+  f.norm = norm;
+  f.image_size = grey.size();
+  detector.detectAndCompute(grey, cv::noArray(), f.keypoints, f.descriptors);
+  return f;
 }
 
 }  // namespace vmap::detail
