@@ -1,0 +1,356 @@
+// `vmap localize`: learn a GCS map of images with poses and localize query images
+// (Trujillo-Romero 2024, DESIGN.md sec. 1.3). Either the virtual-room experiment
+// (--room) or a real sequence with a pose file (--train ... --poses ...).
+#include "vmap/cli.hpp"
+
+#include <vmap/features/akaze.hpp>
+#include <vmap/io/atomic_file.hpp>
+#include <vmap/io/frame_source.hpp>
+#include <vmap/som/localizer.hpp>
+#include <vmap/som/pose_io.hpp>
+#include <vmap/som/virtual_room.hpp>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <numbers>
+#include <numeric>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace {
+
+using vmap::Pose2;
+
+struct Settings {
+  bool room = false;
+  std::string posters;
+  std::string train, poses, pose_format = "auto";
+  std::string query, query_poses;
+  bool every_other = false;
+  std::size_t neurons = 100, lambda = 50, max_epochs = 1000;
+  std::string histogram = "bow";
+  int words = 128;
+  std::size_t query_images = 2;
+  std::uint64_t seed = 1;
+  double margin = 1.5;
+  std::size_t laps = 2, images_per_lap = 82, tests = 20;
+  double pan_deg = 6.0;
+  std::string png, json;
+};
+
+/// One test position: its query images and where it really is.
+struct Query {
+  std::vector<cv::Mat> images;
+  Pose2 truth;
+};
+
+struct Experiment {
+  std::vector<cv::Mat> train_images;
+  std::vector<Pose2> train_poses;  // what the map is built from (odometry in the room)
+  std::vector<Query> queries;
+  std::optional<double> room_size;
+};
+
+// The repository's sample frames: through VMAP_SOURCE_DIR when the build defines it,
+// else relative to the working folder (running from a checkout).
+std::string default_posters() {
+  const std::filesystem::path rel = "examples/data/tum_fr1_rpy_60/rgb";
+#ifdef VMAP_SOURCE_DIR
+  if (std::filesystem::exists(std::filesystem::path(VMAP_SOURCE_DIR) / rel))
+    return (std::filesystem::path(VMAP_SOURCE_DIR) / rel).string();
+#endif
+  return std::filesystem::exists(rel) ? rel.string() : std::string();
+}
+
+Experiment room_experiment(const Settings& s) {
+  vmap::detail::check(!s.posters.empty(),
+                      "--posters: no poster folder given and the repository's examples/data/tum_fr1_rpy_60/rgb "
+                      "was not found (give --posters DIR with at least 16 photos)");
+  vmap::VirtualRoomOptions ro;
+  vmap::VirtualRoom room(vmap::load_posters(s.posters, static_cast<std::size_t>(4 * ro.posters_per_wall)), ro);
+  vmap::AkazeDescriptor akaze;
+  vmap::CircuitOptions co{.margin_m = s.margin, .laps = s.laps, .images_per_lap = s.images_per_lap, .seed = s.seed};
+  auto rec = vmap::record_circuit(room, akaze, vmap::square_circuit(ro, co));
+  Experiment e;
+  e.room_size = ro.size_m;
+  e.train_images = std::move(rec.images);
+  e.train_poses = std::move(rec.odometry);
+  // Test positions: half a step off the training samples, another noise draw.
+  vmap::CircuitOptions qo = co;
+  qo.laps = 1;
+  qo.phase = 0.5;
+  qo.seed = s.seed + 1000;
+  const auto qc = vmap::square_circuit(ro, qo);
+  const std::size_t n = std::min(s.tests, qc.size());
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto& sample = qc[k * qc.size() / n];
+    Query q{{}, sample.truth};
+    for (std::size_t i = 0; i < s.query_images; ++i)
+      q.images.push_back(vmap::capture_view(room, akaze, sample.truth,
+                                            static_cast<double>(i) * s.pan_deg * std::numbers::pi / 180.0)
+                             .image);
+    e.queries.push_back(std::move(q));
+  }
+  return e;
+}
+
+struct Sequence {
+  std::vector<cv::Mat> images;
+  std::vector<Pose2> poses;
+};
+
+vmap::PoseFormat format_of(const std::string& name, const std::string& file) {
+  if (name == "tum") return vmap::PoseFormat::tum;
+  if (name == "kitti") return vmap::PoseFormat::kitti;
+  if (name == "xytheta") return vmap::PoseFormat::xytheta;
+  return vmap::guess_pose_format(file);
+}
+
+// Frames and poses pair by order when the counts agree (TUM key-frame sets, KITTI, x y
+// theta lists); otherwise each frame takes the pose nearest in time (TUM
+// groundtruth.txt at 100 Hz against rgb.txt at 30 Hz), within 20 ms.
+Sequence read_sequence(const std::string& images, const std::string& poses, const std::string& format) {
+  Sequence out;
+  auto src = vmap::FrameSource::open(images);
+  std::vector<double> stamps;
+  while (auto f = src.next()) {
+    out.images.push_back(f->image);
+    stamps.push_back(f->timestamp);
+  }
+  const auto timed = vmap::read_poses(poses, format_of(format, poses));
+  if (timed.size() == out.images.size()) {
+    for (const auto& t : timed) out.poses.push_back(t.pose);
+    return out;
+  }
+  for (std::size_t i = 0; i < stamps.size(); ++i) {
+    const auto it = std::min_element(timed.begin(), timed.end(), [&](const auto& a, const auto& b) {
+      return std::abs(a.timestamp - stamps[i]) < std::abs(b.timestamp - stamps[i]);
+    });
+    vmap::detail::check(std::abs(it->timestamp - stamps[i]) <= 0.02,
+                        "'" + poses + "' has no pose within 20 ms of frame " + std::to_string(i) + " of '" + images +
+                            "' (and the counts differ: " + std::to_string(timed.size()) + " poses, " +
+                            std::to_string(stamps.size()) + " frames)");
+    out.poses.push_back(it->pose);
+  }
+  return out;
+}
+
+// Consecutive query frames form the groups of one estimate; the truth is their mean.
+void add_queries(Experiment& e, const Sequence& q, const std::vector<std::size_t>& idx, std::size_t per) {
+  for (std::size_t k = 0; k + per <= idx.size(); k += 1) {
+    Query one;
+    std::vector<Pose2> truths;
+    for (std::size_t i = 0; i < per; ++i) {
+      one.images.push_back(q.images[idx[k + i]]);
+      truths.push_back(q.poses[idx[k + i]]);
+    }
+    one.truth = vmap::mean_pose(truths);
+    e.queries.push_back(std::move(one));
+  }
+}
+
+Experiment sequence_experiment(const Settings& s) {
+  vmap::detail::check(!s.poses.empty(), "--train needs --poses");
+  const Sequence all = read_sequence(s.train, s.poses, s.pose_format);
+  Experiment e;
+  if (s.every_other) {
+    std::vector<std::size_t> odd;
+    for (std::size_t i = 0; i < all.images.size(); ++i) {
+      if (i % 2 == 0) {
+        e.train_images.push_back(all.images[i]);
+        e.train_poses.push_back(all.poses[i]);
+      } else {
+        odd.push_back(i);
+      }
+    }
+    add_queries(e, all, odd, s.query_images);
+  } else {
+    vmap::detail::check(!s.query.empty() && !s.query_poses.empty(),
+                        "give --query and --query-poses, or --every-other to hold out the odd frames");
+    e.train_images = all.images;
+    e.train_poses = all.poses;
+    const Sequence q = read_sequence(s.query, s.query_poses, s.pose_format);
+    std::vector<std::size_t> idx(q.images.size());
+    std::iota(idx.begin(), idx.end(), std::size_t{0});
+    add_queries(e, q, idx, s.query_images);
+  }
+  vmap::detail::check(!e.queries.empty(), "no query group of " + std::to_string(s.query_images) + " images");
+  return e;
+}
+
+struct Row {
+  Pose2 truth;
+  vmap::Localization estimate;
+  double error = 0.0;
+};
+
+cv::Mat draw_map(const vmap::PoseMap<vmap::GcsXf>& map, const Experiment& e, const std::vector<Row>& rows) {
+  // Bounds of everything drawn, with a margin.
+  double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
+  auto grow = [&](const Pose2& p) {
+    x0 = std::min(x0, p.x());
+    y0 = std::min(y0, p.y());
+    x1 = std::max(x1, p.x());
+    y1 = std::max(y1, p.y());
+  };
+  for (const auto& p : e.train_poses) grow(p);
+  for (const auto& r : rows) grow(r.truth), grow(r.estimate.pose);
+  if (e.room_size) grow(Pose2(0, 0, 0)), grow(Pose2(*e.room_size, *e.room_size, 0));
+  const double span = std::max({x1 - x0, y1 - y0, 0.5});
+  const double pad = 0.08 * span;
+  const int side = 800, legend = 95;
+  const double scale = side / (span + 2 * pad);
+  auto px = [&](const Pose2& p) {
+    return cv::Point(static_cast<int>((p.x() - x0 + pad) * scale), legend + static_cast<int>((y1 + pad - p.y()) * scale));
+  };
+  cv::Mat img(side + legend, side, CV_8UC3, cv::Scalar(255, 255, 255));
+  if (e.room_size)
+    cv::rectangle(img, px(Pose2(0, *e.room_size, 0)), px(Pose2(*e.room_size, 0, 0)), cv::Scalar(0, 0, 0), 3);
+  for (std::size_t i = 1; i < e.train_poses.size(); ++i)
+    cv::line(img, px(e.train_poses[i - 1]), px(e.train_poses[i]), cv::Scalar(200, 200, 200), 1, cv::LINE_AA);
+  const auto& cells = map.neurons();
+  for (const auto& [a, b] : map.network().edges())
+    if (cells[a].has_pose() && cells[b].has_pose())
+      cv::line(img, px(cells[a].mean), px(cells[b].mean), cv::Scalar(235, 206, 135), 1, cv::LINE_AA);
+  for (const auto& c : cells)
+    if (c.has_pose())
+      cv::circle(img, px(c.mean), 3 + static_cast<int>(std::min<std::size_t>(c.count, 6)), cv::Scalar(160, 80, 0), -1,
+                 cv::LINE_AA);
+  for (const auto& r : rows) {
+    cv::line(img, px(r.truth), px(r.estimate.pose), cv::Scalar(0, 0, 220), 2, cv::LINE_AA);
+    cv::circle(img, px(r.truth), 6, cv::Scalar(0, 160, 0), 2, cv::LINE_AA);
+    cv::drawMarker(img, px(r.estimate.pose), cv::Scalar(0, 0, 220), cv::MARKER_CROSS, 14, 2, cv::LINE_AA);
+  }
+  auto text = [&](const std::string& t, int y, const cv::Scalar& c) {
+    cv::putText(img, t, cv::Point(10, y), cv::FONT_HERSHEY_SIMPLEX, 0.5, c, 1, cv::LINE_AA);
+  };
+  text("blue dots: neurons at their mean pose (size ~ images won)", 20, cv::Scalar(120, 60, 0));
+  text("light blue: GCS edges, grey: training path", 40, cv::Scalar(120, 60, 0));
+  text("green circles: true query positions, red crosses: estimates (red line = error)", 60, cv::Scalar(0, 0, 180));
+  text("scale: " + std::to_string(span).substr(0, 4) + " m across", 80, cv::Scalar(0, 0, 0));
+  return img;
+}
+
+struct Summary {
+  double median = 0, mean = 0, max = 0;
+};
+
+Summary summarise(std::vector<double> e) {
+  Summary s;
+  if (e.empty()) return s;
+  std::sort(e.begin(), e.end());
+  s.median = e.size() % 2 ? e[e.size() / 2] : 0.5 * (e[e.size() / 2 - 1] + e[e.size() / 2]);
+  s.mean = std::accumulate(e.begin(), e.end(), 0.0) / static_cast<double>(e.size());
+  s.max = e.back();
+  return s;
+}
+
+template <class H>
+int run_with(const Settings& s, H histogram) {
+  Experiment e = s.room ? room_experiment(s) : sequence_experiment(s);
+  vmap::GcsOptions go{.lambda = s.lambda, .max_cells = s.neurons, .max_epochs = s.max_epochs, .seed = s.seed};
+  vmap::GcsLocalizer<vmap::AkazeDescriptor, H> loc(vmap::AkazeDescriptor{}, std::move(histogram), go);
+  const auto report = loc.train(e.train_images, e.train_poses);
+  std::printf("trained on %zu images: %zu neurons (%zu with a pose), %zu epochs; GCS training %.4f s "
+              "(features %.2f s, histograms %.2f s)\n",
+              e.train_images.size(), report.gcs.cells, loc.map().neurons_with_pose(), report.gcs.epochs,
+              report.gcs_seconds, report.feature_seconds, report.histogram_seconds);
+  std::vector<Row> rows;
+  std::vector<double> errors;
+  std::printf("%4s %8s %8s %8s %8s %7s %7s %7s  %s\n", "#", "true x", "true y", "est x", "est y", "|dx|", "|dy|",
+              "error", "neurons (distance)");
+  for (std::size_t k = 0; k < e.queries.size(); ++k) {
+    const auto& q = e.queries[k];
+    Row r{q.truth, loc.localize(q.images), 0.0};
+    r.error = r.estimate.pose.distance(r.truth);
+    errors.push_back(r.error);
+    std::string ids;
+    for (const auto& m : r.estimate.matches)
+      ids += std::to_string(m.neuron) + (m.substituted ? "*" : "") + " (" + std::to_string(m.distance).substr(0, 5) + ") ";
+    std::printf("%4zu %8.3f %8.3f %8.3f %8.3f %7.3f %7.3f %7.3f  %s\n", k, r.truth.x(), r.truth.y(),
+                r.estimate.pose.x(), r.estimate.pose.y(), std::abs(r.estimate.pose.x() - r.truth.x()),
+                std::abs(r.estimate.pose.y() - r.truth.y()), r.error, ids.c_str());
+    rows.push_back(std::move(r));
+  }
+  const Summary sum = summarise(errors);
+  std::printf("position error over %zu queries of %zu image(s): median %.3f m, mean %.3f m, max %.3f m"
+              " (* = winner had no pose, nearest posed neuron used)\n",
+              errors.size(), s.query_images, sum.median, sum.mean, sum.max);
+  if (!s.png.empty()) {
+    vmap::write_image_atomically(s.png, draw_map(loc.map(), e, rows));
+    std::printf("map picture: %s\n", s.png.c_str());
+  }
+  if (!s.json.empty()) {
+    nlohmann::json j;
+    j["neurons"] = report.gcs.cells;
+    j["neurons_with_pose"] = loc.map().neurons_with_pose();
+    j["train_images"] = e.train_images.size();
+    j["train_seconds"] = report.gcs_seconds;
+    j["feature_seconds"] = report.feature_seconds;
+    j["histogram_seconds"] = report.histogram_seconds;
+    j["query_images"] = s.query_images;
+    j["queries"] = errors.size();
+    j["median_error_m"] = sum.median;
+    j["mean_error_m"] = sum.mean;
+    j["max_error_m"] = sum.max;
+    vmap::write_file_atomically(s.json, j.dump(2) + "\n");
+  }
+  return 0;
+}
+
+std::function<int()> setup(CLI::App& app) {
+  auto s = std::make_shared<Settings>();
+  s->posters = default_posters();
+  app.add_flag("--room", s->room, "Run the virtual-room experiment (6 x 6 m, posters on the walls, laps of a square)");
+  app.add_option("--posters", s->posters, "Folder of photos for the room's posters (16 are used)")
+      ->default_str(s->posters);
+  app.add_option("--train", s->train, "Training images: video, image folder, list or TUM rgb.txt");
+  app.add_option("--poses", s->poses, "Poses of the training images: TUM groundtruth, KITTI poses, or x y theta lines");
+  app.add_option("--pose-format", s->pose_format, "auto | tum | kitti | xytheta")
+      ->check(CLI::IsMember({"auto", "tum", "kitti", "xytheta"}))
+      ->default_str("auto");
+  app.add_option("--query", s->query, "Query images (with --query-poses for their true poses)");
+  app.add_option("--query-poses", s->query_poses, "True poses of the query images");
+  app.add_flag("--every-other", s->every_other, "Train on the even frames of --train, localize the odd ones");
+  app.add_option("--neurons", s->neurons, "GCS cells (the paper: 100, 200, 300)")->default_val(100)->check(CLI::Range(3, 100000));
+  app.add_option("--lambda", s->lambda, "Insert a cell every lambda inputs")->default_val(50)->check(CLI::Range(1, 1000000));
+  app.add_option("--max-epochs", s->max_epochs, "Stop after this many epochs")->default_val(1000)->check(CLI::Range(1, 1000000));
+  app.add_option("--histogram", s->histogram, "bow (bag of binary words) | grid (keypoint grid)")
+      ->check(CLI::IsMember({"bow", "grid"}))
+      ->default_str("bow");
+  app.add_option("--words", s->words, "Vocabulary size of the bow histogram")->default_val(128)->check(CLI::Range(2, 100000));
+  app.add_option("--images", s->query_images, "Query images per estimate (the paper: 1 or 2)")
+      ->default_val(2)
+      ->check(CLI::Range(1, 10));
+  app.add_option("--seed", s->seed, "Seed of the room's noise, the vocabulary and the GCS")->default_val(1);
+  app.add_option("--margin", s->margin, "Room: distance of the circuit from the walls (m)")->default_val(1.5);
+  app.add_option("--laps", s->laps, "Room: laps driven for training")->default_val(2)->check(CLI::Range(1, 100));
+  app.add_option("--images-per-lap", s->images_per_lap, "Room: images per lap (2 x 82 = the paper's 164)")
+      ->default_val(82)
+      ->check(CLI::Range(4, 100000));
+  app.add_option("--tests", s->tests, "Room: test positions")->default_val(20)->check(CLI::Range(1, 100000));
+  app.add_option("--pan", s->pan_deg, "Room: the second query image is panned by this many degrees")->default_val(6.0);
+  app.add_option("--png", s->png, "Write a picture of the map (neurons, training path, estimates)");
+  app.add_option("--json", s->json, "Write a JSON summary (neurons, train_seconds, median/mean/max_error_m)");
+  return [s] {
+    if (!s->room && s->train.empty()) vmap::detail::fail("give --room or --train (see vmap localize --help)");
+    if (s->histogram == "grid") return run_with(*s, vmap::GridHistogram{});
+    vmap::BowHistogramOptions bo;
+    bo.vocabulary.words = s->words;
+    bo.vocabulary.seed = s->seed;
+    return run_with(*s, vmap::BowHistogram(bo));
+  };
+}
+
+static const bool registered =
+    vmap::cli::add_command({"localize", "Learn a GCS map of images with poses and localize query images", setup});
+
+}  // namespace
