@@ -1,7 +1,8 @@
 #pragma once
 
-// Reading training poses: TUM RGB-D ground truth, KITTI odometry poses, or a plain
-// "x y theta" list, each turned into floor poses (Pose2).
+// Reading training poses: TUM RGB-D ground truth, KITTI odometry poses (both read as
+// 3-D camera poses by io/poses.hpp), or a plain "x y theta" list, each turned into
+// floor poses (Pose2).
 //
 // Ground planes: TUM's motion-capture frame has z up (in freiburg3_cabinet the camera
 // height stays at 1.12 +- 0.10 m (sd) while x and y span metres), so the floor is (x, y)
@@ -11,18 +12,12 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/geometry/pose2.hpp>
-
-#include <Eigen/Core>
-#include <Eigen/Geometry>
+#include <vmap/io/atomic_file.hpp>
+#include <vmap/io/poses.hpp>
 
 #include <cmath>
 #include <filesystem>
-#include <fstream>
-#include <initializer_list>
-#include <sstream>
-#include <stdexcept>
 #include <string>
-#include <utility>
 #include <vector>
 
 namespace vmap {
@@ -34,86 +29,43 @@ struct TimedPose {
 
 enum class PoseFormat { tum, kitti, xytheta };
 
-namespace detail {
-
-// Numbers of each non-empty, non-comment line; a line with a non-number is an Error.
-inline std::vector<std::vector<double>> numeric_lines(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) fail("cannot open pose file '" + path.string() + "'");
-  std::vector<std::vector<double>> out;
-  std::size_t no = 0;
-  for (std::string line; std::getline(in, line);) {
-    ++no;
-    const auto b = line.find_first_not_of(" \t\r");
-    if (b == std::string::npos || line[b] == '#') continue;
-    std::istringstream ss(line);
-    std::vector<double> v;
-    std::string tok;
-    while (ss >> tok) {
-      try {
-        std::size_t used = 0;
-        v.push_back(std::stod(tok, &used));
-        if (used != tok.size()) throw std::invalid_argument(tok);
-      } catch (const std::exception&) {
-        fail("pose file '" + path.string() + "' line " + std::to_string(no) + ": '" + tok + "' is not a number");
-      }
-      if (!std::isfinite(v.back()))
-        fail("pose file '" + path.string() + "' line " + std::to_string(no) + ": non-finite value");
-    }
-    out.push_back(std::move(v));
-  }
-  if (out.empty()) fail("pose file '" + path.string() + "' holds no pose");
-  return out;
+/// The floor pose of a camera in a z-up world (TUM): (x, y) and the optical axis's
+/// heading in that plane.
+[[nodiscard]] inline Pose2 floor_pose_z_up(const CameraPose& camera) {
+  const cv::Vec3d d = camera.viewing_direction();
+  return Pose2(camera.position[0], camera.position[1], std::atan2(d[1], d[0]));
 }
 
-inline void expect_fields(const std::filesystem::path& path, std::size_t line, std::size_t got,
-                          std::initializer_list<std::size_t> allowed, const char* format) {
-  for (std::size_t a : allowed)
-    if (got == a) return;
-  fail("pose file '" + path.string() + "' pose " + std::to_string(line + 1) + ": " + std::to_string(got) +
-       " numbers do not make a " + format + " pose");
+/// The floor pose of a camera in a y-down world (KITTI): (x, z) and the optical axis's
+/// heading in that plane, angle from +x.
+[[nodiscard]] inline Pose2 floor_pose_y_down(const CameraPose& camera) {
+  const cv::Vec3d d = camera.viewing_direction();
+  return Pose2(camera.position[0], camera.position[2], std::atan2(d[2], d[0]));
 }
 
-}  // namespace detail
-
-/// TUM: "timestamp tx ty tz qx qy qz qw" (camera to world).
+/// TUM: "timestamp tx ty tz qx qy qz qw" (camera to world), projected onto (x, y).
 inline std::vector<TimedPose> read_tum_poses(const std::filesystem::path& path) {
   std::vector<TimedPose> out;
-  const auto lines = detail::numeric_lines(path);
-  for (std::size_t i = 0; i < lines.size(); ++i) {
-    const auto& v = lines[i];
-    detail::expect_fields(path, i, v.size(), {8}, "TUM");
-    Eigen::Quaterniond q(v[7], v[4], v[5], v[6]);
-    if (q.norm() < 1e-9) detail::fail("pose file '" + path.string() + "' pose " + std::to_string(i + 1) + ": zero quaternion");
-    const Eigen::Vector3d axis = q.normalized().toRotationMatrix().col(2);
-    out.push_back({v[0], Pose2(v[1], v[2], std::atan2(axis.y(), axis.x()))});
-  }
+  for (const CameraPose& c : load_tum_poses(path)) out.push_back({c.timestamp, floor_pose_z_up(c)});
   return out;
 }
 
 /// KITTI: 12 numbers "r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz" (camera to world),
-/// optionally preceded by a time.
+/// optionally preceded by a time, projected onto (x, z).
 inline std::vector<TimedPose> read_kitti_poses(const std::filesystem::path& path) {
   std::vector<TimedPose> out;
-  const auto lines = detail::numeric_lines(path);
-  for (std::size_t i = 0; i < lines.size(); ++i) {
-    const auto& v = lines[i];
-    detail::expect_fields(path, i, v.size(), {12, 13}, "KITTI");
-    const std::size_t o = v.size() == 13 ? 1 : 0;
-    const double time = o ? v[0] : static_cast<double>(i);
-    // optical axis = third column (r13, r23, r33); floor = (x, z)
-    out.push_back({time, Pose2(v[o + 3], v[o + 11], std::atan2(v[o + 10], v[o + 2]))});
-  }
+  for (const CameraPose& c : load_kitti_poses(path)) out.push_back({c.timestamp, floor_pose_y_down(c)});
   return out;
 }
 
 /// "x y theta" (metres, radians) a line.
 inline std::vector<TimedPose> read_xytheta_poses(const std::filesystem::path& path) {
   std::vector<TimedPose> out;
-  const auto lines = detail::numeric_lines(path);
-  for (std::size_t i = 0; i < lines.size(); ++i) {
-    detail::expect_fields(path, i, lines[i].size(), {3}, "x y theta");
-    out.push_back({static_cast<double>(i), Pose2(lines[i][0], lines[i][1], lines[i][2])});
+  for (const auto& l : detail::parse_pose_lines(read_file(path), path.string())) {
+    if (l.values.size() != 3)
+      detail::fail(detail::pose_line_prefix(path.string(), l) + std::to_string(l.values.size()) +
+                   " numbers, an x y theta pose has 3");
+    out.push_back({static_cast<double>(out.size()), Pose2(l.values[0], l.values[1], l.values[2])});
   }
   return out;
 }
@@ -130,12 +82,12 @@ inline std::vector<TimedPose> read_poses(const std::filesystem::path& path, Pose
 /// The format of a pose file by its first pose line: 8 numbers = TUM, 12 or 13 =
 /// KITTI, 3 = x y theta.
 inline PoseFormat guess_pose_format(const std::filesystem::path& path) {
-  const auto n = detail::numeric_lines(path).front().size();
-  if (n == 8) return PoseFormat::tum;
-  if (n == 12 || n == 13) return PoseFormat::kitti;
+  const auto lines = detail::parse_pose_lines(read_file(path), path.string());
+  const std::size_t n = lines.front().values.size();
   if (n == 3) return PoseFormat::xytheta;
-  detail::fail("pose file '" + path.string() + "': " + std::to_string(n) +
-               " numbers a line is none of TUM (8), KITTI (12/13), x y theta (3)");
+  if (const auto f = camera_pose_format_for(n)) return *f == CameraPoseFormat::tum ? PoseFormat::tum : PoseFormat::kitti;
+  detail::fail(detail::pose_line_prefix(path.string(), lines.front()) + std::to_string(n) +
+               " numbers a line is none of TUM (8), KITTI (12 or 13), x y theta (3)");
 }
 
 }  // namespace vmap
