@@ -12,6 +12,7 @@
 #include <vmap/io/frame_source.hpp>
 #include <vmap/lcd/evaluation.hpp>
 #include <vmap/lcd/influence.hpp>
+#include <vmap/lcd/label_sources.hpp>
 #include <vmap/lcd/label_vector.hpp>
 #include <vmap/lcd/loop_detector.hpp>
 #include <vmap/matching/brute_force.hpp>
@@ -53,7 +54,21 @@ struct LoopRun {
   [[nodiscard]] double ms_per_frame() const {
     return results.empty() ? 0.0 : 1e3 * seconds / static_cast<double>(results.size());
   }
+  /// What these label vectors allow any tree (lcd/label_sources.hpp).
+  [[nodiscard]] LabelVectorAgreement agreement(const LoopGroundTruth& gt, std::size_t window) const {
+    std::vector<LabelVector> vectors;
+    for (const LoopResult& r : results) vectors.push_back(r.labels);
+    return label_vector_agreement(vectors, gt, window);
+  }
 };
+
+/// One labels file, or the union of several (detectors with the same label ids).
+inline PrecomputedDetections load_labels(const std::vector<std::filesystem::path>& files) {
+  if (files.size() == 1) return PrecomputedDetections::load(files.front());
+  std::vector<PrecomputedDetections> sources;
+  for (const auto& f : files) sources.push_back(PrecomputedDetections::load(f));
+  return merge_detections(sources);
+}
 
 /// Runs LoopDetector over every frame with the given per-frame detections.
 inline LoopRun run_loops(const LoopRunConfig& config, const PrecomputedDetections& labels,

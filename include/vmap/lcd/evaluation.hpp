@@ -14,6 +14,7 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
+#include <vmap/io/poses.hpp>
 
 #include <opencv2/core.hpp>
 
@@ -25,7 +26,6 @@
 #include <functional>
 #include <limits>
 #include <optional>
-#include <sstream>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -145,55 +145,6 @@ class LoopGroundTruth {
   std::size_t frames_ = 0;
   std::vector<std::uint8_t> cells_;
 };
-
-/// A camera pose in the TUM convention: camera centre and unit quaternion (x, y, z, w)
-/// of the camera-to-world rotation.
-struct CameraPose {
-  double timestamp = 0.0;
-  cv::Vec3d position;
-  cv::Vec4d quaternion{0, 0, 0, 1};
-
-  /// The optical axis (camera +z) in world coordinates.
-  [[nodiscard]] cv::Vec3d viewing_direction() const {
-    const double n = std::sqrt(quaternion.dot(quaternion));
-    const double x = quaternion[0] / n, y = quaternion[1] / n, z = quaternion[2] / n, w = quaternion[3] / n;
-    // Third column of the rotation matrix of (x, y, z, w).
-    return {2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)};
-  }
-};
-
-/// Reads `timestamp tx ty tz qx qy qz qw` lines ('#' comments), e.g. TUM's
-/// groundtruth.txt or tum_fr3_cabinet_kf/truth_cam_poses.txt.
-[[nodiscard]] inline std::vector<CameraPose> parse_tum_poses(std::string_view text,
-                                                             const std::string& name = "<poses>") {
-  std::vector<CameraPose> out;
-  std::istringstream in{std::string(text)};
-  std::size_t line_no = 0;
-  for (std::string line; std::getline(in, line);) {
-    ++line_no;
-    const auto first = line.find_first_not_of(" \t\r");
-    if (first == std::string::npos || line[first] == '#') continue;
-    std::istringstream ls(line);
-    double v[8];
-    for (double& x : v)
-      if (!(ls >> x) || !std::isfinite(x))
-        detail::fail(name + ":" + std::to_string(line_no) + ": expected 8 finite numbers 'timestamp tx ty tz qx qy qz qw'");
-    std::string rest;
-    if (ls >> rest) detail::fail(name + ":" + std::to_string(line_no) + ": more than 8 values on the line");
-    CameraPose p;
-    p.timestamp = v[0];
-    p.position = {v[1], v[2], v[3]};
-    p.quaternion = {v[4], v[5], v[6], v[7]};
-    if (p.quaternion.dot(p.quaternion) < 1e-12)
-      detail::fail(name + ":" + std::to_string(line_no) + ": the quaternion is zero");
-    out.push_back(p);
-  }
-  return out;
-}
-
-[[nodiscard]] inline std::vector<CameraPose> load_tum_poses(const std::filesystem::path& path) {
-  return parse_tum_poses(read_file(path), path.string());
-}
 
 /// When two poses count as the same place.
 struct PoseLoopOptions {

@@ -96,7 +96,7 @@ TEST_CASE("evaluation: ground truth from poses (distance and viewing angle)") {
     // Optical axis (0,0,1) rotated to (-cos a, -sin a, 0): rotation about y by -90 deg
     // then about z by a; written directly as a quaternion: qz(a) * qy(-90 deg).
     const double cz = std::cos(a / 2), sz = std::sin(a / 2), cy = std::cos(-CV_PI / 4), sy = std::sin(-CV_PI / 4);
-    p.quaternion = {-sz * sy, cz * sy, sz * cy, cz * cy};
+    p.rotation = vmap::rotation_from_quaternion(-sz * sy, cz * sy, sz * cy, cz * cy);
     poses.push_back(p);
   }
   const cv::Vec3d d0 = poses[0].viewing_direction();
