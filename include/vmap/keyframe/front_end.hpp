@@ -1,0 +1,199 @@
+#pragma once
+
+// Front ends of the key-image selector: what turns a frame into something comparable and
+// scores a pair (eq. 5 of García-Pintos et al. 2023). The selection logic (Algorithm 1,
+// keyframe/selector.hpp) is written once over the KeyframeFrontEnd concept; two front ends
+// model it:
+//   - FeatureFrontEnd<Descriptor, Matcher, Estimator, Similarity>: per-frame features,
+//     matched and verified by a fundamental matrix (the paper's method);
+//   - PairFrontEnd<PairMatcher, Estimator>: a detector-free matcher that takes the image
+//     pair and returns correspondences plus its eq. 5 denominator (DESIGN.md sec. 2).
+
+#include <vmap/core/concepts.hpp>
+#include <vmap/core/error.hpp>
+#include <vmap/core/features.hpp>
+#include <vmap/core/verification.hpp>
+#include <vmap/hooks/pair_matcher.hpp>
+
+#include <opencv2/core.hpp>
+
+#include <algorithm>
+#include <concepts>
+#include <cstddef>
+#include <string>
+#include <utility>
+
+namespace vmap {
+
+/// The score of one (key image, frame) pair.
+struct PairScore {
+  int raw_matches = 0;       ///< correspondences before verification
+  double upper_bound = 0.0;  ///< raw_matches / eq. 5 denominator: S can only be lower
+  /// False when the estimator was skipped because upper_bound was already below the
+  /// threshold (the fast path); `verification` and `similarity` are then not computed.
+  bool verified_run = false;
+  Verification verification;  ///< the estimator's result (when verified_run)
+  double similarity = 0.0;    ///< eq. 5 (when verified_run; else 0)
+};
+
+// ---- the front-end concept --------------------------------------------------------
+
+/// Turns a frame into the representation the selector caches (`Item`). Called once per
+/// frame; may run on another thread than `score` (the two touch disjoint state).
+template <class F>
+concept PreparesFrames = requires(F& f, const cv::Mat& image) {
+  { f.prepare(image) } -> std::same_as<typename F::Item>;
+};
+
+/// Scores a pair. Fast path: the estimator is skipped when the upper bound is already
+/// below `skip_below`; 0 (no bound is below 0) forces the full verification.
+template <class F>
+concept ScoresItems = requires { typename F::Item; } &&
+    requires(F& f, const typename F::Item& a, const typename F::Item& b, double skip_below) {
+      { f.score(a, b, skip_below) } -> std::same_as<PairScore>;
+    };
+
+/// The features a key image keeps in the VisualMap (empty for pair matchers).
+template <class F>
+concept ExposesFeatures = requires(const F& f, const typename F::Item& a) {
+  { f.features_of(a) } -> std::convertible_to<Features>;
+};
+
+/// What the selection logic needs: score a pair of prepared items, and expose the
+/// features a key image keeps. Items may come from anywhere (the sweep's come from a
+/// feature cache), so preparing frames is a separate concept.
+template <class F>
+concept KeyframeFrontEnd = std::move_constructible<F>  // held by value
+                           && ScoresItems<F>           // PairScore score(key, frame, skip_below)
+                           && ExposesFeatures<F>;      // Features features_of(item) const
+
+/// A front end that can also prepare frames from images (push(Frame), pipelines).
+template <class F>
+concept FrameFrontEnd = KeyframeFrontEnd<F>  // scores pairs
+                        && PreparesFrames<F>;  // Item prepare(image)
+
+// ---- descriptor + matcher + estimator + similarity ---------------------------------
+
+/// The paper's front end: features extracted once per frame (the key image's are kept by
+/// the selector, never recomputed), matched, and verified by the estimator; S per the
+/// Similarity policy. `prepare` uses only the Descriptor and `score` only the other
+/// three policies, so a pipeline may extract frame j+1 while frame j is scored.
+template <Descriptor D, Matcher M, Estimator E, Similarity S>
+class FeatureFrontEnd {
+ public:
+  using Item = Features;
+
+  FeatureFrontEnd(D descriptor, M matcher, E estimator, S similarity)
+      : descriptor_(std::move(descriptor)),
+        matcher_(std::move(matcher)),
+        estimator_(std::move(estimator)),
+        similarity_(std::move(similarity)) {}
+
+  [[nodiscard]] Features prepare(const cv::Mat& image) { return descriptor_.extract(image); }
+
+  [[nodiscard]] PairScore score(const Features& key, const Features& frame, double skip_below) const {
+    const Matches matches = match(key, frame);
+    PairScore s = bound(key, frame, matches);
+    if (s.upper_bound < skip_below) return s;
+    verify(key, frame, matches, s);
+    return s;
+  }
+
+  /// The stages of `score`, public so that the threshold sweep can cache them per pair.
+  [[nodiscard]] Matches match(const Features& key, const Features& frame) const { return matcher_.match(key, frame); }
+  [[nodiscard]] PairScore bound(const Features& key, const Features& frame, const Matches& matches) const {
+    PairScore s;
+    s.raw_matches = static_cast<int>(matches.size());
+    s.upper_bound = similarity_.upper_bound(key, frame, s.raw_matches);
+    return s;
+  }
+  void verify(const Features& key, const Features& frame, const Matches& matches, PairScore& s) const {
+    s.verification = estimator_.verify(key, frame, matches);
+    s.verified_run = true;
+    s.similarity = s.verification.ok() ? static_cast<double>(similarity_(key, frame, s.verification)) : 0.0;
+  }
+
+  [[nodiscard]] const Features& features_of(const Features& item) const noexcept { return item; }
+
+  [[nodiscard]] D& descriptor() noexcept { return descriptor_; }
+  [[nodiscard]] const M& matcher() const noexcept { return matcher_; }
+  [[nodiscard]] const E& estimator() const noexcept { return estimator_; }
+  [[nodiscard]] const S& similarity() const noexcept { return similarity_; }
+
+ private:
+  D descriptor_;
+  M matcher_;
+  E estimator_;
+  S similarity_;
+};
+
+// ---- detector-free pair matcher -----------------------------------------------------
+
+namespace detail {
+
+/// Correspondences as Features + one-to-one Matches, so any Estimator verifies them.
+inline void correspondences_as_features(const Correspondences& c, cv::Size size_a, cv::Size size_b, Features& a,
+                                        Features& b, Matches& m) {
+  check(c.points_b.size() == c.points_a.size(),
+        "PairMatcher: points_a and points_b differ in length (" + std::to_string(c.points_a.size()) + " vs " +
+            std::to_string(c.points_b.size()) + ")");
+  const std::size_t n = c.size();
+  a.keypoints.resize(n);
+  b.keypoints.resize(n);
+  m.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    a.keypoints[i] = cv::KeyPoint(c.points_a[i], 1.0f);
+    b.keypoints[i] = cv::KeyPoint(c.points_b[i], 1.0f);
+    const float conf = i < c.confidence.size() ? c.confidence[i] : 1.0f;
+    m[i] = cv::DMatch(static_cast<int>(i), static_cast<int>(i), 1.0f - conf);
+  }
+  a.image_size = size_a;
+  b.image_size = size_b;
+}
+
+}  // namespace detail
+
+/// A PairMatcher (e.g. a LoFTR-style network behind hooks/pair_matcher.hpp) as the front
+/// end. The item is the image itself (cloned: the matcher needs the key image's pixels
+/// for every later pair). Eq. 5 with the matcher's own denominator:
+/// S = verified correspondences / cells, and raw correspondences / cells bounds it.
+template <PairMatcher P, Estimator E>
+class PairFrontEnd {
+ public:
+  using Item = cv::Mat;
+
+  PairFrontEnd(P matcher, E estimator) : matcher_(std::move(matcher)), estimator_(std::move(estimator)) {}
+
+  [[nodiscard]] cv::Mat prepare(const cv::Mat& image) const { return image.clone(); }
+
+  [[nodiscard]] PairScore score(const cv::Mat& key, const cv::Mat& frame, double skip_below) {
+    const Correspondences c = matcher_.match_pair(key, frame);
+    check_cells(c);
+    PairScore s;
+    s.raw_matches = static_cast<int>(c.size());
+    s.upper_bound = std::min(1.0, static_cast<double>(s.raw_matches) / c.cells);
+    if (s.upper_bound < skip_below) return s;
+    detail::correspondences_as_features(c, key.size(), frame.size(), a_, b_, matches_);
+    s.verification = estimator_.verify(a_, b_, matches_);
+    s.verified_run = true;
+    s.similarity = s.verification.ok() ? std::min(1.0, static_cast<double>(s.verification.inliers) / c.cells) : 0.0;
+    return s;
+  }
+
+  /// A pair matcher has no per-image features: key images keep none.
+  [[nodiscard]] Features features_of(const cv::Mat&) const { return {}; }
+
+ private:
+  static void check_cells(const Correspondences& c) {
+    if (c.cells <= 0)
+      detail::fail("PairMatcher: Correspondences.cells (the eq. 5 denominator) must be > 0, got " +
+                   std::to_string(c.cells));
+  }
+
+  P matcher_;
+  E estimator_;
+  Features a_, b_;  // scratch reused between pairs
+  Matches matches_;
+};
+
+}  // namespace vmap

@@ -1,0 +1,290 @@
+#pragma once
+
+// Streaming key-image selection, Algorithm 1 / eq. 6 of García-Pintos et al. 2023
+// (DESIGN.md sec. 1.1). The logic lives once, in BasicKeyframeSelector<FrontEnd>; the
+// paper's feature stack (KeyframeSelector<D, M, E, S>) and detector-free pair matchers
+// (PairKeyframeSelector<P, E>) are front ends of it, and the threshold sweep drives the
+// same object.
+
+#include <vmap/core/concepts.hpp>
+#include <vmap/core/error.hpp>
+#include <vmap/features/akaze.hpp>
+#include <vmap/features/orb.hpp>
+#include <vmap/features/sift.hpp>
+#include <vmap/geometry/fundamental.hpp>
+#include <vmap/geometry/similarity.hpp>
+#include <vmap/hooks/pair_matcher.hpp>
+#include <vmap/io/frame_source.hpp>
+#include <vmap/keyframe/front_end.hpp>
+#include <vmap/keyframe/visual_map.hpp>
+#include <vmap/matching/brute_force.hpp>
+
+#include <opencv2/core.hpp>
+
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <utility>
+
+namespace vmap {
+
+/// Which frame becomes the new key image when frame j no longer resembles the key image.
+enum class KeyRule : std::uint8_t {
+  previous_frame,  ///< eq. 6: I_{j-1}, the last frame that still passed (the default)
+  current_frame,   ///< Algorithm 1 as printed: I_j itself
+};
+
+struct SelectorOptions {
+  /// tau: a new key image is taken when S(K_i, I_j) < tau; in (0, 1].
+  double tau = 0.3;
+  KeyRule rule = KeyRule::previous_frame;
+  /// Skip the estimator when raw matches / eq. 5 denominator (an upper bound of S) is
+  /// already below tau. Never changes the key images; it only leaves the similarity of
+  /// such frames unknown (FrameResult::exact = false).
+  bool skip_by_upper_bound = true;
+  /// Keep each key image's pixels in the VisualMap (for contact sheets and map files).
+  bool keep_images = false;
+};
+
+/// Why a frame did or did not produce a key image.
+enum class KeyReason : std::uint8_t {
+  none,                 ///< S >= tau: the frame is still covered by the key image
+  first_frame,          ///< K_1 = I_1
+  below_threshold,      ///< verified, S < tau
+  bound_below_threshold,  ///< raw matches / denominator < tau (estimator skipped), so S < tau
+  verification_failed,  ///< no F-matrix (too few matches, no model, too few inliers)
+};
+
+[[nodiscard]] constexpr std::string_view to_string(KeyReason r) noexcept {
+  switch (r) {
+    case KeyReason::none: return "similar to the key image";
+    case KeyReason::first_frame: return "first frame";
+    case KeyReason::below_threshold: return "similarity below tau";
+    case KeyReason::bound_below_threshold: return "match bound below tau (verification skipped)";
+    case KeyReason::verification_failed: return "verification failed";
+  }
+  return "unknown";
+}
+
+/// What push() did with one frame.
+struct FrameResult {
+  std::size_t frame_index = 0;
+  /// S(K, I_j) against the key image that was current when the frame arrived; when
+  /// `exact` is false the estimator was skipped and this is the upper bound (< tau).
+  double similarity = 0.0;
+  bool exact = true;
+  int raw_matches = 0;       ///< correspondences before verification
+  int verified_matches = 0;  ///< inliers (0 if verification failed or was skipped)
+  VerificationStatus status = VerificationStatus::verified;  ///< of the verification (meaningful when `exact`)
+  bool key_taken = false;
+  std::optional<std::size_t> key_frame;  ///< the frame that became a key image (j-1 or j)
+  KeyReason reason = KeyReason::none;
+};
+
+/// A frame after the front end's `prepare` (features extracted), ready for push().
+template <class Item>
+struct PreparedFrame {
+  Item item;
+  std::size_t index = 0;
+  std::string name;
+  double timestamp = 0.0;
+  cv::Mat image;  ///< kept only when SelectorOptions::keep_images
+};
+
+/// Algorithm 1 over any front end. Streaming: push() one frame at a time; map() can be
+/// read at any time. The key image's item (its features) is prepared once and kept.
+///
+/// Threading: prepare() touches only the front end's preparation state (the Descriptor),
+/// push() only the rest, so one thread may prepare frame j+1 while another pushes frame
+/// j (run_selector does this). Everything else is single-threaded.
+template <KeyframeFrontEnd F>
+class BasicKeyframeSelector {
+ public:
+  using FrontEnd = F;
+  using Item = typename F::Item;
+  using Prepared = PreparedFrame<Item>;
+
+  explicit BasicKeyframeSelector(F front_end, const SelectorOptions& options = {})
+      : front_(std::move(front_end)), options_(options) {
+    detail::check(std::isfinite(options_.tau) && options_.tau > 0.0 && options_.tau <= 1.0,
+                  "SelectorOptions.tau must be in (0, 1], got " + std::to_string(options_.tau));
+  }
+
+  [[nodiscard]] Prepared prepare(const Frame& frame)
+    requires PreparesFrames<F>
+  {
+    detail::check(!frame.image.empty(), "key-image selector: frame " + std::to_string(frame.index) + " ('" +
+                                            frame.name + "') is an empty image");
+    Prepared p{front_.prepare(frame.image), frame.index, frame.name, frame.timestamp, {}};
+    if (options_.keep_images) p.image = frame.image;
+    return p;
+  }
+
+  FrameResult push(const Frame& frame)
+    requires PreparesFrames<F>
+  {
+    return push(prepare(frame));
+  }
+
+  /// A bare image: its index is the number of frames pushed so far.
+  FrameResult push(const cv::Mat& image)
+    requires PreparesFrames<F>
+  {
+    Frame f;
+    f.image = image;
+    f.index = map_.frames;
+    f.name = "frame#" + std::to_string(f.index);
+    f.timestamp = static_cast<double>(f.index);
+    return push(f);
+  }
+
+  FrameResult push(Prepared frame) {
+    FrameResult r;
+    r.frame_index = frame.index;
+    ++map_.frames;
+    if (!key_) {  // K_1 = I_1
+      r.similarity = 1.0;
+      r.key_taken = true;
+      r.key_frame = frame.index;
+      r.reason = KeyReason::first_frame;
+      add_key(std::move(frame), nullptr);
+      return r;
+    }
+    PairScore s = front_.score(key_->item, frame.item, options_.skip_by_upper_bound ? options_.tau : 0.0);
+    r.raw_matches = s.raw_matches;
+    r.exact = s.verified_run;
+    r.similarity = s.verified_run ? s.similarity : s.upper_bound;
+    if (s.verified_run) {
+      r.status = s.verification.status;
+      r.verified_matches = s.verification.ok() ? s.verification.inliers : 0;
+    }
+    if (!s.verified_run)
+      r.reason = KeyReason::bound_below_threshold;
+    else if (!s.verification.ok())
+      r.reason = KeyReason::verification_failed;  // the paper: no F-matrix also ends the key image
+    else if (s.similarity < options_.tau)
+      r.reason = KeyReason::below_threshold;
+    if (r.reason == KeyReason::none) {
+      prev_ = std::move(frame);
+      prev_score_ = std::move(s);
+      prev_scored_ = true;
+      return r;
+    }
+    r.key_taken = true;
+    if (options_.rule == KeyRule::previous_frame && prev_) {
+      // Eq. 6: I_{j-1} becomes the key image. Its link to the old key is the score it
+      // passed with (cached), unless it arrived right after a key change and was never
+      // compared with the current key. Comparison resumes with I_{j+1} against the new
+      // key (as in the reference implementation); I_j is scored against it only if it
+      // has to become the next key image itself.
+      PairScore link = prev_scored_ ? std::move(prev_score_) : full_score(prev_->item);
+      r.key_frame = prev_->index;
+      add_key(std::move(*prev_), &link);
+      prev_ = std::move(frame);
+      prev_scored_ = false;
+    } else {
+      // Algorithm 1's rule, or eq. 6 when I_{j-1} already is the key image: take I_j.
+      if (!s.verified_run) s = full_score(frame.item);
+      r.key_frame = frame.index;
+      add_key(std::move(frame), &s);
+      prev_.reset();
+      prev_scored_ = false;
+    }
+    return r;
+  }
+
+  [[nodiscard]] const VisualMap& map() const noexcept { return map_; }
+  /// Moves the map out and starts a new sequence (options and policies are kept).
+  [[nodiscard]] VisualMap take_map() {
+    VisualMap out = std::move(map_);
+    reset();
+    return out;
+  }
+  void reset() {
+    map_ = {};
+    key_.reset();
+    prev_.reset();
+    prev_scored_ = false;
+  }
+
+  /// The current key image's item (its features), nullptr before the first frame. The
+  /// next push() scores its frame against this item.
+  [[nodiscard]] const Item* key_item() const noexcept { return key_ ? &key_->item : nullptr; }
+
+  [[nodiscard]] const SelectorOptions& options() const noexcept { return options_; }
+  [[nodiscard]] F& front_end() noexcept { return front_; }
+  [[nodiscard]] const F& front_end() const noexcept { return front_; }
+
+ private:
+  PairScore full_score(const Item& item) { return front_.score(key_->item, item, 0.0); }
+
+  void add_key(Prepared&& p, const PairScore* link) {
+    KeyImage k;
+    k.frame_index = p.index;
+    k.name = p.name;
+    k.timestamp = p.timestamp;
+    k.features = front_.features_of(p.item);
+    k.image = p.image;
+    if (link) {
+      KeyPair pair;
+      pair.status = link->verification.status;
+      pair.matches = link->raw_matches;
+      if (link->verification.ok()) {
+        pair.fundamental = link->verification.model;
+        pair.inliers = link->verification.inliers;
+      }
+      pair.similarity = link->similarity;
+      map_.pairs.push_back(pair);
+    }
+    map_.keys.push_back(std::move(k));
+    key_ = std::move(p);
+  }
+
+  F front_;
+  SelectorOptions options_;
+  VisualMap map_;
+  std::optional<Prepared> key_;   // the current key image, prepared once
+  std::optional<Prepared> prev_;  // I_{j-1} when it is not the key image
+  PairScore prev_score_;          // S(key, prev) when prev_scored_
+  bool prev_scored_ = false;
+};
+
+/// The paper's stack: Descriptor + Matcher + Estimator + Similarity.
+template <Descriptor D, Matcher M, Estimator E, Similarity S>
+class KeyframeSelector : public BasicKeyframeSelector<FeatureFrontEnd<D, M, E, S>> {
+  using Base = BasicKeyframeSelector<FeatureFrontEnd<D, M, E, S>>;
+
+ public:
+  KeyframeSelector(D descriptor, M matcher, E estimator, S similarity, const SelectorOptions& options = {})
+      : Base(FeatureFrontEnd<D, M, E, S>(std::move(descriptor), std::move(matcher), std::move(estimator),
+                                         std::move(similarity)),
+             options) {}
+
+  /// Every policy default-constructed (e.g. ORB 1000, mutual NN, MAGSAC 1 px, eq. 5).
+  explicit KeyframeSelector(const SelectorOptions& options = {})
+    requires std::default_initializable<D> && std::default_initializable<M> && std::default_initializable<E> &&
+             std::default_initializable<S>
+      : KeyframeSelector(D{}, M{}, E{}, S{}, options) {}
+};
+
+/// A detector-free PairMatcher front end (hooks/pair_matcher.hpp); S = inliers / cells.
+template <PairMatcher P, Estimator E>
+class PairKeyframeSelector : public BasicKeyframeSelector<PairFrontEnd<P, E>> {
+  using Base = BasicKeyframeSelector<PairFrontEnd<P, E>>;
+
+ public:
+  PairKeyframeSelector(P matcher, E estimator, const SelectorOptions& options = {})
+      : Base(PairFrontEnd<P, E>(std::move(matcher), std::move(estimator)), options) {}
+};
+
+// Named stacks. The F-matrix method is an option of FundamentalEstimator
+// (FundamentalOptions::method, MAGSAC++ by default), so e.g. OrbMagsacSelector
+// default-constructed is the paper's ORB 1000 + mutual NN + MAGSAC 1 px 0.99 + eq. 5.
+using OrbMagsacSelector = KeyframeSelector<OrbDescriptor, BruteForceMatcher, FundamentalEstimator, InlierRatio>;
+using AkazeMagsacSelector = KeyframeSelector<AkazeDescriptor, BruteForceMatcher, FundamentalEstimator, InlierRatio>;
+using SiftMagsacSelector = KeyframeSelector<SiftDescriptor, BruteForceMatcher, FundamentalEstimator, InlierRatio>;
+
+}  // namespace vmap
