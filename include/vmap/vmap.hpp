@@ -18,10 +18,37 @@
 
 #include <vmap/geometry/fundamental.hpp>
 #include <vmap/geometry/homography.hpp>
+#include <vmap/geometry/pose2.hpp>
 #include <vmap/geometry/similarity.hpp>
-
-#include <vmap/hooks/detection.hpp>
-#include <vmap/hooks/pair_matcher.hpp>
 
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/frame_source.hpp>
+#include <vmap/io/poses.hpp>
+
+#include <vmap/hooks/callback_detector.hpp>
+#include <vmap/hooks/detection.hpp>
+#include <vmap/hooks/pair_matcher.hpp>
+#include <vmap/hooks/precomputed_detections.hpp>
+
+#include <vmap/keyframe/front_end.hpp>
+#include <vmap/keyframe/map_io.hpp>
+#include <vmap/keyframe/pipeline.hpp>
+#include <vmap/keyframe/selector.hpp>
+#include <vmap/keyframe/sweep.hpp>
+#include <vmap/keyframe/visual_map.hpp>
+
+#include <vmap/lcd/binary_tree.hpp>
+#include <vmap/lcd/evaluation.hpp>
+#include <vmap/lcd/influence.hpp>
+#include <vmap/lcd/label_sources.hpp>
+#include <vmap/lcd/label_vector.hpp>
+#include <vmap/lcd/loop_detector.hpp>
+
+#include <vmap/som/gcs.hpp>
+#include <vmap/som/histogram.hpp>
+#include <vmap/som/localizer.hpp>
+#include <vmap/som/nearest_wall.hpp>
+#include <vmap/som/pose_io.hpp>
+#include <vmap/som/pose_map.hpp>
+#include <vmap/som/virtual_room.hpp>
+#include <vmap/som/vocabulary.hpp>

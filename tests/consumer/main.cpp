@@ -1,24 +1,40 @@
 // A program outside the vmap tree, built against the installed package: it must find
-// the headers, OpenCV and Eigen through vmap::vmap alone.
+// the headers, OpenCV and Eigen through vmap::vmap alone. Its body is the README's
+// usage example, so that example is compiled and run by the tests.
+//
+// usage: vmap_consumer RGB_TXT OUT_MAP
 #include <vmap/vmap.hpp>
-
-#include <opencv2/imgproc.hpp>
 
 #include <cstdio>
 
-int main() {
-  cv::Mat image(240, 320, CV_8UC1, cv::Scalar(0));
-  cv::RNG rng(7);
-  for (int i = 0; i < 300; ++i)
-    cv::circle(image, {rng.uniform(0, 320), rng.uniform(0, 240)}, rng.uniform(2, 9), cv::Scalar(rng.uniform(60, 255)), -1);
-  vmap::OrbDescriptor orb;
-  vmap::BruteForceMatcher matcher;
-  vmap::FundamentalEstimator estimator;
-  const vmap::Features f = orb.extract(image);
-  const vmap::Matches m = matcher.match(f, f);
-  const vmap::Verification v = estimator.verify(f, f, m);
-  std::printf("vmap %d.%d.%d: %zu features, %zu self-matches, status %s\n", vmap::version_major,
-              vmap::version_minor, vmap::version_patch, f.size(), m.size(), std::string(vmap::to_string(v.status)).c_str());
-  // Every keypoint matches itself: the result is exact.
-  return (f.size() > 100 && m.size() == f.size()) ? 0 : 1;
+int main(int argc, char** argv) {
+  if (argc != 3) {
+    std::fprintf(stderr, "usage: vmap_consumer RGB_TXT OUT_MAP\n");
+    return 2;
+  }
+  // ---- README "Use it from C++" ----
+  vmap::KeyframeSelector selector(vmap::OrbDescriptor({.features = 1000}),
+                                  vmap::BruteForceMatcher({.mode = vmap::MatchMode::mutual}),
+                                  vmap::FundamentalEstimator({.method = vmap::RobustMethod::magsac,
+                                                              .threshold_px = 1.0}),
+                                  vmap::InlierRatio{}, {.tau = 0.3});
+
+  auto frames = vmap::FrameSource::open(argv[1], {.grey = true});  // video, folder, list or TUM
+  while (auto frame = frames.next()) {
+    vmap::FrameResult r = selector.push(*frame);
+    if (r.key_taken) std::printf("key image: frame %zu\n", *r.key_frame);
+  }
+  const vmap::VisualMap& map = selector.map();  // key images, F-matrices, similarities
+  std::printf("%zu key images, quality %.3f (eq. 7)\n", map.keys.size(), map.quality());
+  vmap::save_map(map, argv[2]);                 // written atomically
+  // ---- end of the README example ----
+
+  // The sample's 60 frames of a fast rotation give 24 key images at tau 0.3
+  // (examples/keyframes.md); the map must read back the same.
+  const vmap::VisualMap back = vmap::load_map(argv[2]);
+  const bool ok = map.keys.size() == 24 && back.keys.size() == map.keys.size() && map.quality() > 0.4 &&
+                  map.quality() < 0.6;
+  std::printf("vmap %d.%d.%d consumer: %s\n", vmap::version_major, vmap::version_minor, vmap::version_patch,
+              ok ? "ok" : "unexpected result");
+  return ok ? 0 : 1;
 }

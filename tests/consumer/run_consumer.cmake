@@ -13,4 +13,4 @@ run(${CMAKE_COMMAND} --install "${VMAP_BUILD_DIR}" --prefix "${prefix}")
 run(${CMAKE_COMMAND} -S "${CONSUMER_SOURCE_DIR}" -B "${WORK_DIR}/build" -G "${GENERATOR}"
     "-DCMAKE_PREFIX_PATH=${prefix}" -DCMAKE_BUILD_TYPE=Release)
 run(${CMAKE_COMMAND} --build "${WORK_DIR}/build")
-run("${WORK_DIR}/build/vmap_consumer")
+run("${WORK_DIR}/build/vmap_consumer" "${SAMPLE_FRAMES}" "${WORK_DIR}/map.vmap")
