@@ -9,6 +9,7 @@
 #include <vmap/features/orb.hpp>
 #include <vmap/features/sift.hpp>
 #include <vmap/geometry/fundamental.hpp>
+#include <vmap/hooks/xfeat.hpp>
 
 #include <string>
 #include <utility>
@@ -37,7 +38,13 @@ decltype(auto) with_descriptor(const DescriptorChoice& c, F&& f) {
   if (c.name == "orb") return std::forward<F>(f)(OrbDescriptor({.features = c.features}));
   if (c.name == "akaze") return std::forward<F>(f)(AkazeDescriptor{});
   if (c.name == "sift") return std::forward<F>(f)(SiftDescriptor({.features = c.features}));
-  detail::fail("--features: unknown descriptor '" + c.name + "' (choose orb, akaze or sift)");
+  if (c.name == "xfeat") {
+    // A learned model is never looked up or downloaded: the user names the file.
+    if (c.model.empty())
+      detail::fail("--features xfeat needs --model PATH (an XFeat ONNX export such as xfeat_320x224.onnx)");
+    return std::forward<F>(f)(XFeatDescriptor({.model = c.model, .top_k = c.features}));
+  }
+  detail::fail("--features: unknown descriptor '" + c.name + "' (choose orb, akaze, sift or xfeat)");
 }
 
 }  // namespace vmap::examples
