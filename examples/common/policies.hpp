@@ -26,8 +26,8 @@ inline RobustMethod parse_method(const std::string& name) {
 
 /// What the command line says about the descriptor to use.
 struct DescriptorChoice {
-  std::string name = "orb";  ///< orb, akaze, sift
-  int features = 1000;       ///< keypoint budget (ORB, SIFT)
+  std::string name = "orb";  ///< orb, akaze, sift, xfeat
+  int features = 1000;       ///< keypoint budget (ORB, SIFT; XFeat's top-k)
   std::string model;         ///< model file, for learned descriptors
 };
 

@@ -224,7 +224,7 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--sample", a->config.sample, "Frames whose labels form the eq. 5 sample (0: all)")
       ->capture_default_str();
   app.add_option("--features", a->config.descriptor.name, "orb, akaze or sift")->capture_default_str();
-  app.add_option("--n-features", a->config.descriptor.features, "Keypoint budget (ORB, SIFT)")->capture_default_str();
+  app.add_option("--nfeatures", a->config.descriptor.features, "Keypoint budget per image (ORB, SIFT; top-k for XFeat)")->capture_default_str();
   app.add_option("--csv", a->csv, "Write the PR curve (threshold, TP, FP, precision, recall) as CSV");
   app.add_option("--plot", a->plot, "Write the PR curve as a PNG plot");
   app.add_flag("--json", a->json, "Print the figures as JSON");

@@ -95,8 +95,9 @@ const bool registered = vmap::cli::add_command(
        auto args = std::make_shared<MatchArgs>();
        app.add_option("image_a", args->image_a, "First image")->required();
        app.add_option("image_b", args->image_b, "Second image")->required();
-       app.add_option("--features", args->descriptor.name, "orb, akaze or sift")->capture_default_str();
-       app.add_option("--nfeatures", args->descriptor.features, "Keypoint budget (ORB, SIFT)")
+       app.add_option("--features", args->descriptor.name, "orb, akaze, sift or xfeat")->capture_default_str();
+       app.add_option("--model", args->descriptor.model, "Model file of a learned descriptor (xfeat)");
+       app.add_option("--nfeatures", args->descriptor.features, "Keypoint budget per image (ORB, SIFT; top-k for XFeat)")
            ->capture_default_str()
            ->check(CLI::PositiveNumber);
        app.add_option("--estimator", args->estimator, "magsac, ransac, lmeds or 8point")->capture_default_str();

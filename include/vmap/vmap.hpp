@@ -25,10 +25,17 @@
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
 
+#include <vmap/hooks/any_descriptor.hpp>
+#include <vmap/hooks/any_detector.hpp>
 #include <vmap/hooks/callback_detector.hpp>
+#include <vmap/hooks/class_names.hpp>
 #include <vmap/hooks/detection.hpp>
+#include <vmap/hooks/dnn_detectors.hpp>
+#include <vmap/hooks/nms.hpp>
 #include <vmap/hooks/pair_matcher.hpp>
+#include <vmap/hooks/pair_matcher_adapters.hpp>
 #include <vmap/hooks/precomputed_detections.hpp>
+#include <vmap/hooks/xfeat.hpp>
 
 #include <vmap/keyframe/front_end.hpp>
 #include <vmap/keyframe/map_io.hpp>
