@@ -2,8 +2,9 @@
 
 // Visual map files: one binary file, written atomically (io/atomic_file.hpp).
 //
-// Format version 1. All integers little-endian and fixed width; f32/f64 are IEEE-754
-// bit patterns stored as little-endian u32/u64; str = u32 length (<= 4096) + bytes.
+// Format version 1, in io/binary.hpp's encoding: all integers little-endian and fixed
+// width; f32/f64 are IEEE-754 bit patterns stored as little-endian u32/u64; str = u32
+// length (<= 4096) + bytes.
 //
 //   header (24 bytes)
 //     u8[8]  magic "VMAPKEYS"
@@ -22,7 +23,7 @@
 //       u32  keypoints k
 //       k x  { f32 x, y, size, angle, response; i32 octave, class_id }
 //       i32  descriptor type (CV_8UC1 or CV_32FC1), i32 rows (0 or k), i32 cols (0..4096)
-//       u8[] rows * cols * element size descriptor bytes, row-major
+//       rows * cols descriptor values, row-major: u8 (CV_8UC1) or f32 (CV_32FC1)
 //       u8   has image (0 or 1); if 1: i32 rows, i32 cols, i32 type (CV_8UC1/3/4 or
 //            CV_16UC1), u32 length, then a PNG of exactly that size and shape
 //     u32    pairs (m - 1, or 0 when m == 0)
@@ -35,12 +36,12 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
+#include <vmap/io/binary.hpp>
 #include <vmap/keyframe/visual_map.hpp>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -62,120 +63,11 @@ inline constexpr std::uint32_t map_max_string = 4096;
 inline constexpr int map_max_descriptor_cols = 4096;
 inline constexpr int map_max_image_side = 16384;
 
-inline constexpr std::array<std::uint32_t, 256> crc32_table = [] {
-  std::array<std::uint32_t, 256> t{};
-  for (std::uint32_t i = 0; i < 256; ++i) {
-    std::uint32_t c = i;
-    for (int k = 0; k < 8; ++k) c = (c & 1U) ? 0xEDB88320U ^ (c >> 1) : c >> 1;
-    t[i] = c;
-  }
-  return t;
-}();
-
-/// CRC-32 as in zlib / PNG.
-inline std::uint32_t crc32(std::string_view bytes) noexcept {
-  std::uint32_t c = 0xFFFFFFFFU;
-  for (char ch : bytes) c = crc32_table[(c ^ static_cast<unsigned char>(ch)) & 0xFFU] ^ (c >> 8);
-  return c ^ 0xFFFFFFFFU;
-}
-
-class MapWriter {
- public:
-  void u8(std::uint8_t v) { out_.push_back(static_cast<char>(v)); }
-  void u32(std::uint32_t v) {
-    for (int i = 0; i < 4; ++i) out_.push_back(static_cast<char>((v >> (8 * i)) & 0xFFU));
-  }
-  void u64(std::uint64_t v) {
-    for (int i = 0; i < 8; ++i) out_.push_back(static_cast<char>((v >> (8 * i)) & 0xFFU));
-  }
-  void i32(int v) { u32(static_cast<std::uint32_t>(v)); }
-  void f32(float v) {
-    std::uint32_t b = 0;
-    std::memcpy(&b, &v, 4);
-    u32(b);
-  }
-  void f64(double v) {
-    std::uint64_t b = 0;
-    std::memcpy(&b, &v, 8);
-    u64(b);
-  }
-  void bytes(const void* data, std::size_t n) { out_.append(static_cast<const char*>(data), n); }
-  void str(const std::string& s) {
-    check(s.size() <= map_max_string, "save_map: a key image name is longer than 4096 bytes");
-    u32(static_cast<std::uint32_t>(s.size()));
-    bytes(s.data(), s.size());
-  }
-  std::string& data() { return out_; }
-
- private:
-  std::string out_;
-};
-
-class MapReader {
- public:
-  MapReader(std::string_view data, std::string name) : data_(data), name_(std::move(name)) {}
-
-  [[noreturn]] void corrupt(const std::string& what) const {
-    fail("map file '" + name_ + "': " + what + " (at byte " + std::to_string(map_header_size + pos_) + ")");
-  }
-  void need(std::uint64_t n, const char* what) const {
-    if (n > data_.size() - pos_) corrupt(std::string("truncated or corrupt: ") + what + " needs " + std::to_string(n) +
-                                         " bytes, " + std::to_string(data_.size() - pos_) + " left");
-  }
-  std::uint8_t u8(const char* what) {
-    need(1, what);
-    return static_cast<std::uint8_t>(data_[pos_++]);
-  }
-  std::uint32_t u32(const char* what) {
-    need(4, what);
-    std::uint32_t v = 0;
-    for (int i = 0; i < 4; ++i) v |= static_cast<std::uint32_t>(static_cast<unsigned char>(data_[pos_++])) << (8 * i);
-    return v;
-  }
-  std::uint64_t u64(const char* what) {
-    need(8, what);
-    std::uint64_t v = 0;
-    for (int i = 0; i < 8; ++i) v |= static_cast<std::uint64_t>(static_cast<unsigned char>(data_[pos_++])) << (8 * i);
-    return v;
-  }
-  int i32(const char* what) { return static_cast<int>(u32(what)); }
-  float f32(const char* what) {
-    const std::uint32_t b = u32(what);
-    float v = 0;
-    std::memcpy(&v, &b, 4);
-    return v;
-  }
-  double f64(const char* what) {
-    const std::uint64_t b = u64(what);
-    double v = 0;
-    std::memcpy(&v, &b, 8);
-    return v;
-  }
-  std::string_view bytes(std::uint64_t n, const char* what) {
-    need(n, what);
-    const auto v = data_.substr(pos_, static_cast<std::size_t>(n));
-    pos_ += static_cast<std::size_t>(n);
-    return v;
-  }
-  std::string str(const char* what) {
-    const std::uint32_t n = u32(what);
-    if (n > map_max_string) corrupt(std::string(what) + " is " + std::to_string(n) + " bytes long (limit 4096)");
-    return std::string(bytes(n, what));
-  }
-  [[nodiscard]] bool at_end() const noexcept { return pos_ == data_.size(); }
-  [[nodiscard]] std::size_t left() const noexcept { return data_.size() - pos_; }
-
- private:
-  std::string_view data_;
-  std::string name_;
-  std::size_t pos_ = 0;
-};
-
 inline bool valid_image_type(int type) {
   return type == CV_8UC1 || type == CV_8UC3 || type == CV_8UC4 || type == CV_16UC1;
 }
 
-inline void write_features(MapWriter& w, const Features& f) {
+inline void write_features(BinaryWriter& w, const Features& f) {
   w.i32(f.norm);
   w.i32(f.image_size.width);
   w.i32(f.image_size.height);
@@ -197,11 +89,15 @@ inline void write_features(MapWriter& w, const Features& f) {
   w.i32(d.empty() ? CV_8UC1 : d.type());
   w.i32(d.empty() ? 0 : d.rows);
   w.i32(d.empty() ? 0 : d.cols);
-  for (int r = 0; r < (d.empty() ? 0 : d.rows); ++r)
-    w.bytes(d.ptr(r), static_cast<std::size_t>(d.cols) * d.elemSize());
+  for (int r = 0; r < (d.empty() ? 0 : d.rows); ++r) {
+    if (d.type() == CV_8UC1)
+      w.bytes(d.ptr(r), static_cast<std::size_t>(d.cols));
+    else
+      w.f32s(d.ptr<float>(r), static_cast<std::size_t>(d.cols));
+  }
 }
 
-inline Features read_features(MapReader& r) {
+inline Features read_features(BinaryReader& r) {
   Features f;
   f.norm = r.i32("norm");
   if (f.norm != cv::NORM_HAMMING && f.norm != cv::NORM_HAMMING2 && f.norm != cv::NORM_L1 && f.norm != cv::NORM_L2)
@@ -213,7 +109,7 @@ inline Features read_features(MapReader& r) {
     r.corrupt("invalid feature image size");
   const std::uint32_t k = r.u32("keypoint count");
   constexpr std::uint64_t keypoint_bytes = 28;
-  r.need(k * keypoint_bytes, "keypoints");  // before allocating
+  r.require_items(k, keypoint_bytes, "keypoint count");
   f.keypoints.resize(k);
   for (auto& kp : f.keypoints) {
     kp.pt.x = r.f32("keypoint");
@@ -233,16 +129,22 @@ inline Features read_features(MapReader& r) {
   if (cols < 0 || cols > map_max_descriptor_cols || (rows == 0) != (cols == 0))
     r.corrupt("invalid descriptor width " + std::to_string(cols));
   if (rows > 0) {
-    const std::uint64_t elem = type == CV_8UC1 ? 1 : 4;
-    const auto raw = r.bytes(static_cast<std::uint64_t>(rows) * static_cast<std::uint64_t>(cols) * elem, "descriptors");
-    f.descriptors.create(rows, cols, type);
-    std::memcpy(f.descriptors.data, raw.data(), raw.size());
-    if (type == CV_32FC1 && !cv::checkRange(f.descriptors)) r.corrupt("descriptors hold a non-finite value");
+    const auto values = static_cast<std::uint64_t>(rows) * static_cast<std::uint64_t>(cols);
+    if (type == CV_8UC1) {
+      const auto raw = r.bytes(values, "descriptors");
+      f.descriptors.create(rows, cols, type);
+      std::memcpy(f.descriptors.data, raw.data(), raw.size());
+    } else {
+      r.require_items(values, sizeof(float), "descriptors");  // before allocating
+      f.descriptors.create(rows, cols, type);
+      r.f32s(f.descriptors.ptr<float>(), values, "descriptors");
+      if (!cv::checkRange(f.descriptors)) r.corrupt("descriptors hold a non-finite value");
+    }
   }
   return f;
 }
 
-inline void write_image(MapWriter& w, const cv::Mat& image) {
+inline void write_image(BinaryWriter& w, const cv::Mat& image) {
   if (image.empty()) {
     w.u8(0);
     return;
@@ -265,7 +167,7 @@ inline std::uint32_t big_endian32(std::string_view b, std::size_t at) {
   return v;
 }
 
-inline cv::Mat read_image(MapReader& r) {
+inline cv::Mat read_image(BinaryReader& r) {
   const std::uint8_t has = r.u8("image flag");
   if (has == 0) return {};
   if (has != 1) r.corrupt("image flag is " + std::to_string(has) + ", not 0 or 1");
@@ -297,29 +199,27 @@ inline cv::Mat read_image(MapReader& r) {
 }
 
 inline VisualMap parse_map(std::string_view file, const std::string& name) {
+  BinaryReader r(file, "map file '" + name + "'");
   if (file.size() < map_header_size)
-    fail("map file '" + name + "': too short (" + std::to_string(file.size()) + " bytes) to be a vmap map");
-  if (std::memcmp(file.data(), map_magic, 8) != 0) fail("map file '" + name + "': not a vmap map (wrong magic bytes)");
-  MapReader header(file.substr(8, 16), name);
-  const std::uint32_t version = header.u32("version");
+    r.corrupt("too short (" + std::to_string(file.size()) + " bytes) to be a vmap map");
+  if (r.bytes(8, "magic") != std::string_view(map_magic, 8)) r.corrupt("not a vmap map (wrong magic bytes)");
+  const std::uint32_t version = r.u32("version");
   if (version != map_format_version)
-    fail("map file '" + name + "': format version " + std::to_string(version) + " is not supported (this build reads " +
-         std::to_string(map_format_version) + ")");
-  const std::uint64_t size = header.u64("payload size");
-  const std::uint32_t crc = header.u32("checksum");
-  const std::string_view payload = file.substr(map_header_size);
-  if (size != payload.size())
-    fail("map file '" + name + "': truncated or padded (header says " + std::to_string(size) + " payload bytes, file has " +
-         std::to_string(payload.size()) + ")");
-  if (crc32(payload) != crc) fail("map file '" + name + "': checksum mismatch (the file is corrupt)");
+    r.corrupt("format version " + std::to_string(version) + " is not supported (this build reads " +
+              std::to_string(map_format_version) + ")");
+  const std::uint64_t size = r.u64("payload size");
+  const std::uint32_t crc = r.u32("checksum");
+  if (size != r.remaining())
+    r.corrupt("truncated or padded (header says " + std::to_string(size) + " payload bytes, file has " +
+              std::to_string(r.remaining()) + ")");
+  if (crc32(r.rest()) != crc) r.corrupt("checksum mismatch (the file is corrupt)");
 
-  MapReader r(payload, name);
   VisualMap map;
   map.frames = static_cast<std::size_t>(r.u64("frame count"));
   const std::uint32_t m = r.u32("key image count");
   // Each key image takes at least 49 bytes, so m is bounded by the file before any
   // allocation happens (keys are appended one by one).
-  if (m > r.left() / 49) r.corrupt("key image count " + std::to_string(m) + " exceeds what the file can hold");
+  r.require_items(m, 49, "key image count");
   for (std::uint32_t i = 0; i < m; ++i) {
     KeyImage k;
     const std::uint64_t idx = r.u64("frame index");
@@ -327,7 +227,7 @@ inline VisualMap parse_map(std::string_view file, const std::string& name) {
     if (!map.keys.empty() && idx <= map.keys.back().frame_index) r.corrupt("key image frame indices are not increasing");
     k.frame_index = static_cast<std::size_t>(idx);
     k.timestamp = r.f64("timestamp");
-    k.name = r.str("name");
+    k.name = r.str("name", map_max_string);
     k.features = read_features(r);
     k.image = read_image(r);
     map.keys.push_back(std::move(k));
@@ -350,7 +250,7 @@ inline VisualMap parse_map(std::string_view file, const std::string& name) {
     if (!(pair.similarity >= 0.0 && pair.similarity <= 1.0)) r.corrupt("similarity outside [0, 1]");
     map.pairs.push_back(pair);
   }
-  if (!r.at_end()) r.corrupt(std::to_string(r.left()) + " unexpected bytes after the last pair");
+  r.expect_end("the last pair");
   return map;
 }
 
@@ -361,13 +261,13 @@ inline VisualMap parse_map(std::string_view file, const std::string& name) {
   detail::check(map.pairs.size() == (map.keys.empty() ? 0 : map.keys.size() - 1),
                 "save_map: the map has " + std::to_string(map.pairs.size()) + " pairs for " +
                     std::to_string(map.keys.size()) + " key images");
-  detail::MapWriter w;
+  detail::BinaryWriter w;
   w.u64(map.frames);
   w.u32(static_cast<std::uint32_t>(map.keys.size()));
   for (const auto& k : map.keys) {
     w.u64(k.frame_index);
     w.f64(k.timestamp);
-    w.str(k.name);
+    w.str(k.name, detail::map_max_string, "save_map: a key image name");
     detail::write_features(w, k.features);
     detail::write_image(w, k.image);
   }
@@ -379,13 +279,14 @@ inline VisualMap parse_map(std::string_view file, const std::string& name) {
     w.i32(p.inliers);
     w.f64(p.similarity);
   }
-  const std::string payload = std::move(w.data());
-  detail::MapWriter h;
+  const std::string payload = std::move(w).take();
+  detail::BinaryWriter h;
   h.bytes(detail::map_magic, 8);
   h.u32(map_format_version);
   h.u64(payload.size());
   h.u32(detail::crc32(payload));
-  return h.data() + payload;
+  h.bytes(payload);
+  return std::move(h).take();
 }
 
 /// Parses map bytes; `name` is used in error messages. Throws vmap::Error for anything

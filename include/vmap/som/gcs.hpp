@@ -15,7 +15,7 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
-#include <vmap/som/detail/bytes.hpp>
+#include <vmap/io/binary.hpp>
 
 #include <Eigen/Core>
 
@@ -284,33 +284,49 @@ class GrowingCellStructures {
 
   static constexpr std::uint32_t file_version = 1;
 
-  /// The network as bytes: magic "VMAPGCS\n", version, scalar size, K, dimension,
-  /// options, weights, counters, simplices (native byte order, which the magic's
-  /// endianness tag records).
+  /// The network as bytes, in io/binary.hpp's little-endian encoding (Scalar must be
+  /// float or double):
+  ///   u8[8] magic "VMAPGCS\n"; u32 version (1); u32 byte-order tag 0x01020304;
+  ///   u32 scalar size (4 or 8); u32 K; u64 dimension d;
+  ///   f64 eps_b, f64 eps_n, f64 alpha, u64 lambda, f64 eta, u64 max_cells,
+  ///   u64 max_epochs, u64 seed (the options);
+  ///   u64 cells n; u64 simplices s;
+  ///   n x d weights (f32 or f64, cell by cell); n x f64 counters;
+  ///   s x (K + 1) u64 cell ids.
+  /// Earlier builds wrote the host's byte order and recorded it in the tag: their files
+  /// from little-endian machines are these same bytes (so still version 1), and one
+  /// from a big-endian machine is refused (its version reads as 0x01000000).
   [[nodiscard]] std::string serialize() const {
-    detail::ByteWriter out;
-    out.put_bytes(magic());
-    out.put<std::uint32_t>(file_version);
-    out.put<std::uint32_t>(endian_tag);
-    out.put<std::uint32_t>(sizeof(Scalar));
-    out.put<std::uint32_t>(static_cast<std::uint32_t>(K));
-    out.put<std::uint64_t>(dim_);
-    out.put<double>(options_.eps_b);
-    out.put<double>(options_.eps_n);
-    out.put<double>(options_.alpha);
-    out.put<std::uint64_t>(options_.lambda);
-    out.put<double>(options_.eta);
-    out.put<std::uint64_t>(options_.max_cells);
-    out.put<std::uint64_t>(options_.max_epochs);
-    out.put<std::uint64_t>(options_.seed);
-    out.put<std::uint64_t>(w_.size());
-    out.put<std::uint64_t>(simplices_.size());
+    static_assert(std::same_as<Scalar, float> || std::same_as<Scalar, double>,
+                  "GCS files store float or double weights");
+    detail::BinaryWriter out;
+    out.bytes(magic());
+    out.u32(file_version);
+    out.u32(endian_tag);
+    out.u32(sizeof(Scalar));
+    out.u32(static_cast<std::uint32_t>(K));
+    out.u64(dim_);
+    out.f64(options_.eps_b);
+    out.f64(options_.eps_n);
+    out.f64(options_.alpha);
+    out.u64(options_.lambda);
+    out.f64(options_.eta);
+    out.u64(options_.max_cells);
+    out.u64(options_.max_epochs);
+    out.u64(options_.seed);
+    out.u64(w_.size());
+    out.u64(simplices_.size());
     for (const auto& w : w_)
-      for (Eigen::Index i = 0; i < w.size(); ++i) out.put<Scalar>(w[i]);
-    for (double t : tau_) out.put<double>(t);
+      for (Eigen::Index i = 0; i < w.size(); ++i) {
+        if constexpr (std::same_as<Scalar, float>)
+          out.f32(w[i]);
+        else
+          out.f64(w[i]);
+      }
+    for (double t : tau_) out.f64(t);
     for (const auto& s : simplices_)
-      for (std::size_t c : s) out.put<std::uint64_t>(c);
-    return out.bytes();
+      for (std::size_t c : s) out.u64(c);
+    return std::move(out).take();
   }
 
   /// Writes serialize() to `path` atomically.
@@ -320,63 +336,72 @@ class GrowingCellStructures {
   /// (for a fixed Dim) dimension, or a truncated / corrupt one is a vmap::Error.
   static GrowingCellStructures deserialize(std::string_view bytes, const std::string& what = "GCS data",
                                            Metric metric = {}) {
-    detail::ByteReader in(bytes, what);
-    if (in.get_bytes(magic().size(), "the magic") != magic())
-      detail::fail(what + ": not a vmap GCS file (bad magic)");
-    const auto version = in.get<std::uint32_t>("the version");
+    static_assert(std::same_as<Scalar, float> || std::same_as<Scalar, double>,
+                  "GCS files store float or double weights");
+    detail::BinaryReader in(bytes, what);
+    if (in.bytes(magic().size(), "the magic") != magic()) in.corrupt("not a vmap GCS file (bad magic)");
+    const auto version = in.u32("the version");
     if (version != file_version)
-      detail::fail(what + ": unsupported GCS file version " + std::to_string(version) + " (this build reads " +
-                   std::to_string(file_version) + ")");
-    if (in.get<std::uint32_t>("the byte-order tag") != endian_tag)
-      detail::fail(what + ": written on a machine of another byte order");
-    const auto scalar = in.get<std::uint32_t>("the scalar size");
+      in.corrupt("unsupported GCS file version " + std::to_string(version) + " (this build reads " +
+                 std::to_string(file_version) + ")");
+    if (in.u32("the byte-order tag") != endian_tag)
+      in.corrupt("bad byte-order tag (corrupt, or written in another byte order)");
+    const auto scalar = in.u32("the scalar size");
     if (scalar != sizeof(Scalar))
-      detail::fail(what + ": holds " + std::to_string(scalar * 8) + "-bit weights, this network uses " +
-                   std::to_string(sizeof(Scalar) * 8) + "-bit");
-    const auto k = in.get<std::uint32_t>("K");
+      in.corrupt("holds " + std::to_string(scalar * 8) + "-bit weights, this network uses " +
+                 std::to_string(sizeof(Scalar) * 8) + "-bit");
+    const auto k = in.u32("K");
     if (k != static_cast<std::uint32_t>(K))
-      detail::fail(what + ": holds " + std::to_string(k) + "-simplices, this network uses K = " + std::to_string(K));
-    const auto dim = in.get<std::uint64_t>("the dimension");
-    if (dim == 0 || (Dim != Eigen::Dynamic && dim != static_cast<std::uint64_t>(Dim)))
-      detail::fail(what + ": dimension " + std::to_string(dim) + " does not fit this network (Dim = " +
-                   std::to_string(Dim) + ")");
+      in.corrupt("holds " + std::to_string(k) + "-simplices, this network uses K = " + std::to_string(K));
+    const auto dim = in.u64("the dimension");
+    if (Dim != Eigen::Dynamic && dim != static_cast<std::uint64_t>(Dim))
+      in.corrupt("dimension " + std::to_string(dim) + " does not fit this network (Dim = " + std::to_string(Dim) + ")");
     GcsOptions o;
-    o.eps_b = in.get<double>("eps_b");
-    o.eps_n = in.get<double>("eps_n");
-    o.alpha = in.get<double>("alpha");
-    o.lambda = in.get<std::uint64_t>("lambda");
-    o.eta = in.get<double>("eta");
-    o.max_cells = in.get<std::uint64_t>("max_cells");
-    o.max_epochs = in.get<std::uint64_t>("max_epochs");
-    o.seed = in.get<std::uint64_t>("seed");
+    o.eps_b = in.f64("eps_b");
+    o.eps_n = in.f64("eps_n");
+    o.alpha = in.f64("alpha");
+    o.lambda = in.u64("lambda");
+    o.eta = in.f64("eta");
+    o.max_cells = in.u64("max_cells");
+    o.max_epochs = in.u64("max_epochs");
+    o.seed = in.u64("seed");
     try {
       detail::validate(o, K);
     } catch (const Error& e) {
-      detail::fail(what + ": corrupt options (" + e.what() + ")");
+      in.corrupt(std::string("corrupt options (") + e.what() + ")");
     }
     GrowingCellStructures g(o, std::move(metric));
-    const auto n = in.get<std::uint64_t>("the cell count");
-    const auto ns = in.get<std::uint64_t>("the simplex count");
-    if (dim > in.remaining() / sizeof(Scalar)) detail::fail(what + ": truncated or corrupt (dimension too large)");
-    in.require_items(n, static_cast<std::size_t>(dim) * sizeof(Scalar) + sizeof(double), "the cell count");
+    const auto n = in.u64("the cell count");
+    const auto ns = in.u64("the simplex count");
+    // An untrained network has no cells (and, if dynamic, no dimension yet); cells need
+    // one. The bound on dim keeps the size of one cell below from overflowing.
+    if (n > 0 && dim == 0) in.corrupt("cells of dimension 0");
+    if (dim > std::numeric_limits<std::uint64_t>::max() / 4 / sizeof(Scalar))
+      in.corrupt("dimension " + std::to_string(dim) + " is impossible");
+    in.require_items(n, dim * sizeof(Scalar) + sizeof(double), "the cell count");
     g.dim_ = static_cast<std::size_t>(dim);
     g.w_.reserve(static_cast<std::size_t>(n));
     for (std::uint64_t c = 0; c < n; ++c) {
       Vector w(static_cast<Eigen::Index>(dim));
-      for (Eigen::Index i = 0; i < w.size(); ++i) w[i] = in.get<Scalar>("the weights");
+      for (Eigen::Index i = 0; i < w.size(); ++i) {
+        if constexpr (std::same_as<Scalar, float>)
+          w[i] = in.f32("the weights");
+        else
+          w[i] = in.f64("the weights");
+      }
       g.w_.push_back(std::move(w));
     }
     g.tau_.resize(static_cast<std::size_t>(n));
-    for (auto& t : g.tau_) t = in.get<double>("the counters");
+    for (auto& t : g.tau_) t = in.f64("the counters");
     in.require_items(ns, sizeof(std::uint64_t) * (K + 1), "the simplex count");
     g.simplices_.resize(static_cast<std::size_t>(ns));
     for (auto& s : g.simplices_)
       for (auto& c : s) {
-        const auto v = in.get<std::uint64_t>("the simplices");
-        if (v >= n) detail::fail(what + ": corrupt (a simplex refers to cell " + std::to_string(v) + " of " + std::to_string(n) + ")");
+        const auto v = in.u64("the simplices");
+        if (v >= n) in.corrupt("corrupt: a simplex refers to cell " + std::to_string(v) + " of " + std::to_string(n));
         c = static_cast<std::size_t>(v);
       }
-    in.expect_end();
+    in.expect_end("the simplices");
     g.rebuild_adjacency();
     try {
       g.check_topology();
