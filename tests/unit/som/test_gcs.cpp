@@ -163,6 +163,15 @@ TEST_CASE("GCS k_nearest and bmu agree; other K and metrics keep their invariant
   CHECK(tet.bmu(d3[0]).distance == doctest::Approx(tet.metric()(d3[0], tet.weights()[tet.bmu(d3[0]).cell])));
 }
 
+TEST_CASE("an untrained GCS saves and loads") {
+  const vmap::Gcs2d fixed;
+  const auto f = vmap::Gcs2d::deserialize(fixed.serialize());
+  CHECK(f.size() == 0);
+  const vmap::GcsXf dynamic;
+  const auto d = vmap::GcsXf::deserialize(dynamic.serialize());
+  CHECK(d.size() == 0);
+}
+
 TEST_CASE("GCS save and load round-trip; corrupt files are errors") {
   const auto dir = vmap::test::scratch_dir("som_gcs");
   std::vector<Eigen::VectorXf> data;
