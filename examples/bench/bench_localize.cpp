@@ -10,6 +10,7 @@
 //     odd ones against their ground-truth poses projected to the floor (x, y)).
 //
 //   bench_localize [--shared DIR] [--posters DIR] [--repeat N]
+#include "common/error_stats.hpp"
 #include <vmap/features/akaze.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/som/gcs.hpp>
@@ -40,19 +41,6 @@ double seconds_since(clock_type::time_point t0) {
   return std::chrono::duration<double>(clock_type::now() - t0).count();
 }
 
-struct Stats {
-  double median = 0, mean = 0, max = 0;
-};
-
-Stats stats(std::vector<double> e) {
-  Stats s;
-  if (e.empty()) return s;
-  std::sort(e.begin(), e.end());
-  s.median = e.size() % 2 ? e[e.size() / 2] : 0.5 * (e[e.size() / 2 - 1] + e[e.size() / 2]);
-  s.mean = std::accumulate(e.begin(), e.end(), 0.0) / static_cast<double>(e.size());
-  s.max = e.back();
-  return s;
-}
 
 // A query group (one or two images) and its true position.
 struct Group {
@@ -87,7 +75,7 @@ Errors evaluate(const vmap::PoseMap<vmap::GcsXf>& map, const std::vector<Eigen::
 }
 
 void print_errors(const char* label, std::size_t images, const Errors& e) {
-  const Stats g = stats(e.gcs), n = stats(e.nearest);
+  const vmap::examples::ErrorStats g = vmap::examples::error_stats(e.gcs), n = vmap::examples::error_stats(e.nearest);
   std::printf("  %-22s %zu image(s): GCS median %.3f m  mean %.3f m  max %.3f m | nearest-image baseline median %.3f m"
               "  max %.3f m  (%zu queries)\n",
               label, images, g.median, g.mean, g.max, n.median, n.max, e.gcs.size());

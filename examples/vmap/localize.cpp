@@ -1,6 +1,7 @@
 // `vmap localize`: learn a GCS map of images with poses and localize query images
 // (Trujillo-Romero 2024, DESIGN.md sec. 1.3). Either the virtual-room experiment
 // (--room) or a real sequence with a pose file (--train ... --poses ...).
+#include "common/error_stats.hpp"
 #include "vmap/cli.hpp"
 
 #include <vmap/features/akaze.hpp>
@@ -239,19 +240,6 @@ cv::Mat draw_map(const vmap::PoseMap<vmap::GcsXf>& map, const Experiment& e, con
   return img;
 }
 
-struct Summary {
-  double median = 0, mean = 0, max = 0;
-};
-
-Summary summarise(std::vector<double> e) {
-  Summary s;
-  if (e.empty()) return s;
-  std::sort(e.begin(), e.end());
-  s.median = e.size() % 2 ? e[e.size() / 2] : 0.5 * (e[e.size() / 2 - 1] + e[e.size() / 2]);
-  s.mean = std::accumulate(e.begin(), e.end(), 0.0) / static_cast<double>(e.size());
-  s.max = e.back();
-  return s;
-}
 
 template <class H>
 int run_with(const Settings& s, H histogram) {
@@ -280,7 +268,7 @@ int run_with(const Settings& s, H histogram) {
                 std::abs(r.estimate.pose.y() - r.truth.y()), r.error, ids.c_str());
     rows.push_back(std::move(r));
   }
-  const Summary sum = summarise(errors);
+  const vmap::examples::ErrorStats sum = vmap::examples::error_stats(errors);
   std::printf("position error over %zu queries of %zu image(s): median %.3f m, mean %.3f m, max %.3f m"
               " (* = winner had no pose, nearest posed neuron used)\n",
               errors.size(), s.query_images, sum.median, sum.mean, sum.max);
