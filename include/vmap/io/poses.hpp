@@ -17,6 +17,7 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
+#include <vmap/io/detail/lines.hpp>
 
 #include <opencv2/core.hpp>
 
@@ -86,15 +87,9 @@ struct PoseLine {
 /// must not silently split 1.5 into 1 and 5).
 [[nodiscard]] inline std::vector<PoseLine> parse_pose_lines(std::string_view text, const std::string& name) {
   std::vector<PoseLine> out;
-  std::size_t line_no = 0;
-  for (std::size_t pos = 0; pos < text.size();) {
-    const std::size_t nl = text.find('\n', pos);
-    const std::size_t end = nl == std::string_view::npos ? text.size() : nl;
-    const std::string_view line = text.substr(pos, end - pos);
-    pos = end + 1;
-    ++line_no;
+  for_each_line(text, [&](std::string_view line, std::size_t line_no) {
     const std::size_t first = line.find_first_not_of(" \t\r");
-    if (first == std::string_view::npos || line[first] == '#') continue;
+    if (first == std::string_view::npos || line[first] == '#') return;
     PoseLine pl{line_no, {}};
     for (std::size_t i = first; i < line.size();) {
       const std::size_t stop = std::min(line.find_first_of(" \t\r", i), line.size());
@@ -111,7 +106,7 @@ struct PoseLine {
       pl.values.push_back(v);
     }
     out.push_back(std::move(pl));
-  }
+  });
   if (out.empty()) fail(name + ": holds no pose");
   return out;
 }

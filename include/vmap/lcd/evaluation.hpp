@@ -14,6 +14,7 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
+#include <vmap/io/detail/lines.hpp>
 #include <vmap/io/poses.hpp>
 
 #include <opencv2/core.hpp>
@@ -54,13 +55,7 @@ class LoopGroundTruth {
   [[nodiscard]] static LoopGroundTruth parse(std::string_view text, const std::string& name = "<ground truth>",
                                              std::optional<std::size_t> expected_frames = std::nullopt) {
     std::vector<std::vector<std::uint8_t>> rows;
-    std::size_t line_no = 0;
-    for (std::size_t pos = 0; pos < text.size();) {
-      const std::size_t nl = text.find('\n', pos);
-      const std::size_t end = nl == std::string_view::npos ? text.size() : nl;
-      const std::string_view line = text.substr(pos, end - pos);
-      pos = end + 1;
-      ++line_no;
+    detail::for_each_line(text, [&](std::string_view line, std::size_t line_no) {
       std::vector<std::uint8_t> row;
       for (char ch : line) {
         if (ch == '0' || ch == '1') {
@@ -75,10 +70,10 @@ class LoopGroundTruth {
       if (line.find("00") != std::string_view::npos || line.find("01") != std::string_view::npos ||
           line.find("10") != std::string_view::npos || line.find("11") != std::string_view::npos)
         detail::fail(name + ":" + std::to_string(line_no) + ": values must be separated by whitespace");
-      if (row.empty()) continue;
+      if (row.empty()) return;
       if (rows.size() >= max_frames) detail::fail(name + ": more than " + std::to_string(max_frames) + " rows");
       rows.push_back(std::move(row));
-    }
+    });
     for (std::size_t r = 0; r < rows.size(); ++r)
       if (rows[r].size() != rows.size())
         detail::fail(name + ": the ground-truth matrix is not square (" + std::to_string(rows.size()) + " rows, row " +

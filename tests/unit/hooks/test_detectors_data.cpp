@@ -4,6 +4,7 @@
 #include <vmap/hooks/dnn_detectors.hpp>
 #include <vmap/hooks/precomputed_detections.hpp>
 
+#include "support/errors.hpp"
 #include "support/shared_data.hpp"
 
 #include <doctest/doctest.h>
@@ -54,14 +55,7 @@ void check_inside_image(const std::vector<vmap::Detection>& dets, cv::Size size)
   }
 }
 
-std::string error_of(auto&& make) {
-  try {
-    make();
-  } catch (const vmap::Error& e) {
-    return e.what();
-  }
-  return "no error";
-}
+using vmap::test::error_of;
 
 template <class D>
 const char* model_file();

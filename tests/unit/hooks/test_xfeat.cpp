@@ -4,6 +4,7 @@
 #include <vmap/hooks/xfeat.hpp>
 #include <vmap/matching/brute_force.hpp>
 
+#include "support/errors.hpp"
 #include "support/shared_data.hpp"
 
 #include <doctest/doctest.h>
@@ -15,14 +16,7 @@
 
 namespace {
 
-std::string error_of(auto&& make) {
-  try {
-    make();
-  } catch (const vmap::Error& e) {
-    return e.what();
-  }
-  return "no error";
-}
+using vmap::test::error_of;
 
 /// Fraction of matches whose b point is within `px` of H applied to the a point.
 double fraction_within(const vmap::Features& a, const vmap::Features& b, const vmap::Matches& m,
