@@ -25,7 +25,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <limits>
-#include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -96,8 +96,10 @@ struct LabelVectorAgreement {
                   "label_vector_agreement: vector " + std::to_string(k) + " has length " +
                       std::to_string(vectors[k].size()) + ", the first has " + std::to_string(vectors.front().size()));
   LabelVectorAgreement a;
-  std::map<LabelVector, std::size_t> distinct;
-  for (const LabelVector& v : vectors) ++distinct[v];
+  // Keyed by the bytes as a string: GCC 12 at -O3 warns falsely (stringop-overread)
+  // inside std::vector's <=> that a std::map<LabelVector, ...> would use.
+  std::set<std::string> distinct;
+  for (const LabelVector& v : vectors) distinct.emplace(v.begin(), v.end());
   a.distinct_vectors = distinct.size();
   for (std::size_t q = 0; q < vectors.size(); ++q) {
     bool loop = false, reachable = false;
