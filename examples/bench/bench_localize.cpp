@@ -130,14 +130,20 @@ int main(int argc, char** argv) {
     qo.phase = 0.5;
     qo.seed = 1001;
     const auto qc = vmap::square_circuit(ro, qo);
-    std::vector<Group> one, two;
-    for (std::size_t k = 0; k < 20; ++k) {
-      const Pose2 truth = qc[k * qc.size() / 20].truth;
-      const auto a = bow(akaze.extract(vmap::capture_view(room, akaze, truth).image));
-      const auto b = bow(akaze.extract(vmap::capture_view(room, akaze, truth, 6.0 * std::numbers::pi / 180.0).image));
-      one.push_back({{a}, truth});
-      two.push_back({{a, b}, truth});
-    }
+    // 20 test positions as one-image and two-image queries, under a histogram policy.
+    auto query_groups = [&](auto& histogram) {
+      std::pair<std::vector<Group>, std::vector<Group>> groups;
+      for (std::size_t k = 0; k < 20; ++k) {
+        const Pose2 truth = qc[k * qc.size() / 20].truth;
+        const auto a = histogram(akaze.extract(vmap::capture_view(room, akaze, truth).image));
+        const auto b =
+            histogram(akaze.extract(vmap::capture_view(room, akaze, truth, 6.0 * std::numbers::pi / 180.0).image));
+        groups.first.push_back({{a}, truth});
+        groups.second.push_back({{a, b}, truth});
+      }
+      return groups;
+    };
+    const auto [one, two] = query_groups(bow);
 
     const double paper[3] = {4063.0, 14287.0, 33347.0};
     const std::size_t sizes[3] = {100, 200, 300};
@@ -180,14 +186,7 @@ int main(int argc, char** argv) {
       vmap::GcsXf g(gcs_options(100, 50));
       g.train(gt);
       const vmap::PoseMap<vmap::GcsXf> gm(std::move(g), gt, rec.odometry);
-      std::vector<Group> g1, g2;
-      for (std::size_t k = 0; k < 20; ++k) {
-        const Pose2 truth = qc[k * qc.size() / 20].truth;
-        const auto a = grid(akaze.extract(vmap::capture_view(room, akaze, truth).image));
-        const auto b = grid(akaze.extract(vmap::capture_view(room, akaze, truth, 6.0 * std::numbers::pi / 180.0).image));
-        g1.push_back({{a}, truth});
-        g2.push_back({{a, b}, truth});
-      }
+      const auto [g1, g2] = query_groups(grid);
       print_errors("grid histogram, 100 n.", 1, evaluate(gm, gt, rec.odometry, g1));
       print_errors("grid histogram, 100 n.", 2, evaluate(gm, gt, rec.odometry, g2));
     }
