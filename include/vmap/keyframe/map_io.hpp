@@ -301,7 +301,7 @@ inline void save_map(const VisualMap& map, const std::filesystem::path& path) {
 }
 
 [[nodiscard]] inline VisualMap load_map(const std::filesystem::path& path) {
-  return detail::parse_map(read_file(path), path.string());
+  return detail::parse_map(read_file(path, default_max_file_bytes, "map file"), path.string());
 }
 
 }  // namespace vmap

@@ -209,7 +209,7 @@ class BinaryClassifiedTree {
   [[nodiscard]] static BinaryClassifiedTree load(const std::filesystem::path& path)
     requires std::integral<Id>
   {
-    return from_text(read_file(path), path.string());
+    return from_text(read_text_file(path, "tree file"), path.string());
   }
 
  private:

@@ -412,7 +412,7 @@ class GrowingCellStructures {
   }
 
   static GrowingCellStructures load(const std::filesystem::path& path, Metric metric = {}) {
-    return deserialize(read_file(path), "GCS file '" + path.string() + "'", std::move(metric));
+    return deserialize(read_file(path, default_max_file_bytes, "GCS file"), "GCS file '" + path.string() + "'", std::move(metric));
   }
 
  private:
