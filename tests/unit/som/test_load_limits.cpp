@@ -1,14 +1,17 @@
 // The SOM loaders as untrusted input (issue 13): a GCS file claiming more cells than
 // its own max_cells, or a folder / device given as a GCS or pose file, is an Error
 // naming the input.
+#include <vmap/features/akaze.hpp>
 #include <vmap/som/gcs.hpp>
 #include <vmap/som/pose_io.hpp>
+#include <vmap/som/virtual_room.hpp>
 
 #include "support/errors.hpp"
 #include "support/shared_data.hpp"
 
 #include <doctest/doctest.h>
 
+#include <cmath>
 #include <random>
 #include <string>
 #include <vector>
@@ -43,4 +46,24 @@ TEST_CASE("GCS file: more cells than max_cells, folders and devices are errors")
   CHECK(contains(error_of([] { (void)vmap::GcsXf::load("/dev/zero"); }), "not a regular file"));
   CHECK(contains(error_of([&] { (void)vmap::read_xytheta_poses(dir); }), "pose file '" + dir.string() + "' is a folder"));
   CHECK(contains(error_of([&] { (void)vmap::guess_pose_format("/dev/zero"); }), "pose file '/dev/zero' is not a regular file"));
+}
+
+TEST_CASE("circuit and capture options: non-finite values are named by their meaning") {
+  const vmap::VirtualRoomOptions room;
+  CHECK(contains(error_of([&] { (void)vmap::square_circuit(room, {.margin_m = std::nan("")}); }),
+                 "the path's distance from the walls (CircuitOptions.margin_m) must be more than 0"));
+  CHECK(contains(error_of([&] { (void)vmap::square_circuit(room, {.margin_m = room.size_m}); }), "less than half"));
+  CHECK(contains(error_of([&] { (void)vmap::square_circuit(room, {.path_noise_m = -1.0}); }), "CircuitOptions.path_noise_m"));
+
+  vmap::VirtualRoomOptions small;
+  small.image_size = {64, 48};
+  const vmap::VirtualRoom r(vmap::load_posters(vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb",
+                                               static_cast<std::size_t>(4 * small.posters_per_wall)),
+                            small);
+  vmap::AkazeDescriptor akaze;
+  const auto e = error_of([&] {
+    (void)vmap::capture_view(r, akaze, vmap::Pose2(small.size_m / 2, small.size_m / 2, 0.0), std::nan(""));
+  });
+  CHECK(contains(e, "the camera's pan angle (pan_rad) is not a finite number"));
+  CHECK_FALSE(contains(e, "wrap_angle"));
 }
