@@ -3,35 +3,40 @@
 // Class names of a detector, one per line in output order (e.g. coco80.names).
 
 #include <vmap/core/error.hpp>
+#include <vmap/io/detail/lines.hpp>
 #include <vmap/io/files.hpp>
 
 #include <cstdint>
 #include <filesystem>
-#include <sstream>
 #include <string>
+#include <string_view>
 #include <system_error>
 #include <vector>
 
 namespace vmap {
 
-/// Reads a names file: one class name per line, line i naming label i. Trailing
-/// whitespace (and '\r') is removed; empty lines are kept only between names (a file
-/// may end with blank lines). Errors: a missing or unreadable file, a folder or a
-/// non-regular file (a device such as /dev/zero), a file larger than 1 MiB (no real
-/// class list is that long), a file without any name.
+/// Class names from the text of a names file: one class name per line, line i naming
+/// label i. Trailing whitespace (and '\r') is removed; empty lines are kept only between
+/// names (a file may end with blank lines). A text without any name is an Error naming
+/// `name`.
+[[nodiscard]] inline std::vector<std::string> parse_class_names(std::string_view text,
+                                                                const std::string& name = "<class names>") {
+  std::vector<std::string> names;
+  detail::for_each_line(text, [&](std::string_view line, std::size_t) {
+    const auto last = line.find_last_not_of(" \t\r");
+    names.emplace_back(last == std::string_view::npos ? std::string_view() : line.substr(0, last + 1));
+  });
+  while (!names.empty() && names.back().empty()) names.pop_back();
+  if (names.empty()) detail::fail("class names file '" + name + "' contains no class name");
+  return names;
+}
+
+/// Reads a names file (format: parse_class_names). Errors: a missing or unreadable
+/// file, a folder or a non-regular file (a device such as /dev/zero), a file larger
+/// than 1 MiB (no real class list is that long), a file without any name.
 [[nodiscard]] inline std::vector<std::string> read_class_names(const std::filesystem::path& path) {
   constexpr std::uintmax_t max_bytes = 1u << 20;
-  const std::string text = read_text_file(path, "class names file", max_bytes);
-  std::vector<std::string> names;
-  std::istringstream in(text);
-  std::string line;
-  while (std::getline(in, line)) {
-    const auto last = line.find_last_not_of(" \t\r");
-    names.push_back(last == std::string::npos ? std::string() : line.substr(0, last + 1));
-  }
-  while (!names.empty() && names.back().empty()) names.pop_back();
-  if (names.empty()) detail::fail("class names file '" + path.string() + "' contains no class name");
-  return names;
+  return parse_class_names(read_text_file(path, "class names file", max_bytes), path.string());
 }
 
 /// The name of `label`, or "class <label>" when the list does not cover it.

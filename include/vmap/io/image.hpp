@@ -132,7 +132,7 @@ inline std::optional<cv::Size2l> tiff_size(std::string_view b) {
       const std::uint32_t bits = le32(b, 21);
       return cv::Size2l((bits & 0x3FFF) + 1, ((bits >> 14) & 0x3FFF) + 1);
     }
-    if (chunk == "VP8X")
+    if (chunk == "VP8X" && b.size() >= 31)
       return cv::Size2l((le32(b, 24) & 0xFFFFFF) + 1, (le32(b, 27) & 0xFFFFFF) + 1);
     return std::nullopt;
   }

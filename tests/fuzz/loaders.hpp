@@ -1,0 +1,36 @@
+#pragma once
+
+// The loaders under fuzzing: one VMAP_FUZZ_LOADER(name, body) line each, where `body`
+// parses `bytes` (a std::string_view of the fuzzer's input). tests/fuzz/CMakeLists.txt
+// reads the names from this file and builds one libFuzzer executable `fuzz_<name>` per
+// line, seeded from tests/fuzz/corpus/<name>/ when that folder exists. Adding a loader
+// is one line here (and, optionally, a few seed files).
+//
+// A loader may throw vmap::Error for bad input (that is the contract); any other
+// exception, a crash, a sanitizer report, a leak or a timeout is a finding.
+
+#include <vmap/hooks/class_names.hpp>
+#include <vmap/hooks/precomputed_detections.hpp>
+#include <vmap/io/image.hpp>
+#include <vmap/io/poses.hpp>
+#include <vmap/keyframe/map_io.hpp>
+#include <vmap/lcd/binary_tree.hpp>
+#include <vmap/lcd/evaluation.hpp>
+#include <vmap/som/gcs.hpp>
+
+#include <cstddef>
+#include <string_view>
+
+#define VMAP_FUZZ_LOADER(name, body) \
+  inline void fuzz_load_##name([[maybe_unused]] std::string_view bytes) body
+
+// clang-format off
+VMAP_FUZZ_LOADER(map, { (void)vmap::deserialize_map(bytes, "fuzz", {.max_image_pixels = 1 << 20}); })
+VMAP_FUZZ_LOADER(gcs, { (void)vmap::GcsXf::deserialize(bytes, "fuzz"); (void)vmap::Gcs2d::deserialize(bytes, "fuzz"); })
+VMAP_FUZZ_LOADER(tree, { (void)vmap::BinaryClassifiedTree<int>::from_text(bytes, "fuzz"); })
+VMAP_FUZZ_LOADER(detections, { (void)vmap::PrecomputedDetections::parse(bytes, "fuzz"); })
+VMAP_FUZZ_LOADER(poses, { (void)vmap::parse_camera_poses(bytes, vmap::guess_camera_pose_format(bytes, "fuzz"), "fuzz"); })
+VMAP_FUZZ_LOADER(ground_truth, { (void)vmap::LoopGroundTruth::parse(bytes, "fuzz"); })
+VMAP_FUZZ_LOADER(class_names, { (void)vmap::parse_class_names(bytes, "fuzz"); })
+VMAP_FUZZ_LOADER(image_header, { (void)vmap::image_header_size(bytes); })
+// clang-format on
