@@ -87,9 +87,14 @@ class LoopGroundTruth {
     return gt;
   }
 
+  /// Reads a ground-truth file (format: parse). Errors (vmap::Error naming the file):
+  /// missing, a folder or device, unreadable, larger than the largest matrix's text, or
+  /// malformed ("file:line").
   [[nodiscard]] static LoopGroundTruth load(const std::filesystem::path& path,
                                             std::optional<std::size_t> expected_frames = std::nullopt) {
-    return parse(read_text_file(path, "ground truth file"), path.string(), expected_frames);
+    // The largest matrix takes two characters a cell ("0 "), plus line ends ("\r\n").
+    constexpr std::uintmax_t max_bytes = std::uintmax_t{2} * max_frames * max_frames + 2 * max_frames;
+    return parse(read_text_file(path, "ground truth file", max_bytes), path.string(), expected_frames);
   }
 
   /// The matrix as text, one row per line (the format `parse` reads).

@@ -46,3 +46,14 @@ TEST_CASE("keypoint budgets have a documented maximum instead of a bad_alloc") {
         "SiftOptions.features must be in [0, 1048576], got 2000000000");
   CHECK(error_of([] { vmap::OrbDescriptor d({.features = vmap::max_keypoint_budget}); }) == "no error");
 }
+
+TEST_CASE("a 1x1 image is a clear error from every descriptor, not an OpenCV assertion") {
+  const cv::Mat one(1, 1, CV_8UC1, cv::Scalar(7));
+  vmap::OrbDescriptor orb;
+  vmap::SiftDescriptor sift;
+  const auto e = error_of([&] { (void)orb.extract(one); });
+  CHECK(e == "ORB extract: the image is 1x1 pixels, too small to detect features in (at least 8x8)");
+  CHECK(error_of([&] { (void)sift.extract(one); }).find("1x1 pixels, too small") != std::string::npos);
+  const cv::Mat eight(8, 8, CV_8UC1, cv::Scalar(7));
+  CHECK(error_of([&] { (void)orb.extract(eight); }) == "no error");
+}

@@ -40,6 +40,9 @@ inline void to_grey8(const cv::Mat& image, cv::Mat& grey, std::string_view who) 
     cv::cvtColor(eight, grey, channels == 3 ? cv::COLOR_BGR2GRAY : cv::COLOR_BGRA2GRAY);
 }
 
+/// Smallest image side the descriptors accept (an image below it is an Error).
+inline constexpr int min_feature_image_side = 8;
+
 /// The body every OpenCV-backed Descriptor shares: convert, detect and describe.
 /// `grey` is the caller's buffer, reused between frames.
 inline Features detect_and_compute(cv::Feature2D& detector, const cv::Mat& image, cv::Mat& grey, int norm,
@@ -48,7 +51,18 @@ inline Features detect_and_compute(cv::Feature2D& detector, const cv::Mat& image
   Features f;
   f.norm = norm;
   f.image_size = grey.size();
-  detector.detectAndCompute(grey, cv::noArray(), f.keypoints, f.descriptors);
+  // OpenCV's pyramids assert on tiny images (ORB: "inv_scale_x > 0" in resize.cpp for
+  // 1x1); say what was wrong with the image instead.
+  if (grey.cols < min_feature_image_side || grey.rows < min_feature_image_side)
+    fail(std::string(who) + ": the image is " + std::to_string(grey.cols) + "x" + std::to_string(grey.rows) +
+         " pixels, too small to detect features in (at least " + std::to_string(min_feature_image_side) + "x" +
+         std::to_string(min_feature_image_side) + ")");
+  try {
+    detector.detectAndCompute(grey, cv::noArray(), f.keypoints, f.descriptors);
+  } catch (const cv::Exception& e) {
+    fail(std::string(who) + ": OpenCV failed on a " + std::to_string(grey.cols) + "x" + std::to_string(grey.rows) +
+         " image: " + e.err);
+  }
   return f;
 }
 
