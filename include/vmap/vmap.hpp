@@ -8,9 +8,11 @@
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
+#include <vmap/core/numeric.hpp>
 #include <vmap/core/verification.hpp>
 
 #include <vmap/features/akaze.hpp>
+#include <vmap/features/budget.hpp>
 #include <vmap/features/orb.hpp>
 #include <vmap/features/sift.hpp>
 
@@ -22,7 +24,9 @@
 #include <vmap/geometry/similarity.hpp>
 
 #include <vmap/io/atomic_file.hpp>
+#include <vmap/io/files.hpp>
 #include <vmap/io/frame_source.hpp>
+#include <vmap/io/image.hpp>
 #include <vmap/io/poses.hpp>
 
 #include <vmap/hooks/any_descriptor.hpp>

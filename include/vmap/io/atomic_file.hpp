@@ -9,7 +9,9 @@
 // A reader sees the old file or the new one, never a mix; two processes saving to the
 // same path at once each write their own temporary file, and the last rename wins with
 // a complete file. A writer that fails or throws before `commit()` leaves the previous
-// file untouched and removes its temporary file.
+// file untouched and removes its temporary file. A process killed mid-save (kill -9,
+// power loss) leaves the target intact and may leave its hidden temporary file
+// (`.<name>.vmap-XXXXXX`) beside it; such files are never read and can be deleted.
 //
 // Several files as one set (`AtomicDirectory`): the files are written into a
 // temporary folder beside the target folder (`.<name>.vmap-XXXXXX`), which is then
