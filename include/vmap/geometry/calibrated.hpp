@@ -1,0 +1,100 @@
+#pragma once
+
+// Calibrated<E>: any Estimator run on undistorted keypoints. The keypoints of the
+// matches are re-projected to the ideal pinhole image with the camera's own K
+// (geometry/camera.hpp), so an F-matrix fits again where a wide-angle or fisheye lens
+// bends the epipolar lines, and the wrapped estimator's pixel threshold keeps its
+// meaning (exactly at the image centre; toward the edge of a strong lens an ideal pixel
+// covers less of the real image).
+
+#include <vmap/core/concepts.hpp>
+#include <vmap/core/error.hpp>
+#include <vmap/geometry/camera.hpp>
+#include <vmap/geometry/detail/robust.hpp>
+#include <vmap/geometry/fundamental.hpp>
+#include <vmap/geometry/homography.hpp>
+
+#include <opencv2/core.hpp>
+
+#include <cmath>
+#include <cstddef>
+#include <optional>
+#include <utility>
+#include <vector>
+
+namespace vmap {
+
+/// Wraps an Estimator so that it sees undistorted keypoints.
+///
+/// - With a camera: the matched keypoints of both images are undistorted (one camera
+///   took both images), matches whose keypoints the lens model cannot undistort (beyond
+///   its field of view) are left out and marked outliers, and the wrapped estimator
+///   runs on the rest. The Verification's inlier_mask is aligned with the given
+///   matches; `matches` counts all of them; the model (F or H) is the model of the ideal
+///   pinhole image, x_ideal = K * normalised ray.
+/// - Without a camera (std::nullopt) or with an ideal one: the wrapped estimator,
+///   unchanged, so a command line can choose at run time with one type.
+///
+/// The wrapped estimator sees keypoints only (positions, with the other KeyPoint fields
+/// kept) and no descriptors. Const and thread-safe when the wrapped estimator is.
+template <Estimator E>
+class Calibrated {
+ public:
+  Calibrated(std::optional<Camera> camera, E estimator) : camera_(std::move(camera)), estimator_(std::move(estimator)) {
+    if (camera_) camera_->validate("Calibrated: camera");
+  }
+
+  [[nodiscard]] Verification verify(const Features& a, const Features& b, const Matches& matches) const {
+    if (!camera_ || camera_->ideal()) return estimator_.verify(a, b, matches);
+    std::vector<cv::Point2f> pa, pb;
+    std::vector<int> order;
+    detail::gather_points(a, b, matches, 0, pa, pb, order);  // checks the indices; seed 0: given order
+    const std::vector<cv::Point2f> ua = undistort_points(*camera_, pa);
+    const std::vector<cv::Point2f> ub = undistort_points(*camera_, pb);
+    Features fa, fb;
+    fa.norm = a.norm;
+    fb.norm = b.norm;
+    fa.image_size = a.image_size;
+    fb.image_size = b.image_size;
+    Matches kept;
+    std::vector<std::size_t> original;  // kept[k] stands for matches[original[k]]
+    kept.reserve(matches.size());
+    original.reserve(matches.size());
+    fa.keypoints.reserve(matches.size());
+    fb.keypoints.reserve(matches.size());
+    for (std::size_t k = 0; k < matches.size(); ++k) {
+      if (!finite(ua[k]) || !finite(ub[k])) continue;
+      cv::KeyPoint ka = a.keypoints[static_cast<std::size_t>(matches[k].queryIdx)];
+      cv::KeyPoint kb = b.keypoints[static_cast<std::size_t>(matches[k].trainIdx)];
+      ka.pt = ua[k];
+      kb.pt = ub[k];
+      const int i = static_cast<int>(kept.size());
+      fa.keypoints.push_back(ka);
+      fb.keypoints.push_back(kb);
+      kept.emplace_back(i, i, matches[k].distance);
+      original.push_back(k);
+    }
+    Verification v = estimator_.verify(fa, fb, kept);
+    v.matches = static_cast<int>(matches.size());
+    if (!v.inlier_mask.empty()) {
+      std::vector<std::uint8_t> mask(matches.size(), 0);
+      for (std::size_t k = 0; k < kept.size(); ++k) mask[original[k]] = v.inlier_mask[k];
+      v.inlier_mask = std::move(mask);
+    }
+    return v;
+  }
+
+  [[nodiscard]] const std::optional<Camera>& camera() const noexcept { return camera_; }
+  [[nodiscard]] const E& estimator() const noexcept { return estimator_; }
+
+ private:
+  static bool finite(const cv::Point2f& p) noexcept { return std::isfinite(p.x) && std::isfinite(p.y); }
+
+  std::optional<Camera> camera_;
+  E estimator_;
+};
+
+static_assert(Estimator<Calibrated<FundamentalEstimator>>);
+static_assert(Estimator<Calibrated<HomographyEstimator>>);
+
+}  // namespace vmap
