@@ -63,7 +63,7 @@ class EssentialEstimator {
     const std::vector<cv::Point2f> na = normalize_points(camera_, pa);
     const std::vector<cv::Point2f> nb = normalize_points(camera_, pb);
     // Points the lens model cannot normalise (beyond its field of view) are left out.
-    std::vector<cv::Point2f> ka, kb;
+    std::vector<cv::Point2f> ka, kb, ra, rb;  // kept points: normalised, and real pixels
     std::vector<int> kept_order;
     ka.reserve(na.size());
     kb.reserve(nb.size());
@@ -72,6 +72,8 @@ class EssentialEstimator {
       if (std::isfinite(na[k].x) && std::isfinite(na[k].y) && std::isfinite(nb[k].x) && std::isfinite(nb[k].y)) {
         ka.push_back(na[k]);
         kb.push_back(nb[k]);
+        ra.push_back(pa[k]);
+        rb.push_back(pb[k]);
         kept_order.push_back(order[k]);
       }
     if (static_cast<int>(ka.size()) < minimal_matches) return v;  // too_few_matches
@@ -91,6 +93,8 @@ class EssentialEstimator {
     std::vector<int> positions(kept_order.size());
     for (std::size_t k = 0; k < positions.size(); ++k) positions[k] = static_cast<int>(k);
     detail::fill_from_estimate(E, mask, positions, options_.min_inliers, v);
+    if (v.status == VerificationStatus::verified || v.status == VerificationStatus::too_few_inliers)
+      rescore_in_image_pixels(ra, rb, ka, kb, v);
     if (!v.inlier_mask.empty()) {
       std::vector<std::uint8_t> full(matches.size(), 0);
       for (std::size_t k = 0; k < kept_order.size(); ++k)
@@ -99,7 +103,9 @@ class EssentialEstimator {
     }
     if (v.ok() && options_.recover_pose) {
       cv::Mat R, t;
-      cv::Mat pose_mask = mask.clone();
+      cv::Mat pose_mask(static_cast<int>(kept_order.size()), 1, CV_8U);
+      for (std::size_t k = 0; k < kept_order.size(); ++k)
+        pose_mask.at<std::uint8_t>(static_cast<int>(k)) = v.inlier_mask[static_cast<std::size_t>(kept_order[k])];
       try {
         const int front = cv::recoverPose(E, ka, kb, cv::Mat::eye(3, 3, CV_64F), R, t, pose_mask);
         RelativePose p;
@@ -120,6 +126,38 @@ class EssentialEstimator {
   [[nodiscard]] const EssentialOptions& options() const noexcept { return options_; }
 
  private:
+  /// Final inliers by the Sampson distance in pixels of the real images
+  /// (detail::sampson_in_image_pixels) against threshold_px: the robust search ran on
+  /// normalised coordinates, where a fixed threshold is too tight toward the edge of a
+  /// strong lens. All vectors and `v.inlier_mask` are over the kept points.
+  void rescore_in_image_pixels(const std::vector<cv::Point2f>& ra, const std::vector<cv::Point2f>& rb,
+                               const std::vector<cv::Point2f>& ka, const std::vector<cv::Point2f>& kb,
+                               Verification& v) const {
+    const cv::Matx33d K = camera_.K();
+    auto to_ideal = [&](const cv::Point2f& n) {
+      return cv::Point2f(static_cast<float>(K(0, 0) * n.x + K(0, 2)), static_cast<float>(K(1, 1) * n.y + K(1, 2)));
+    };
+    std::vector<cv::Point2f> ia, ib;
+    ia.reserve(ka.size());
+    ib.reserve(kb.size());
+    for (std::size_t k = 0; k < ka.size(); ++k) {
+      ia.push_back(to_ideal(ka[k]));
+      ib.push_back(to_ideal(kb[k]));
+    }
+    const cv::Matx33d Kinv = K.inv();
+    const cv::Matx33d F = Kinv.t() * v.model * Kinv;
+    const auto d = detail::sampson_in_image_pixels(F, ia, ib, detail::undistortion_jacobians(camera_, ra),
+                                                   detail::undistortion_jacobians(camera_, rb));
+    v.inlier_mask.assign(d.size(), 0);
+    v.inliers = 0;
+    for (std::size_t k = 0; k < d.size(); ++k)
+      if (d[k] <= options_.threshold_px) {
+        v.inlier_mask[k] = 1;
+        ++v.inliers;
+      }
+    v.status = v.inliers >= options_.min_inliers ? VerificationStatus::verified : VerificationStatus::too_few_inliers;
+  }
+
   Camera camera_;
   EssentialOptions options_;
 };
