@@ -80,6 +80,7 @@ int run(const MatchArgs& args) {
       std::printf("matches       %zu (mutual nearest neighbours)\n", m.size());
       std::printf("verification  %s (%s, %.2f px)\n", std::string(vmap::to_string(v.status)).c_str(),
                   args.estimator.c_str(), args.threshold);
+      if (!args.camera.empty()) std::printf("camera        %s (keypoints undistorted)\n", args.camera.c_str());
       std::printf("inliers       %d\n", v.inliers);
       std::printf("similarity    %.3f  (eq. 5: inliers / max(|D_a|, |D_b|))\n", s);
       if (v.ok())
