@@ -310,10 +310,13 @@ class FrameSource {
       f.index = idx;
       f.name = (kind_ == SourceKind::live ? input_.string() : input_.filename().string()) + "#" + std::to_string(idx);
       f.timestamp = capture_.get(cv::CAP_PROP_POS_MSEC) / 1000.0;
-      if (kind_ == SourceKind::live && !(f.timestamp > 0.0)) {
-        // Cameras without a stream clock: the Unix time of the read, so that the frames
-        // line up with ground truth or odometry stamped by the system clock.
-        f.timestamp = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+      if (kind_ == SourceKind::live) {
+        // The capture's clock when its first frame has one; otherwise (cameras without a
+        // stream clock) the Unix time of each read, so that frames line up with ground
+        // truth or odometry stamped by the system clock. Decided once: no mixed clocks.
+        if (!live_capture_clock_) live_capture_clock_ = f.timestamp > 0.0;
+        if (!*live_capture_clock_)
+          f.timestamp = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
       }
       if (options_.grey && img.channels() != 1)
         cv::cvtColor(img, f.image, img.channels() == 4 ? cv::COLOR_BGRA2GRAY : cv::COLOR_BGR2GRAY);
@@ -357,6 +360,7 @@ class FrameSource {
   std::size_t video_pos_ = 0;
   std::size_t next_index_ = 0;
   std::size_t delivered_ = 0;
+  std::optional<bool> live_capture_clock_;  ///< live input: time frames by the capture (else wall clock)
   std::vector<SkippedFrame> skipped_;
 };
 
