@@ -48,6 +48,7 @@ struct LensSceneOptions {
   double outlier_fraction = 0.25;  ///< extra random pixel pairs, as a share of the visible points
   double noise_px = 0.3;           ///< Gaussian noise on every inlier pixel (both images)
   double max_angle_deg = 75.0;     ///< points up to this angle from either optical axis
+  bool planar = false;             ///< all points on one slanted plane (a homography explains them)
   std::uint64_t seed = 1;
 };
 
@@ -89,8 +90,14 @@ inline LensScene make_lens_scene(const Camera& cam, const LensSceneOptions& o, b
   for (int i = 0; i < o.points; ++i) {
     const double theta = rng.uniform(0.0, max_angle);
     const double phi = rng.uniform(0.0, 2 * CV_PI);
-    const double depth = rng.uniform(2.0, 8.0);
+    double depth = rng.uniform(2.0, 8.0);
     const cv::Vec3d ray(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta));
+    if (o.planar) {
+      // The plane n.X = 3 with n = (0.1, -0.1, 1): rays that miss it in front are skipped.
+      const double along = ray.dot(cv::Vec3d(0.1, -0.1, 1.0));
+      if (along < 0.2) continue;
+      depth = 3.0 / along;
+    }
     X.emplace_back(ray * depth);
   }
   const auto real_a = project(X, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), false);

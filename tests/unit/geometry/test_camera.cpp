@@ -224,3 +224,18 @@ TEST_CASE("camera and estimator options are validated with messages naming the v
   CHECK(error_of([&] { vmap::EssentialEstimator(vmap::test::wide_radtan_camera(), {.threshold_px = 0}); })
             .find("EssentialOptions.threshold_px") == 0);
 }
+
+TEST_CASE("the degeneracy test follows the final inliers: a plane seen through a fisheye is a homography") {
+  const auto cam = vmap::test::wide_fisheye_camera();
+  const vmap::Calibrated<vmap::FundamentalEstimator> cf(cam, vmap::FundamentalEstimator{});
+  const auto plane = vmap::test::make_lens_scene(cam, {.planar = true, .seed = 6});
+  REQUIRE(plane.true_inliers > 200);
+  const auto vp = cf.verify(plane.a, plane.b, plane.matches);
+  REQUIRE(vp.ok());
+  CHECK(vp.degeneracy == vmap::Degeneracy::homography);
+  CHECK(vp.homography_inliers >= 0.9 * vp.inliers);
+  const auto general = vmap::test::make_lens_scene(cam, {.seed = 6});
+  const auto vg = cf.verify(general.a, general.b, general.matches);
+  REQUIRE(vg.ok());
+  CHECK(vg.degeneracy == vmap::Degeneracy::none);
+}
