@@ -7,7 +7,9 @@
 #include "common/policies.hpp"
 
 #include <vmap/core/error.hpp>
+#include <vmap/geometry/calibrated.hpp>
 #include <vmap/geometry/fundamental.hpp>
+#include <vmap/io/calibration.hpp>
 #include <vmap/keyframe/selector.hpp>
 
 #include <CLI/CLI.hpp>
@@ -33,6 +35,7 @@ struct KeyframeArgs {
   std::size_t end = 0;  // 0: to the end
   std::size_t stride = 1;
   bool json = false;
+  std::string camera;  // calibration file; empty: raw pixels
 
   [[nodiscard]] DescriptorChoice descriptor() const { return {features, nfeatures, model}; }
 };
@@ -52,6 +55,8 @@ inline void add_keyframe_options(CLI::App& app, KeyframeArgs& a) {
   app.add_option("--end", a.end, "One past the last frame index to read (0: to the end)");
   app.add_option("--stride", a.stride, "Read every stride-th frame")->check(CLI::PositiveNumber);
   app.add_flag("--json", a.json, "Print one JSON object instead of tables");
+  app.add_option("--camera", a.camera,
+                 "Calibration (ORB-SLAM YAML, ROS camera_info, KITTI calib.txt): undistort keypoints before the F-matrix");
 }
 
 inline KeyRule parse_rule(const std::string& name) {
@@ -61,9 +66,11 @@ inline KeyRule parse_rule(const std::string& name) {
 }
 
 /// The paper's verification: F-matrix, 1 px, 0.99; the homography degeneracy check is
-/// off because the selection does not use it.
-inline FundamentalEstimator make_estimator(const std::string& method) {
-  return FundamentalEstimator({.method = parse_method(method), .check_degeneracy = false});
+/// off because the selection does not use it. With a calibration file the keypoints are
+/// undistorted first (the same type either way, so one instantiation serves both).
+inline Calibrated<FundamentalEstimator> make_estimator(const std::string& method, const std::string& camera = {}) {
+  return {camera.empty() ? std::nullopt : std::optional<Camera>(read_camera(camera)),
+          FundamentalEstimator({.method = parse_method(method), .check_degeneracy = false})};
 }
 
 inline FrameSourceOptions source_options(const KeyframeArgs& a, bool grey) {

@@ -65,7 +65,7 @@ void print_table(const vmap::VisualMap& map) {
 /// must not depend on --out), so image files are read again in colour here; video
 /// frames were decoded in colour and converted exactly as the grey mode does.
 void colour_key_images(vmap::VisualMap& map, const vmap::FrameSource& src) {
-  if (src.kind() == vmap::SourceKind::video) return;
+  if (src.kind() == vmap::SourceKind::video || src.kind() == vmap::SourceKind::live) return;
   const auto paths = src.paths();
   for (auto& k : map.keys) {
     cv::Mat colour = cv::imread(paths.at(k.frame_index).string(), cv::IMREAD_COLOR);
@@ -118,7 +118,7 @@ std::function<int()> setup(CLI::App& app) {
       src = vmap::FrameSource::open(a.input, ex::source_options(a, false));
     const auto expected = expected_frames(src, a);
     const vmap::SelectorOptions so{.tau = args->tau, .rule = ex::parse_rule(a.rule), .keep_images = pictures};
-    const auto estimator = ex::make_estimator(a.estimator);
+    const auto estimator = ex::make_estimator(a.estimator, a.camera);
     return ex::with_descriptor(a.descriptor(), [&](auto descriptor) -> int {
       vmap::KeyframeSelector sel(std::move(descriptor), vmap::BruteForceMatcher{}, estimator, vmap::InlierRatio{}, so);
       ex::Progress progress(expected);
@@ -149,6 +149,7 @@ std::function<int()> setup(CLI::App& app) {
                          {"features", a.features},
                          {"estimator", a.estimator},
                          {"rule", a.rule},
+                         {"camera", a.camera},
                          {"key_frames", map.key_indices()}};
         std::printf("%s\n", j.dump().c_str());
         return 0;

@@ -7,6 +7,7 @@
 #include <vmap/features/akaze.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/frame_source.hpp>
+#include <vmap/io/poses.hpp>
 #include <vmap/som/localizer.hpp>
 #include <vmap/som/pose_io.hpp>
 #include <vmap/som/virtual_room.hpp>
@@ -127,20 +128,7 @@ Sequence read_sequence(const std::string& images, const std::string& poses, cons
     stamps.push_back(f->timestamp);
   }
   const auto timed = vmap::read_poses(poses, format_of(format, poses));
-  if (timed.size() == out.images.size()) {
-    for (const auto& t : timed) out.poses.push_back(t.pose);
-    return out;
-  }
-  for (std::size_t i = 0; i < stamps.size(); ++i) {
-    const auto it = std::min_element(timed.begin(), timed.end(), [&](const auto& a, const auto& b) {
-      return std::abs(a.timestamp - stamps[i]) < std::abs(b.timestamp - stamps[i]);
-    });
-    vmap::detail::check(std::abs(it->timestamp - stamps[i]) <= 0.02,
-                        "'" + poses + "' has no pose within 20 ms of frame " + std::to_string(i) + " of '" + images +
-                            "' (and the counts differ: " + std::to_string(timed.size()) + " poses, " +
-                            std::to_string(stamps.size()) + " frames)");
-    out.poses.push_back(it->pose);
-  }
+  for (const auto& t : vmap::poses_for_frames(timed, stamps, poses, 0.02)) out.poses.push_back(t.pose);
   return out;
 }
 

@@ -4,7 +4,9 @@
 #include "common/policies.hpp"
 #include "vmap/cli.hpp"
 
+#include <vmap/geometry/calibrated.hpp>
 #include <vmap/geometry/fundamental.hpp>
+#include <vmap/io/calibration.hpp>
 #include <vmap/geometry/similarity.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/matching/brute_force.hpp>
@@ -16,6 +18,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 
 namespace {
@@ -27,6 +30,7 @@ struct MatchArgs {
   double threshold = 1.0;
   std::string out;
   bool json = false;
+  std::string camera;  // calibration file; empty: raw pixels
 };
 
 cv::Mat read_image(const std::string& path) {
@@ -40,8 +44,9 @@ int run(const MatchArgs& args) {
   using clock = std::chrono::steady_clock;
   const cv::Mat a_img = read_image(args.image_a);
   const cv::Mat b_img = read_image(args.image_b);
-  const vmap::FundamentalEstimator estimator(
-      {.method = vmap::examples::parse_method(args.estimator), .threshold_px = args.threshold});
+  const vmap::Calibrated<vmap::FundamentalEstimator> estimator(
+      args.camera.empty() ? std::nullopt : std::optional<vmap::Camera>(vmap::read_camera(args.camera)),
+      vmap::FundamentalEstimator({.method = vmap::examples::parse_method(args.estimator), .threshold_px = args.threshold}));
   const vmap::BruteForceMatcher matcher;
   return vmap::examples::with_descriptor(args.descriptor, [&](auto descriptor) {
     const auto t0 = clock::now();
@@ -67,13 +72,15 @@ int run(const MatchArgs& args) {
                           {"homography_inliers", v.homography_inliers},
                           {"ms_extract", ms(t1 - t0)},
                           {"ms_match", ms(t2 - t1)},
-                          {"ms_verify", ms(t3 - t2)}};
+                          {"ms_verify", ms(t3 - t2)},
+                          {"camera", args.camera}};
       std::printf("%s\n", j.dump(2).c_str());
     } else {
       std::printf("features      %zu | %zu (%s)\n", a.size(), b.size(), args.descriptor.name.c_str());
       std::printf("matches       %zu (mutual nearest neighbours)\n", m.size());
       std::printf("verification  %s (%s, %.2f px)\n", std::string(vmap::to_string(v.status)).c_str(),
                   args.estimator.c_str(), args.threshold);
+      if (!args.camera.empty()) std::printf("camera        %s (keypoints undistorted)\n", args.camera.c_str());
       std::printf("inliers       %d\n", v.inliers);
       std::printf("similarity    %.3f  (eq. 5: inliers / max(|D_a|, |D_b|))\n", s);
       if (v.ok())
@@ -106,6 +113,8 @@ const bool registered = vmap::cli::add_command(
            ->check(CLI::PositiveNumber);
        app.add_option("--out", args->out, "Write a PNG of the verified matches here");
        app.add_flag("--json", args->json, "Print one JSON object");
+       app.add_option("--camera", args->camera,
+                      "Calibration (ORB-SLAM YAML, ROS camera_info, KITTI calib.txt): undistort keypoints first");
        return [args] { return run(*args); };
      }});
 

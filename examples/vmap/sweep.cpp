@@ -54,7 +54,7 @@ std::function<int()> setup(CLI::App& app) {
     for (double t : args->taus)
       if (!(t > 0.0 && t <= 1.0)) vmap::detail::fail("--taus: every threshold must be in (0, 1], got " + std::to_string(t));
     auto src = vmap::FrameSource::open(a.input, ex::source_options(a, true));
-    const auto estimator = ex::make_estimator(a.estimator);
+    const auto estimator = ex::make_estimator(a.estimator, a.camera);
     const vmap::SweepOptions so{.taus = args->taus, .rule = ex::parse_rule(a.rule), .pipelined = !args->single_thread};
     const auto t0 = std::chrono::steady_clock::now();
     const vmap::SweepResult r = ex::with_descriptor(a.descriptor(), [&](auto descriptor) {
@@ -83,7 +83,8 @@ std::function<int()> setup(CLI::App& app) {
                        {"fps", fps},
                        {"features", a.features},
                        {"estimator", a.estimator},
-                       {"rule", a.rule}};
+                       {"rule", a.rule},
+                       {"camera", a.camera}};
       std::printf("%s\n", j.dump().c_str());
       return 0;
     }

@@ -18,6 +18,9 @@
 
 #include <vmap/matching/brute_force.hpp>
 
+#include <vmap/geometry/calibrated.hpp>
+#include <vmap/geometry/camera.hpp>
+#include <vmap/geometry/essential.hpp>
 #include <vmap/geometry/fundamental.hpp>
 #include <vmap/geometry/homography.hpp>
 #include <vmap/geometry/pose2.hpp>
@@ -25,6 +28,7 @@
 
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/files.hpp>
+#include <vmap/io/calibration.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/image.hpp>
 #include <vmap/io/poses.hpp>

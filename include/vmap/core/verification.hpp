@@ -3,6 +3,7 @@
 #include <opencv2/core.hpp>
 
 #include <cstdint>
+#include <optional>
 #include <string_view>
 #include <vector>
 
@@ -39,15 +40,26 @@ enum class Degeneracy : std::uint8_t {
   return d == Degeneracy::none ? "none" : "homography (planar scene or pure rotation)";
 }
 
+/// The motion between two calibrated views, from an essential matrix (cv::recoverPose):
+/// a point X_a in camera a's coordinates is X_b = rotation * X_a + translation in camera
+/// b's. Two views fix the translation only up to scale: |translation| = 1.
+struct RelativePose {
+  cv::Matx33d rotation = cv::Matx33d::eye();
+  cv::Vec3d translation;
+  int points_in_front = 0;  ///< inliers triangulated in front of both cameras (cheirality)
+};
+
 /// The result of geometric verification of a set of matches.
 struct Verification {
   VerificationStatus status = VerificationStatus::too_few_matches;
-  cv::Matx33d model = cv::Matx33d::zeros();  ///< F (x2^T F x1 = 0) or H (x2 ~ H x1)
+  cv::Matx33d model = cv::Matx33d::zeros();  ///< F (x2^T F x1 = 0), H (x2 ~ H x1) or E
   std::vector<std::uint8_t> inlier_mask;     ///< one entry per match, 1 = inlier
   int inliers = 0;                           ///< number of ones in inlier_mask
   int matches = 0;                           ///< correspondences that were given
   Degeneracy degeneracy = Degeneracy::none;
   int homography_inliers = 0;  ///< model inliers a homography also explains (0 if unchecked)
+  /// Set by estimators that know the camera (EssentialEstimator with recover_pose).
+  std::optional<RelativePose> relative_pose;
 
   [[nodiscard]] bool ok() const noexcept { return status == VerificationStatus::verified; }
 };

@@ -30,6 +30,7 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <chrono>
 #include <cstddef>
 #include <filesystem>
 #include <functional>
@@ -48,7 +49,7 @@ struct Frame {
   cv::Mat image;
   std::size_t index = 0;
   std::string name;        ///< file name, or "<video>#<index>"
-  double timestamp = 0.0;  ///< TUM timestamp, video position in seconds, else the index
+  double timestamp = 0.0;  ///< TUM timestamp, video position in seconds, live: capture or Unix time; else the index
 };
 
 /// A frame that could not be decoded and was skipped.
@@ -58,7 +59,7 @@ struct SkippedFrame {
   std::string reason;
 };
 
-enum class SourceKind { video, image_folder, image_list, tum_rgb };
+enum class SourceKind { video, image_folder, image_list, tum_rgb, live };
 
 struct FrameSourceOptions {
   std::size_t start = 0;                                     ///< first frame index read
@@ -128,6 +129,15 @@ inline std::string trim(const std::string& s) {
   if (b == std::string::npos) return {};
   const auto e = s.find_last_not_of(" \t\r\n");
   return s.substr(b, e - b + 1);
+}
+
+/// A live source for cv::VideoCapture rather than a path: a camera index ("0"), a V4L
+/// device (/dev/video0), a URL (rtsp://, http://, ...) or a GStreamer pipeline (holds
+/// '!'). Decided from the string alone, without touching the file system.
+inline bool is_live_source(const std::string& s) {
+  if (s.empty()) return false;
+  if (std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c) != 0; })) return s.size() <= 4;
+  return s.rfind("/dev/video", 0) == 0 || s.find("://") != std::string::npos || s.find('!') != std::string::npos;
 }
 
 struct ListEntry {
@@ -205,6 +215,7 @@ class FrameSource {
     detail::check(options.resize.width >= 0 && options.resize.height >= 0 &&
                       (options.resize.width > 0) == (options.resize.height > 0),
                   "frame source: resize must be (0, 0) or a positive size");
+    if (detail::is_live_source(input.string())) return open_live(input.string(), std::move(options));
     std::error_code ec;
     if (!std::filesystem::exists(input, ec)) {
       if (ec && ec != std::errc::no_such_file_or_directory)
@@ -244,7 +255,7 @@ class FrameSource {
 
   /// The next frame, or nullopt at the end of the sequence (or at options.end).
   [[nodiscard]] std::optional<Frame> next() {
-    std::optional<Frame> f = kind_ == SourceKind::video ? next_video() : next_image();
+    std::optional<Frame> f = kind_ == SourceKind::video || kind_ == SourceKind::live ? next_video() : next_image();
     if (f) {
       ++delivered_;
       if (options_.resize.width > 0 && f->image.size() != options_.resize)
@@ -261,6 +272,7 @@ class FrameSource {
   /// Total frames in the underlying sequence if known (lists and folders; videos that
   /// report a frame count), before start/end/stride.
   [[nodiscard]] std::optional<std::size_t> total() const noexcept {
+    if (kind_ == SourceKind::live) return std::nullopt;
     if (kind_ != SourceKind::video) return entries_.size();
     return video_frames_ > 0 ? std::optional<std::size_t>(video_frames_) : std::nullopt;
   }
@@ -269,6 +281,14 @@ class FrameSource {
   [[nodiscard]] const std::vector<SkippedFrame>& skipped() const noexcept { return skipped_; }
   /// Frames returned by next() so far.
   [[nodiscard]] std::size_t delivered() const noexcept { return delivered_; }
+  /// Frame times of a list, folder or TUM source, without decoding an image (TUM: the
+  /// rgb.txt times; otherwise the indices); empty for a video or live source.
+  [[nodiscard]] std::vector<double> timestamps() const {
+    std::vector<double> out;
+    out.reserve(entries_.size());
+    for (const auto& e : entries_) out.push_back(e.timestamp);
+    return out;
+  }
   /// Image paths of a list, folder or TUM source (empty for a video).
   [[nodiscard]] std::vector<std::filesystem::path> paths() const {
     std::vector<std::filesystem::path> out;
@@ -282,6 +302,34 @@ class FrameSource {
 
   [[noreturn]] static void fail_missing(const std::filesystem::path& p) {
     detail::fail("frame source: '" + p.string() + "' does not exist");
+  }
+
+  /// A camera index, device, URL or pipeline through cv::VideoCapture: no existence
+  /// check, GStreamer for pipelines, any backend otherwise.
+  static FrameSource open_live(const std::string& source, FrameSourceOptions options) {
+    FrameSource s;
+    s.input_ = source;
+    s.options_ = std::move(options);
+    s.kind_ = SourceKind::live;
+    const bool index = std::all_of(source.begin(), source.end(), [](unsigned char c) { return std::isdigit(c) != 0; });
+    try {
+      if (index)
+        s.capture_.open(std::stoi(source), cv::CAP_ANY);
+      else if (source.find('!') != std::string::npos)
+        s.capture_.open(source, cv::CAP_GSTREAMER);
+      else
+        s.capture_.open(source, cv::CAP_ANY);
+    } catch (const std::exception&) {  // cv::Exception, or std::stoi's out_of_range for a huge index
+      s.capture_.release();
+    }
+    if (!s.capture_.isOpened())
+      detail::fail("frame source: cannot open live input '" + source + "' (" +
+                   (index ? "no camera with this index"
+                    : source.find('!') != std::string::npos ? "GStreamer pipeline did not start"
+                                                             : "device or stream not available") +
+                   "; file paths that look like this need a ./ prefix)");
+    s.next_index_ = s.options_.start;
+    return s;
   }
 
   void open_video() {
@@ -375,8 +423,16 @@ class FrameSource {
       next_index_ = detail::saturating_add(idx, options_.stride);
       Frame f;
       f.index = idx;
-      f.name = input_.filename().string() + "#" + std::to_string(idx);
+      f.name = (kind_ == SourceKind::live ? input_.string() : input_.filename().string()) + "#" + std::to_string(idx);
       f.timestamp = capture_.get(cv::CAP_PROP_POS_MSEC) / 1000.0;
+      if (kind_ == SourceKind::live) {
+        // The capture's clock when its first frame has one; otherwise (cameras without a
+        // stream clock) the Unix time of each read, so that frames line up with ground
+        // truth or odometry stamped by the system clock. Decided once: no mixed clocks.
+        if (!live_capture_clock_) live_capture_clock_ = f.timestamp > 0.0;
+        if (!*live_capture_clock_)
+          f.timestamp = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+      }
       if (options_.grey && img.channels() != 1)
         cv::cvtColor(img, f.image, img.channels() == 4 ? cv::COLOR_BGRA2GRAY : cv::COLOR_BGR2GRAY);
       else
@@ -431,6 +487,7 @@ class FrameSource {
   std::size_t video_pos_ = 0;
   std::size_t next_index_ = 0;
   std::size_t delivered_ = 0;
+  std::optional<bool> live_capture_clock_;  ///< live input: time frames by the capture (else wall clock)
   std::vector<SkippedFrame> skipped_;
 };
 

@@ -24,6 +24,8 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <concepts>
+#include <numeric>
 #include <cstddef>
 #include <filesystem>
 #include <optional>
@@ -193,6 +195,80 @@ struct PoseLine {
 [[nodiscard]] inline std::vector<CameraPose> load_camera_poses(const std::filesystem::path& path) {
   const std::string text = read_text_file(path, "pose file");
   return parse_camera_poses(text, guess_camera_pose_format(text, path.string()), path.string());
+}
+
+/// Anything with a time in seconds: CameraPose, som's TimedPose, ...
+template <class P>
+concept Timestamped = requires(const P& p) {
+  { p.timestamp } -> std::convertible_to<double>;
+};
+
+/// Ground truth by timestamp: for each frame time, the index of the pose nearest in time
+/// if it is at most `tolerance` seconds away, else nullopt (the frame has no ground
+/// truth). TUM's ground truth runs at 100 Hz and its images at 30 Hz, and TUM's own
+/// associate.py pairs them this way with a 0.02 s default. Equally near poses: the
+/// earlier one. The poses need not be sorted. A slack of 1 us on the tolerance absorbs
+/// the rounding of printed Unix times (a double resolves 0.24 us at 1.3e9 s).
+/// Error: a negative or non-finite tolerance, or a non-finite frame time.
+template <Timestamped P>
+[[nodiscard]] std::vector<std::optional<std::size_t>> associate_by_timestamp(const std::vector<P>& poses,
+                                                                             const std::vector<double>& frame_times,
+                                                                             double tolerance = 0.02) {
+  detail::check(std::isfinite(tolerance) && tolerance >= 0,
+                "associate_by_timestamp: the tolerance must be a finite number >= 0 seconds, got " +
+                    std::to_string(tolerance));
+  std::vector<std::size_t> order(poses.size());
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
+    return static_cast<double>(poses[i].timestamp) < static_cast<double>(poses[j].timestamp);
+  });
+  std::vector<double> times(order.size());
+  for (std::size_t k = 0; k < order.size(); ++k) times[k] = static_cast<double>(poses[order[k]].timestamp);
+  const double limit = tolerance + 1e-6;
+  std::vector<std::optional<std::size_t>> out(frame_times.size());
+  for (std::size_t f = 0; f < frame_times.size(); ++f) {
+    const double t = frame_times[f];
+    detail::check(std::isfinite(t), "associate_by_timestamp: frame " + std::to_string(f) + " has no finite time");
+    const auto it = std::lower_bound(times.begin(), times.end(), t);
+    std::optional<std::size_t> best;
+    double best_dt = limit;
+    if (it != times.begin()) {  // the pose just before t (the earlier one wins a tie)
+      const auto k = static_cast<std::size_t>(it - times.begin()) - 1;
+      // The first of equal times, so that duplicates resolve to the file's first line.
+      std::size_t first = k;
+      while (first > 0 && times[first - 1] == times[k]) --first;
+      if (t - times[k] <= best_dt) {
+        best = order[first];
+        best_dt = t - times[k];
+      }
+    }
+    if (it != times.end() && *it - t <= limit && (!best || *it - t < best_dt))
+      best = order[static_cast<std::size_t>(it - times.begin())];
+    out[f] = best;
+  }
+  return out;
+}
+
+/// The poses of the frames: by order when there are as many poses as frames and
+/// `by_order_if_counts_match` (key-frame sets, KITTI, lists without times), otherwise by
+/// timestamp (associate_by_timestamp). Every frame must get one: a frame without a pose
+/// within the tolerance is an Error naming `poses_name`, the frame and the nearest miss.
+template <Timestamped P>
+[[nodiscard]] std::vector<P> poses_for_frames(const std::vector<P>& poses, const std::vector<double>& frame_times,
+                                              const std::string& poses_name, double tolerance = 0.02,
+                                              bool by_order_if_counts_match = true) {
+  if (by_order_if_counts_match && poses.size() == frame_times.size()) return poses;
+  const auto match = associate_by_timestamp(poses, frame_times, tolerance);
+  std::vector<P> out;
+  out.reserve(match.size());
+  for (std::size_t f = 0; f < match.size(); ++f) {
+    if (!match[f])
+      detail::fail(poses_name + ": no pose within " + std::to_string(tolerance) + " s of frame " + std::to_string(f) +
+                   " (time " + std::to_string(frame_times[f]) + "; " + std::to_string(poses.size()) + " poses, " +
+                   std::to_string(frame_times.size()) + " frames)");
+    out.push_back(poses[*match[f]]);
+  }
+  return out;
 }
 
 }  // namespace vmap

@@ -1,0 +1,241 @@
+#pragma once
+
+// Camera calibration files, read into a vmap::Camera (geometry/camera.hpp):
+//
+//   ORB-SLAM YAML  OpenCV FileStorage, `Camera.fx` ... (ORB-SLAM2, TUM1-3.yaml) or
+//                  `Camera1.fx` ... (ORB-SLAM3 File.version "1.0"); `Camera.type`
+//                  "PinHole" (k1 k2 p1 p2 [k3]), "KannalaBrandt8" (fisheye k1..k4) or
+//                  "Rectified" (no distortion); `Camera.width` / `Camera.height` optional
+//   ROS            camera_info YAML: `camera_matrix: {data: [9]}`, `distortion_model:
+//                  plumb_bob | rational_polynomial | equidistant | fisheye`,
+//                  `distortion_coefficients: {data: [...]}`, `image_width` / `image_height`
+//   KITTI          calib.txt: `P0: <12 numbers>`, the 3x4 projection of rectified camera 0
+//                  (no distortion); `read_kitti_camera` takes another P1..P3
+//
+// `read_camera` tells them apart by their content. A bad file is a vmap::Error naming
+// the file and the missing or bad key (or "file:line" for KITTI).
+
+#include <vmap/core/error.hpp>
+#include <vmap/geometry/camera.hpp>
+#include <vmap/io/atomic_file.hpp>
+#include <vmap/io/detail/lines.hpp>
+
+#include <opencv2/core.hpp>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstddef>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <system_error>
+#include <vector>
+
+namespace vmap {
+
+enum class CalibrationFormat { orbslam, ros, kitti };
+
+namespace detail {
+
+/// OpenCV's YAML reader needs the "%YAML:1.0" directive that ROS files do not have.
+inline cv::FileStorage open_yaml_text(const std::string& text, const std::string& name) {
+  std::string yaml = text;
+  if (yaml.rfind("%YAML", 0) != 0) yaml = "%YAML:1.0\n" + yaml;
+  try {
+    cv::FileStorage fs(yaml, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
+    if (!fs.isOpened()) fail(name + ": cannot be read as a YAML file");
+    return fs;
+  } catch (const cv::Exception& e) {
+    fail(name + ": not a valid YAML file (" + e.err + ")");
+  }
+}
+
+inline std::optional<double> yaml_number(const cv::FileNode& node, const std::string& key, const std::string& name) {
+  if (node.empty() || node.isNone()) return std::nullopt;
+  if (!node.isReal() && !node.isInt()) fail(name + ": key '" + key + "' is not a number");
+  return static_cast<double>(node);
+}
+
+inline double yaml_required_number(const cv::FileNode& node, const std::string& key, const std::string& name) {
+  const auto v = yaml_number(node, key, name);
+  if (!v) fail(name + ": missing key '" + key + "'");
+  return *v;
+}
+
+/// A `data: [...]` sequence of numbers under `key` (ROS matrices).
+inline std::vector<double> yaml_data(const cv::FileStorage& fs, const std::string& key, const std::string& name) {
+  const cv::FileNode m = fs[key];
+  if (m.empty() || m.isNone()) fail(name + ": missing key '" + key + "'");
+  const cv::FileNode d = m["data"];
+  if (!d.isSeq()) fail(name + ": key '" + key + ".data' is missing or not a list");
+  std::vector<double> out;
+  for (const auto& e : d) {
+    if (!e.isReal() && !e.isInt()) fail(name + ": key '" + key + ".data' holds a value that is not a number");
+    out.push_back(static_cast<double>(e));
+  }
+  return out;
+}
+
+inline cv::Size yaml_image_size(const cv::FileNode& w, const cv::FileNode& h, const std::string& wkey,
+                                const std::string& hkey, const std::string& name) {
+  const auto width = yaml_number(w, wkey, name);
+  const auto height = yaml_number(h, hkey, name);
+  if (width.has_value() != height.has_value())
+    fail(name + ": give both '" + wkey + "' and '" + hkey + "' or neither");
+  if (!width) return {};
+  if (!(*width > 0 && *height > 0 && *width == std::floor(*width) && *height == std::floor(*height)))
+    fail(name + ": '" + wkey + "' and '" + hkey + "' must be positive whole numbers");
+  return {static_cast<int>(*width), static_cast<int>(*height)};
+}
+
+inline bool is_kitti_line(std::string_view line) {
+  const auto first = line.find_first_not_of(" \t");
+  if (first == std::string_view::npos) return false;
+  line.remove_prefix(first);
+  return (line.size() > 3 && line[0] == 'P' && line[1] >= '0' && line[1] <= '3' && line[2] == ':') ||
+         line.rfind("P_rect_0", 0) == 0;
+}
+
+}  // namespace detail
+
+/// The calibration format of a file's text: KITTI when a line starts with "P0:".."P3:"
+/// (or "P_rect_0"), ROS when it names `camera_matrix`, ORB-SLAM when it names
+/// `Camera.fx` or `Camera1.fx`.
+[[nodiscard]] inline CalibrationFormat guess_calibration_format(const std::string& text,
+                                                                const std::string& name = "<calibration>") {
+  bool kitti = false;
+  detail::for_each_line(text, [&](std::string_view line, std::size_t) { kitti = kitti || detail::is_kitti_line(line); });
+  if (kitti) return CalibrationFormat::kitti;
+  if (text.find("camera_matrix") != std::string::npos) return CalibrationFormat::ros;
+  if (text.find("Camera.fx") != std::string::npos || text.find("Camera1.fx") != std::string::npos)
+    return CalibrationFormat::orbslam;
+  detail::fail(name +
+               ": not a camera calibration file vmap knows: expected an ORB-SLAM YAML (Camera.fx ...), a ROS "
+               "camera_info YAML (camera_matrix ...) or a KITTI calib.txt (P0: ...)");
+}
+
+/// An ORB-SLAM2 / ORB-SLAM3 settings file (see the header comment).
+[[nodiscard]] inline Camera parse_orbslam_camera(const std::string& text, const std::string& name = "<calibration>") {
+  const cv::FileStorage fs = detail::open_yaml_text(text, name);
+  const std::string prefix = fs["Camera1.fx"].empty() ? "Camera." : "Camera1.";
+  const auto num = [&](const std::string& key) { return detail::yaml_required_number(fs[prefix + key], prefix + key, name); };
+  const auto opt = [&](const std::string& key) { return detail::yaml_number(fs[prefix + key], prefix + key, name); };
+  std::string type = "PinHole";
+  if (const cv::FileNode t = fs["Camera.type"]; !t.empty() && !t.isNone()) {
+    if (!t.isString()) detail::fail(name + ": key 'Camera.type' is not a string");
+    type = static_cast<std::string>(t);
+  }
+  Camera c;
+  c.fx = num("fx");
+  c.fy = num("fy");
+  c.cx = num("cx");
+  c.cy = num("cy");
+  if (type == "KannalaBrandt8") {
+    c.lens = LensModel::fisheye;
+    c.distortion = {num("k1"), num("k2"), num("k3"), num("k4")};
+  } else if (type == "PinHole") {
+    const bool any = opt("k1") || opt("k2") || opt("p1") || opt("p2") || opt("k3");
+    if (any) {
+      c.distortion = {num("k1"), num("k2"), num("p1"), num("p2")};
+      if (const auto k3 = opt("k3")) c.distortion.push_back(*k3);
+    }
+  } else if (type != "Rectified") {
+    detail::fail(name + ": key 'Camera.type' is '" + type + "'; vmap reads PinHole, KannalaBrandt8 and Rectified");
+  }
+  c.image_size = detail::yaml_image_size(fs["Camera.width"], fs["Camera.height"], "Camera.width", "Camera.height", name);
+  c.validate(name);
+  return c;
+}
+
+/// A ROS camera_info YAML (camera_calibration's output, Kalibr's ROS export).
+[[nodiscard]] inline Camera parse_ros_camera(const std::string& text, const std::string& name = "<calibration>") {
+  const cv::FileStorage fs = detail::open_yaml_text(text, name);
+  const std::vector<double> k = detail::yaml_data(fs, "camera_matrix", name);
+  if (k.size() != 9)
+    detail::fail(name + ": key 'camera_matrix.data' has " + std::to_string(k.size()) + " numbers, a 3x3 matrix has 9");
+  if (k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0)
+    detail::fail(name + ": key 'camera_matrix' is not [fx 0 cx; 0 fy cy; 0 0 1] (vmap does not model skew)");
+  Camera c;
+  c.fx = k[0];
+  c.fy = k[4];
+  c.cx = k[2];
+  c.cy = k[5];
+  std::string model = "plumb_bob";
+  if (const cv::FileNode m = fs["distortion_model"]; !m.empty() && !m.isNone()) {
+    if (!m.isString()) detail::fail(name + ": key 'distortion_model' is not a string");
+    model = static_cast<std::string>(m);
+  }
+  std::vector<double> d;
+  if (const cv::FileNode dn = fs["distortion_coefficients"]; !dn.empty() && !dn.isNone())
+    d = detail::yaml_data(fs, "distortion_coefficients", name);
+  if (model == "equidistant" || model == "fisheye") {
+    c.lens = LensModel::fisheye;
+    if (d.size() != 4)
+      detail::fail(name + ": key 'distortion_coefficients.data' has " + std::to_string(d.size()) +
+                   " numbers, the equidistant model has 4 (k1 k2 k3 k4)");
+  } else if (model == "plumb_bob" || model == "rational_polynomial") {
+    const bool zero = std::all_of(d.begin(), d.end(), [](double x) { return x == 0.0; });
+    if (zero) d.clear();  // ROS writes five zeros for rectified images
+  } else {
+    detail::fail(name + ": key 'distortion_model' is '" + model +
+                 "'; vmap reads plumb_bob, rational_polynomial, equidistant and fisheye");
+  }
+  c.distortion = d;
+  c.image_size = detail::yaml_image_size(fs["image_width"], fs["image_height"], "image_width", "image_height", name);
+  c.validate(name);
+  return c;
+}
+
+/// A KITTI calib.txt: the rectified projection `which` ("P0".."P3"), fx = P(0,0),
+/// fy = P(1,1), cx = P(0,2), cy = P(1,2), no distortion.
+[[nodiscard]] inline Camera parse_kitti_camera(const std::string& text, const std::string& name = "<calibration>",
+                                               const std::string& which = "P0") {
+  std::optional<Camera> found;
+  const std::string key = which + ":";
+  detail::for_each_line(text, [&](std::string_view line, std::size_t line_no) {
+    const auto first = line.find_first_not_of(" \t");
+    if (found || first == std::string_view::npos || line.substr(first).rfind(key, 0) != 0) return;
+    std::vector<double> v;
+    const std::string where = name + ":" + std::to_string(line_no) + ": ";
+    for (std::size_t i = first + key.size(); i < line.size();) {
+      i = line.find_first_not_of(" \t\r", i);
+      if (i == std::string_view::npos) break;
+      const std::size_t stop = std::min(line.find_first_of(" \t\r", i), line.size());
+      const std::string_view tok = line.substr(i, stop - i);
+      double x = 0.0;
+      const auto [ptr, ec] = std::from_chars(tok.data(), tok.data() + tok.size(), x);
+      if (ec != std::errc() || ptr != tok.data() + tok.size() || !std::isfinite(x))
+        detail::fail(where + "'" + std::string(tok) + "' in '" + which + "' is not a finite number");
+      v.push_back(x);
+      i = stop;
+    }
+    if (v.size() != 12)
+      detail::fail(where + "'" + which + "' has " + std::to_string(v.size()) + " numbers, a 3x4 projection has 12");
+    Camera c;
+    c.fx = v[0];
+    c.fy = v[5];
+    c.cx = v[2];
+    c.cy = v[6];
+    found = c;
+  });
+  if (!found) detail::fail(name + ": no '" + key + "' line (a KITTI calib.txt holds P0: .. P3:)");
+  found->validate(name);
+  return *found;
+}
+
+/// The camera of a calibration file of any of the three formats (see the header
+/// comment); the format is told from the content. Missing file: Error naming it.
+[[nodiscard]] inline Camera read_camera(const std::filesystem::path& path) {
+  const std::string text = read_file(path);
+  const std::string name = path.string();
+  switch (guess_calibration_format(text, name)) {
+    case CalibrationFormat::orbslam: return parse_orbslam_camera(text, name);
+    case CalibrationFormat::ros: return parse_ros_camera(text, name);
+    case CalibrationFormat::kitti: return parse_kitti_camera(text, name);
+  }
+  detail::fail(name + ": unknown calibration format");
+}
+
+}  // namespace vmap
