@@ -218,6 +218,32 @@ class VocabularyTree {
     return v;
   }
 
+  /// A tree given node by node (e.g. converted from another library's vocabulary, or
+  /// generated): `child_count[i]` children for node i, nodes in breadth-first order (the
+  /// children of node i are the next unclaimed nodes after those of nodes < i; node 0 is
+  /// the root), `centres` one row per node (the root's is ignored), `idf` one weight per
+  /// leaf, leaves numbered in node order. Checked as a loaded file is.
+  static VocabularyTree from_tree(int branching, int depth, std::vector<std::uint32_t> child_count, const cv::Mat& centres,
+                                  std::vector<float> idf) {
+    check_options({.branching = branching, .depth = depth});
+    VocabularyTree v;
+    v.branching_ = branching;
+    v.depth_ = depth;
+    v.child_count_ = std::move(child_count);
+    if (const std::string problem = v.tree_problem(); !problem.empty()) detail::fail("VocabularyTree::from_tree: " + problem);
+    detail::check(centres.type() == Traits::descriptor_type && static_cast<std::size_t>(centres.rows) == v.child_count_.size() &&
+                      centres.cols >= 1 && centres.cols <= max_cols,
+                  "VocabularyTree::from_tree: centres must be " + cv::typeToString(Traits::descriptor_type) +
+                      " with one row per node (" + std::to_string(v.child_count_.size()) + ") and 1..4096 columns");
+    if constexpr (std::is_same_v<value_type, float>)
+      detail::check(cv::checkRange(centres), "VocabularyTree::from_tree: a centre value is not finite");
+    v.cols_ = centres.cols;
+    v.centres_ = centres.clone();
+    v.index();
+    v.set_idf(std::move(idf));
+    return v;
+  }
+
   /// The word (leaf id) of each descriptor row. O(branching * depth) per row.
   [[nodiscard]] std::vector<std::uint32_t> assign(const cv::Mat& descriptors) const {
     check_descriptors(descriptors, "assign");
@@ -372,12 +398,9 @@ class VocabularyTree {
     r.require_items(n, 4 + row_bytes, "node count");
     if (n < 1 || n > std::numeric_limits<std::uint32_t>::max() / 2) r.corrupt("node count " + std::to_string(n) + " is invalid");
     v.child_count_.resize(static_cast<std::size_t>(n));
-    for (auto& c : v.child_count_) {
-      c = r.u32("child count");
-      if (c > k) r.corrupt("a node has " + std::to_string(c) + " children, more than the branching " + std::to_string(k));
-    }
-    if (v.child_count_[0] == 0) r.corrupt("the root has no children");
-    v.index_checked(r);
+    for (auto& c : v.child_count_) c = r.u32("child count");
+    if (const std::string problem = v.tree_problem(); !problem.empty()) r.corrupt(problem);
+    v.index();
     v.centres_.create(static_cast<int>(n), v.cols_, Traits::descriptor_type);
     if constexpr (std::is_same_v<value_type, float>) {
       for (std::size_t i = 0; i < n; ++i) {
@@ -576,24 +599,28 @@ class VocabularyTree {
     }
   }
 
-  /// index() for counts read from a file: checks they form one breadth-first tree of at
-  /// most depth_ levels (each node's children come after it, every node but the root
-  /// has one parent).
-  void index_checked(detail::BinaryReader& r) {
+  /// What makes child_count_ not one breadth-first tree of at most depth_ levels with
+  /// at most branching_ children a node (each node's children come after it, every node
+  /// but the root has exactly one parent, the root has children); empty if nothing.
+  [[nodiscard]] std::string tree_problem() const {
     const std::size_t n = child_count_.size();
+    if (n == 0 || child_count_[0] == 0) return "the root has no children";
     std::uint64_t next = 1;
     std::vector<std::uint8_t> level(n, 0);
     for (std::size_t i = 0; i < n; ++i) {
       const std::uint32_t c = child_count_[i];
       if (c == 0) continue;
-      if (next <= i) r.corrupt("node " + std::to_string(i) + " is nobody's child (the counts do not form a tree)");
-      if (next + c > n) r.corrupt("the child counts claim more nodes than the " + std::to_string(n) + " stored");
-      if (level[i] + 1 > depth_) r.corrupt("the tree is deeper than its depth " + std::to_string(depth_));
+      if (c > static_cast<std::uint32_t>(branching_))
+        return "node " + std::to_string(i) + " has " + std::to_string(c) + " children, more than the branching " +
+               std::to_string(branching_);
+      if (next <= i) return "node " + std::to_string(i) + " is nobody's child (the counts do not form a tree)";
+      if (next + c > n) return "the child counts claim more nodes than the " + std::to_string(n) + " stored";
+      if (level[i] + 1 > depth_) return "the tree is deeper than its depth " + std::to_string(depth_);
       for (std::uint64_t j = next; j < next + c; ++j) level[j] = static_cast<std::uint8_t>(level[i] + 1);
       next += c;
     }
-    if (next != n) r.corrupt("the child counts claim " + std::to_string(next) + " nodes, " + std::to_string(n) + " are stored");
-    index();
+    if (next != n) return "the child counts claim " + std::to_string(next) + " nodes, " + std::to_string(n) + " are stored";
+    return {};
   }
 
   int branching_ = 0;

@@ -99,6 +99,35 @@ TEST_CASE("a node with fewer descriptors than the branching becomes a leaf") {
   CHECK(two.assign(same)[0] != two.assign(other)[0]);
 }
 
+TEST_CASE("a tree given node by node: words are the leaves in node order") {
+  // root -> {1, 2}; 1 -> {3, 4}; 2 a leaf. Words: node 2 = 0, node 3 = 1, node 4 = 2.
+  cv::Mat c = (cv::Mat_<float>(5, 2) << 0, 0,  //
+               0, 0,                            // node 1, left
+               10, 0,                           // node 2, right
+               -1, 1,                           // node 3
+               -1, -1);                         // node 4
+  const auto v = vmap::FloatVocabularyTree::from_tree(2, 2, {2, 2, 0, 0, 0}, c, {1.0f, 2.0f, 3.0f});
+  CHECK(v.size() == 3);
+  CHECK(v.nodes() == 5);
+  const cv::Mat d = (cv::Mat_<float>(4, 2) << 9, 0.5f, -0.5f, 3, 0.5f, -3, 12, -1);
+  CHECK(v.assign(d) == std::vector<std::uint32_t>{0, 1, 2, 0});
+  CHECK(cv::norm(v.words(), c.rowRange(2, 5), cv::NORM_L1) == 0.0);
+  const vmap::BowVector b = v.transform(d);  // raw (2 x 1, 1 x 2, 1 x 3) / 7
+  REQUIRE(b.size() == 3);
+  CHECK(b.entries[0].weight == doctest::Approx(2.0 / 7.0));
+  CHECK(b.entries[2].weight == doctest::Approx(3.0 / 7.0));
+  using F = vmap::FloatVocabularyTree;
+  CHECK_THROWS_AS(F::from_tree(2, 1, {2, 2, 0, 0, 0}, c, {1, 2, 3}), vmap::Error);     // deeper than depth 1
+  CHECK_THROWS_AS(F::from_tree(2, 2, {2, 2, 0, 0}, c.rowRange(0, 4), {1, 2, 3}), vmap::Error);  // counts claim 5 nodes
+  CHECK_THROWS_AS(F::from_tree(2, 2, {2, 0, 0, 2, 0}, c, {1, 2, 3}), vmap::Error);     // node 3 claims nodes before it
+  CHECK_THROWS_AS(F::from_tree(2, 2, {3, 0, 0, 0, 0}, c, {1, 2, 3}), vmap::Error);     // above the branching
+  CHECK_THROWS_AS(F::from_tree(2, 2, {2, 2, 0, 0, 0}, c.rowRange(0, 4), {1, 2, 3}), vmap::Error);  // a centre missing
+  CHECK_THROWS_AS(F::from_tree(2, 2, {2, 2, 0, 0, 0}, c, {1, 2}), vmap::Error);        // an idf missing
+  cv::Mat nan = c.clone();
+  nan.at<float>(3, 0) = NAN;
+  CHECK_THROWS_AS(F::from_tree(2, 2, {2, 2, 0, 0, 0}, nan, {1, 2, 3}), vmap::Error);
+}
+
 TEST_CASE("TF-IDF weights and transform against hand-computed values") {
   cv::Mat words(3, 32, CV_8UC1);
   cv::randu(words, 0, 256);
