@@ -50,9 +50,9 @@ template <class Id = std::uint32_t>
 struct QueryFilter {
   /// Only these ids are candidates (e.g. the frames of a label-tree leaf); ids not in
   /// the database are ignored. Unset: every image.
-  std::optional<std::vector<Id>> only;
+  std::optional<std::vector<Id>> only{};
   /// Ids >= this are ignored (the most recent frames, trivially similar to the query).
-  std::optional<Id> exclude_from;
+  std::optional<Id> exclude_from{};
 };
 
 /// Inverted-file place database.
