@@ -264,6 +264,8 @@ class PlaceDatabase {
     const std::uint64_t n = r.u64("image count");
     r.require_items(n, 12, "image count");  // an image takes at least 12 bytes
     std::optional<Id> previous;
+    std::vector<std::pair<Id, BowVector>> images;
+    images.reserve(static_cast<std::size_t>(n));
     for (std::uint64_t i = 0; i < n; ++i) {
       using Wide = std::conditional_t<std::is_signed_v<Id>, std::int64_t, std::uint64_t>;
       const auto wide = static_cast<Wide>(r.u64("image id"));
@@ -293,9 +295,21 @@ class PlaceDatabase {
         if (x.weight <= 0.0f) r.corrupt("an image's vector has a zero weight");
       if (!v.empty() && std::fabs(detail::scoring_norm(v, db.scoring_) - 1.0) > 1e-3)
         r.corrupt("an image's vector is not normalised");
-      db.insert(id, std::move(v));
+      images.emplace_back(id, std::move(v));
     }
     r.expect_end("the last image");
+    // The posting lists sized once from the word counts: no regrowth while loading, and
+    // no spare capacity afterwards.
+    std::vector<std::uint32_t> per_word;
+    for (const auto& [id, v] : images)
+      for (const auto& e : v.entries) {
+        if (e.word >= per_word.size()) per_word.resize(e.word + std::size_t{1}, 0);
+        ++per_word[e.word];
+      }
+    db.postings_.resize(per_word.size());
+    for (std::size_t w = 0; w < per_word.size(); ++w) db.postings_[w].reserve(per_word[w]);
+    db.slots_.reserve(images.size());
+    for (auto& [id, v] : images) db.insert(id, std::move(v));
     return db;
   }
 
