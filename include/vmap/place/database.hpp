@@ -241,7 +241,7 @@ class PlaceDatabase {
       const auto& v = slots_[slot].bow;
       w.u32(static_cast<std::uint32_t>(v.size()));
       if constexpr (entries_as_bytes) {
-        w.bytes(v.entries.data(), v.entries.size() * sizeof(BowEntry));  // {u32 word, f32 weight} as stored
+        if (!v.empty()) w.bytes(v.entries.data(), v.entries.size() * sizeof(BowEntry));  // {u32 word, f32 weight} as stored
       } else {
         for (const auto& e : v.entries) {
           w.u32(e.word);
@@ -279,7 +279,7 @@ class PlaceDatabase {
       v.entries.resize(e);
       if constexpr (entries_as_bytes) {
         const auto block = r.bytes(std::uint64_t{e} * sizeof(BowEntry), "entries");
-        std::memcpy(v.entries.data(), block.data(), block.size());
+        if (e > 0) std::memcpy(v.entries.data(), block.data(), block.size());  // no null destination
       } else {
         for (auto& x : v.entries) {
           x.word = r.u32("word");

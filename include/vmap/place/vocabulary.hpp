@@ -179,7 +179,8 @@ class VocabularyTree {
                                         " columns (at most " + std::to_string(max_cols) + ")");
     std::mt19937_64 rng(o.seed);
     std::shuffle(rows.begin(), rows.end(), rng);
-    if (rows.size() > o.max_descriptors) rows.resize(o.max_descriptors);
+    // The sample is one cv::Mat: at most INT_MAX rows whatever max_descriptors says.
+    rows.resize(std::min({rows.size(), o.max_descriptors, static_cast<std::size_t>(std::numeric_limits<int>::max())}));
     cv::Mat sample(static_cast<int>(rows.size()), cols, Traits::descriptor_type);
     for (std::size_t r = 0; r < rows.size(); ++r)
       std::copy(rows[r], rows[r] + cols, sample.ptr<value_type>(static_cast<int>(r)));
@@ -386,7 +387,7 @@ class VocabularyTree {
     auto r = detail::open_payload(bytes, file_magic(), file_version, "vocabulary", "vocabulary file '" + name + "'");
     const std::uint8_t kind = r.u8("kind");
     if (kind != Traits::file_kind)
-      r.corrupt(std::string("holds a ") + (kind == 0 ? "binary" : kind == 1 ? "float" : "unknown") +
+      r.corrupt(std::string("holds a") + (kind == 0 ? " binary" : kind == 1 ? " float" : "n unknown") +
                 " vocabulary, not a " + Traits::name + " one");
     VocabularyTree v;
     v.cols_ = r.i32("descriptor columns");
