@@ -2,6 +2,7 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/features/budget.hpp>
 #include <vmap/features/detail/grey.hpp>
 
 #include <opencv2/features2d.hpp>
@@ -14,7 +15,7 @@ namespace vmap {
 /// Options of the ORB detector/descriptor (Rublee et al. 2011), OpenCV's defaults
 /// except the feature count, which follows the visual-map paper's experiments (1000).
 struct OrbOptions {
-  int features = 1000;        ///< maximum number of keypoints kept
+  int features = 1000;        ///< maximum number of keypoints kept, <= max_keypoint_budget
   float scale_factor = 1.2f;  ///< pyramid decimation ratio, > 1
   int levels = 8;             ///< pyramid levels, >= 1
   int edge_threshold = 31;    ///< border where no keypoint is detected, in pixels
@@ -27,7 +28,7 @@ class OrbDescriptor {
  public:
   explicit OrbDescriptor(const OrbOptions& options = {}) : options_(options) {
     const auto& o = options_;
-    detail::check(o.features > 0, "OrbOptions.features must be > 0, got " + std::to_string(o.features));
+    detail::check_keypoint_budget(o.features, 1, "OrbOptions.features");
     detail::check(std::isfinite(o.scale_factor) && o.scale_factor > 1.0f,
                   "OrbOptions.scale_factor must be a finite number > 1, got " + std::to_string(o.scale_factor));
     detail::check(o.levels >= 1, "OrbOptions.levels must be >= 1, got " + std::to_string(o.levels));

@@ -2,6 +2,7 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/features/budget.hpp>
 #include <vmap/features/detail/grey.hpp>
 
 #include <opencv2/features2d.hpp>
@@ -13,7 +14,7 @@ namespace vmap {
 
 /// Options of SIFT (Lowe 2004), OpenCV's defaults except a bounded feature count.
 struct SiftOptions {
-  int features = 1000;                ///< keypoints kept (best first); 0 keeps all
+  int features = 1000;                ///< keypoints kept (best first); 0 keeps all; <= max_keypoint_budget
   int octave_layers = 3;              ///< layers per octave, >= 1
   double contrast_threshold = 0.04;   ///< > 0
   double edge_threshold = 10.0;       ///< > 0
@@ -25,7 +26,7 @@ class SiftDescriptor {
  public:
   explicit SiftDescriptor(const SiftOptions& options = {}) : options_(options) {
     const auto& o = options_;
-    detail::check(o.features >= 0, "SiftOptions.features must be >= 0, got " + std::to_string(o.features));
+    detail::check_keypoint_budget(o.features, 0, "SiftOptions.features");
     detail::check(o.octave_layers >= 1, "SiftOptions.octave_layers must be >= 1");
     detail::check(std::isfinite(o.contrast_threshold) && o.contrast_threshold > 0,
                   "SiftOptions.contrast_threshold must be a finite number > 0");

@@ -3,11 +3,10 @@
 // Class names of a detector, one per line in output order (e.g. coco80.names).
 
 #include <vmap/core/error.hpp>
+#include <vmap/io/files.hpp>
 
 #include <cstdint>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 #include <sstream>
 #include <string>
 #include <system_error>
@@ -17,19 +16,12 @@ namespace vmap {
 
 /// Reads a names file: one class name per line, line i naming label i. Trailing
 /// whitespace (and '\r') is removed; empty lines are kept only between names (a file
-/// may end with blank lines). Errors: a missing or unreadable file, a file larger than
-/// 1 MiB (no real class list is that long), a file without any name.
+/// may end with blank lines). Errors: a missing or unreadable file, a folder or a
+/// non-regular file (a device such as /dev/zero), a file larger than 1 MiB (no real
+/// class list is that long), a file without any name.
 [[nodiscard]] inline std::vector<std::string> read_class_names(const std::filesystem::path& path) {
   constexpr std::uintmax_t max_bytes = 1u << 20;
-  std::error_code ec;
-  const auto bytes = std::filesystem::file_size(path, ec);
-  if (!ec && bytes > max_bytes)
-    detail::fail("class names file '" + path.string() + "' is " + std::to_string(bytes) +
-                 " bytes; a names file has one short line per class (limit 1 MiB)");
-  std::ifstream file(path, std::ios::binary);
-  if (!file) detail::fail("cannot open the class names file '" + path.string() + "'");
-  const std::string text((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
-  if (file.bad()) detail::fail("reading the class names file '" + path.string() + "' failed");
+  const std::string text = read_text_file(path, "class names file", max_bytes);
   std::vector<std::string> names;
   std::istringstream in(text);
   std::string line;

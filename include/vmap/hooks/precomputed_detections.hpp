@@ -83,7 +83,7 @@ class PrecomputedDetections {
 
   /// Reads a labels file; any malformed line is an Error naming the file and line.
   [[nodiscard]] static PrecomputedDetections load(const std::filesystem::path& path) {
-    return parse(read_file(path), path.string());
+    return parse(read_text_file(path, "detections file"), path.string());
   }
 
   /// Parses the text of a labels file; `name` is used in error messages.

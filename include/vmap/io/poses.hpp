@@ -181,17 +181,17 @@ struct PoseLine {
 
 /// A TUM pose file; a missing file is an Error naming it.
 [[nodiscard]] inline std::vector<CameraPose> load_tum_poses(const std::filesystem::path& path) {
-  return parse_tum_poses(read_file(path), path.string());
+  return parse_tum_poses(read_text_file(path, "pose file"), path.string());
 }
 
 /// A KITTI pose file (e.g. poses/07.txt); a missing file is an Error naming it.
 [[nodiscard]] inline std::vector<CameraPose> load_kitti_poses(const std::filesystem::path& path) {
-  return parse_kitti_poses(read_file(path), path.string());
+  return parse_kitti_poses(read_text_file(path, "pose file"), path.string());
 }
 
 /// A TUM or KITTI pose file, the format guessed from its first pose line.
 [[nodiscard]] inline std::vector<CameraPose> load_camera_poses(const std::filesystem::path& path) {
-  const std::string text = read_file(path);
+  const std::string text = read_text_file(path, "pose file");
   return parse_camera_poses(text, guess_camera_pose_format(text, path.string()), path.string());
 }
 

@@ -32,11 +32,15 @@
 //
 // Loading checks every count against the bytes that remain before allocating, so a
 // truncated, corrupt or hostile file is a vmap::Error, never a crash or a huge
-// allocation; the CRC rejects accidental corruption before anything is parsed.
+// allocation; the CRC rejects accidental corruption before anything is parsed. Key
+// images are compressed, so their size is bounded separately (MapLoadOptions): the
+// PNG header's width x height is checked against the limits before it is decoded.
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/binary.hpp>
+#include <vmap/io/files.hpp>
+#include <vmap/io/image.hpp>
 #include <vmap/keyframe/visual_map.hpp>
 
 #include <opencv2/core.hpp>
@@ -54,6 +58,16 @@
 namespace vmap {
 
 inline constexpr std::uint32_t map_format_version = 1;
+
+/// Limits of `load_map` / `deserialize_map` (a map file is untrusted input).
+struct MapLoadOptions {
+  /// Pixels of one key image (default 64 Mi pixels), checked before decoding it.
+  std::uint64_t max_image_pixels = default_max_image_pixels;
+  /// Pixels of all key images together (default 512 Mi pixels, e.g. 1700 VGA images).
+  std::uint64_t max_total_image_pixels = std::uint64_t{1} << 29;
+  /// Size of the file (load_map only).
+  std::uintmax_t max_file_bytes = default_max_file_bytes;
+};
 
 namespace detail {
 
@@ -167,7 +181,7 @@ inline std::uint32_t big_endian32(std::string_view b, std::size_t at) {
   return v;
 }
 
-inline cv::Mat read_image(BinaryReader& r) {
+inline cv::Mat read_image(BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels) {
   const std::uint8_t has = r.u8("image flag");
   if (has == 0) return {};
   if (has != 1) r.corrupt("image flag is " + std::to_string(has) + ", not 0 or 1");
@@ -177,6 +191,14 @@ inline cv::Mat read_image(BinaryReader& r) {
   if (rows <= 0 || cols <= 0 || rows > map_max_image_side || cols > map_max_image_side)
     r.corrupt("invalid key image size " + std::to_string(cols) + "x" + std::to_string(rows));
   if (!valid_image_type(type)) r.corrupt("invalid key image type " + std::to_string(type));
+  const auto pixels = static_cast<std::uint64_t>(rows) * static_cast<std::uint64_t>(cols);
+  if (pixels > limits.max_image_pixels)
+    r.corrupt("key image of " + std::to_string(cols) + "x" + std::to_string(rows) + " pixels is above the limit of " +
+              std::to_string(limits.max_image_pixels) + " pixels (MapLoadOptions::max_image_pixels)");
+  total_pixels += pixels;
+  if (total_pixels > limits.max_total_image_pixels)
+    r.corrupt("the key images hold more than " + std::to_string(limits.max_total_image_pixels) +
+              " pixels together (MapLoadOptions::max_total_image_pixels)");
   const std::uint32_t len = r.u32("image length");
   const std::string_view png = r.bytes(len, "image");
   // Check the PNG's own header before the decoder sees it, so a hostile size field
@@ -198,7 +220,7 @@ inline cv::Mat read_image(BinaryReader& r) {
   return img;
 }
 
-inline VisualMap parse_map(std::string_view file, const std::string& name) {
+inline VisualMap parse_map(std::string_view file, const std::string& name, const MapLoadOptions& limits) {
   BinaryReader r(file, "map file '" + name + "'");
   if (file.size() < map_header_size)
     r.corrupt("too short (" + std::to_string(file.size()) + " bytes) to be a vmap map");
@@ -215,6 +237,7 @@ inline VisualMap parse_map(std::string_view file, const std::string& name) {
   if (crc32(r.rest()) != crc) r.corrupt("checksum mismatch (the file is corrupt)");
 
   VisualMap map;
+  std::uint64_t total_pixels = 0;
   map.frames = static_cast<std::size_t>(r.u64("frame count"));
   const std::uint32_t m = r.u32("key image count");
   // Each key image takes at least 49 bytes, so m is bounded by the file before any
@@ -229,7 +252,7 @@ inline VisualMap parse_map(std::string_view file, const std::string& name) {
     k.timestamp = r.f64("timestamp");
     k.name = r.str("name", map_max_string);
     k.features = read_features(r);
-    k.image = read_image(r);
+    k.image = read_image(r, limits, total_pixels);
     map.keys.push_back(std::move(k));
   }
   const std::uint32_t p = r.u32("pair count");
@@ -291,8 +314,9 @@ inline VisualMap parse_map(std::string_view file, const std::string& name) {
 
 /// Parses map bytes; `name` is used in error messages. Throws vmap::Error for anything
 /// that is not a valid version-1 map.
-[[nodiscard]] inline VisualMap deserialize_map(std::string_view bytes, const std::string& name = "<memory>") {
-  return detail::parse_map(bytes, name);
+[[nodiscard]] inline VisualMap deserialize_map(std::string_view bytes, const std::string& name = "<memory>",
+                                               const MapLoadOptions& limits = {}) {
+  return detail::parse_map(bytes, name, limits);
 }
 
 /// Writes the map to `path` atomically (temp file + rename).
@@ -300,8 +324,10 @@ inline void save_map(const VisualMap& map, const std::filesystem::path& path) {
   write_file_atomically(path, serialize_map(map));
 }
 
-[[nodiscard]] inline VisualMap load_map(const std::filesystem::path& path) {
-  return detail::parse_map(read_file(path), path.string());
+/// Reads a map file. Errors (vmap::Error naming the file): missing, a folder or device,
+/// unreadable, corrupt, or above the limits.
+[[nodiscard]] inline VisualMap load_map(const std::filesystem::path& path, const MapLoadOptions& limits = {}) {
+  return detail::parse_map(read_file(path, limits.max_file_bytes, "map file"), path.string(), limits);
 }
 
 }  // namespace vmap

@@ -46,6 +46,9 @@ class BinaryClassifiedTree {
  public:
   /// Deepest tree `load` accepts; far more labels than any detector has classes.
   static constexpr std::size_t max_depth = 4096;
+  /// Most nodes `from_text` / `load` build (4 Mi nodes, ~250 MB): 100 000 key frames
+  /// with 40 labels need at most 4 M, and real label vectors share most prefixes.
+  static constexpr std::uint64_t max_load_nodes = std::uint64_t{1} << 22;
 
   explicit BinaryClassifiedTree(std::size_t depth = 0) : depth_(depth) {
     detail::check(depth <= max_depth, "BinaryClassifiedTree: depth " + std::to_string(depth) + " exceeds " +
@@ -181,7 +184,28 @@ class BinaryClassifiedTree {
     while (body > 0 && lines[3 + body - 1].empty()) --body;
     if (count != body)
       bad(2, "says " + std::to_string(count) + " ids but " + std::to_string(body) + " lines follow (truncated?)");
+    // The nodes the tree will need, counted exactly before any is allocated: one per
+    // distinct prefix of the label bits (sorted bit strings share their common prefix).
+    // A node costs ~60 bytes against one character of the file, so a hostile file of
+    // long distinct bit strings is refused here instead of expanding 60-fold.
+    std::uint64_t nodes = 1;
+    {
+      std::vector<std::string_view> bits;
+      bits.reserve(count);
+      for (std::size_t k = 0; k < count; ++k) bits.push_back(lines[3 + k].substr(0, lines[3 + k].find(' ')));
+      std::sort(bits.begin(), bits.end());
+      for (std::size_t k = 0; k < bits.size(); ++k) {
+        std::size_t common = 0;
+        if (k > 0)
+          while (common < bits[k].size() && common < bits[k - 1].size() && bits[k][common] == bits[k - 1][common]) ++common;
+        nodes += std::min(bits[k].size(), depth) - std::min(common, depth);
+      }
+      if (nodes > max_load_nodes)
+        bad(1, "the tree would need " + std::to_string(nodes) + " nodes, more than the limit of " +
+                   std::to_string(max_load_nodes));
+    }
     BinaryClassifiedTree tree(depth);
+    tree.nodes_.reserve(static_cast<std::size_t>(nodes));
     LabelVector v(depth);
     for (std::size_t k = 0; k < count; ++k) {
       const std::string_view l = lines[3 + k];
@@ -209,7 +233,7 @@ class BinaryClassifiedTree {
   [[nodiscard]] static BinaryClassifiedTree load(const std::filesystem::path& path)
     requires std::integral<Id>
   {
-    return from_text(read_file(path), path.string());
+    return from_text(read_text_file(path, "tree file"), path.string());
   }
 
  private:

@@ -89,7 +89,7 @@ class LoopGroundTruth {
 
   [[nodiscard]] static LoopGroundTruth load(const std::filesystem::path& path,
                                             std::optional<std::size_t> expected_frames = std::nullopt) {
-    return parse(read_file(path), path.string(), expected_frames);
+    return parse(read_text_file(path, "ground truth file"), path.string(), expected_frames);
   }
 
   /// The matrix as text, one row per line (the format `parse` reads).

@@ -379,6 +379,18 @@ class GrowingCellStructures {
     if (dim > std::numeric_limits<std::uint64_t>::max() / 4 / sizeof(Scalar))
       in.corrupt("dimension " + std::to_string(dim) + " is impossible");
     in.require_items(n, dim * sizeof(Scalar) + sizeof(double), "the cell count");
+    // Bounds on what the file makes us build besides the weights (per-cell vectors,
+    // adjacency, the topology check's sets cost ~100 bytes a cell and ~250 a simplex,
+    // far more than the 12 and 24 bytes they take in the file): training never makes
+    // more cells than max_cells, nor many more simplices than K per cell.
+    if (n > o.max_cells)
+      in.corrupt("holds " + std::to_string(n) + " cells, more than its max_cells " + std::to_string(o.max_cells));
+    if (n > max_load_cells)
+      in.corrupt("holds " + std::to_string(n) + " cells, more than the " + std::to_string(max_load_cells) +
+                 " a GCS file may hold");
+    if (ns > max_simplices_per_cell * n)
+      in.corrupt("holds " + std::to_string(ns) + " simplices for " + std::to_string(n) + " cells (at most " +
+                 std::to_string(max_simplices_per_cell) + " a cell)");
     g.dim_ = static_cast<std::size_t>(dim);
     g.w_.reserve(static_cast<std::size_t>(n));
     for (std::uint64_t c = 0; c < n; ++c) {
@@ -411,8 +423,15 @@ class GrowingCellStructures {
     return g;
   }
 
+  /// Largest network `deserialize` / `load` accept: 2^20 cells (a map of a building
+  /// has hundreds), with at most 64 simplices a cell.
+  static constexpr std::uint64_t max_load_cells = std::uint64_t{1} << 20;
+  static constexpr std::uint64_t max_simplices_per_cell = 64;
+
+  /// Reads a network written by save(). Errors (vmap::Error naming the file): missing,
+  /// a folder or device, unreadable, corrupt, above the limits above.
   static GrowingCellStructures load(const std::filesystem::path& path, Metric metric = {}) {
-    return deserialize(read_file(path), "GCS file '" + path.string() + "'", std::move(metric));
+    return deserialize(read_file(path, default_max_file_bytes, "GCS file"), "GCS file '" + path.string() + "'", std::move(metric));
   }
 
  private:

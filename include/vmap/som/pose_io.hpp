@@ -61,7 +61,7 @@ inline std::vector<TimedPose> read_kitti_poses(const std::filesystem::path& path
 /// "x y theta" (metres, radians) a line.
 inline std::vector<TimedPose> read_xytheta_poses(const std::filesystem::path& path) {
   std::vector<TimedPose> out;
-  for (const auto& l : detail::parse_pose_lines(read_file(path), path.string())) {
+  for (const auto& l : detail::parse_pose_lines(read_text_file(path, "pose file"), path.string())) {
     if (l.values.size() != 3)
       detail::fail(detail::pose_line_prefix(path.string(), l) + std::to_string(l.values.size()) +
                    " numbers, an x y theta pose has 3");
@@ -82,7 +82,7 @@ inline std::vector<TimedPose> read_poses(const std::filesystem::path& path, Pose
 /// The format of a pose file by its first pose line: 8 numbers = TUM, 12 or 13 =
 /// KITTI, 3 = x y theta.
 inline PoseFormat guess_pose_format(const std::filesystem::path& path) {
-  const auto lines = detail::parse_pose_lines(read_file(path), path.string());
+  const auto lines = detail::parse_pose_lines(read_text_file(path, "pose file"), path.string());
   const std::size_t n = lines.front().values.size();
   if (n == 3) return PoseFormat::xytheta;
   if (const auto f = camera_pose_format_for(n)) return *f == CameraPoseFormat::tum ? PoseFormat::tum : PoseFormat::kitti;

@@ -230,11 +230,16 @@ struct CircuitSample {
 /// increments (Pose2::between) with per-step noise, integrated from the true start.
 inline std::vector<CircuitSample> square_circuit(const VirtualRoomOptions& room, const CircuitOptions& c) {
   const double side = room.size_m - 2.0 * c.margin_m;
-  detail::check(c.margin_m > 0.0 && side > 0.0, "CircuitOptions.margin_m must be in (0, size / 2)");
+  detail::check(std::isfinite(c.margin_m) && c.margin_m > 0.0 && side > 0.0,
+                "the path's distance from the walls (CircuitOptions.margin_m) must be more than 0 and less than half "
+                "the room's size (" + std::to_string(room.size_m / 2.0) + " m), got " + std::to_string(c.margin_m) + " m");
+  detail::check(std::isfinite(c.phase), "the circuit's phase (CircuitOptions.phase) is not a finite number");
   detail::check(c.laps >= 1 && c.images_per_lap >= 4, "CircuitOptions: need laps >= 1 and images_per_lap >= 4");
-  detail::check(c.path_noise_m >= 0.0 && c.heading_noise_deg >= 0.0 && c.odometry_noise_m >= 0.0 &&
-                    c.odometry_noise_deg >= 0.0,
-                "CircuitOptions: noise levels must be >= 0");
+  for (const auto& [value, name] : {std::pair{c.path_noise_m, "path_noise_m"}, std::pair{c.heading_noise_deg, "heading_noise_deg"},
+                                    std::pair{c.odometry_noise_m, "odometry_noise_m"},
+                                    std::pair{c.odometry_noise_deg, "odometry_noise_deg"}})
+    detail::check(std::isfinite(value) && value >= 0.0, std::string("the noise level CircuitOptions.") + name +
+                                                            " must be a finite number >= 0, got " + std::to_string(value));
   std::mt19937_64 rng(c.seed);
   std::normal_distribution<double> n01(0.0, 1.0);
   const double deg = std::numbers::pi / 180.0;
@@ -282,6 +287,8 @@ struct RoomView {
 /// the camera 90 degrees to the side with more (plus `pan_rad`), take the picture.
 template <Descriptor D>
 RoomView capture_view(const VirtualRoom& room, D& descriptor, const Pose2& robot, double pan_rad = 0.0) {
+  detail::check(std::isfinite(pan_rad), "the camera's pan angle (pan_rad) is not a finite number, got " +
+                                            std::to_string(pan_rad));
   RoomView v;
   v.choice = nearest_wall(descriptor, room.render(robot, room.options().look_ahead_hfov_deg));
   const double turn = (v.choice.side == WallSide::left ? 1.0 : -1.0) * std::numbers::pi / 2.0;

@@ -42,7 +42,7 @@ TEST_CASE("class names: missing, empty and oversized files are errors naming the
       CHECK(what.find(part) != std::string::npos);
     }
   };
-  check_error(dir / "missing.names", "cannot open");
+  check_error(dir / "missing.names", "does not exist");
   check_error(write(dir, "empty.names", "\n \n"), "no class name");
   check_error(write(dir, "huge.names", std::string((1u << 20) + 1, 'x')), "limit");
 }
