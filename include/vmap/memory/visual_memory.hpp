@@ -33,7 +33,8 @@
 //     "selc" the selector's I_{j-1}: u8 has; if 1: u64 index, f64 timestamp, str name,
 //            features, image, pose; then u8 has score; if 1: i32 raw matches, f64 bound,
 //            u8 verified run, u8 status, f64[9] F, i32 inliers, i32 matches, u8 degeneracy,
-//            i32 homography inliers, f64 S. Then the pose of the last pushed frame.
+//            i32 homography inliers, f64 S. Then u8 has last; if 1: u64 the index of the
+//            last pushed frame (where a resumed stream goes on).
 //     "voca" u8 has vocabulary; if 1: u64 length + the vocabulary file (place/vocabulary.hpp)
 //     "plcd" u64 length + the place database file (place/database.hpp), ids = key indices
 // Each section is parsed by its own reader, so every error names its section; counts
@@ -160,7 +161,7 @@ enum class LocalizeStatus : std::uint8_t {
 }
 
 /// localize()'s answer: verified key images, most inliers first.
-struct Localization {
+struct MemoryLocalization {
   LocalizeStatus status = LocalizeStatus::empty_memory;
   std::vector<PlaceLink> matches;
   std::size_t verified_candidates = 0;  ///< key images the estimator ran on
@@ -180,11 +181,11 @@ namespace detail {
 inline constexpr char memory_magic[8] = {'V', 'M', 'A', 'P', 'M', 'E', 'M', 'O'};
 inline constexpr std::uint32_t memory_sections = 7;
 
-inline void write_matx(BinaryWriter& w, const cv::Matx33d& m) {
+inline void memory_write_matx(BinaryWriter& w, const cv::Matx33d& m) {
   for (double e : m.val) w.f64(e);
 }
 
-inline cv::Matx33d read_matx(BinaryReader& r, std::string_view what) {
+inline cv::Matx33d memory_read_matx(BinaryReader& r, std::string_view what) {
   cv::Matx33d m;
   for (double& e : m.val) {
     e = r.f64(what);
@@ -243,7 +244,7 @@ inline cv::Mat read_memory_image(BinaryReader& r) {
   return img;
 }
 
-inline void write_pose(BinaryWriter& w, const OdometryPose& p) {
+inline void memory_write_pose(BinaryWriter& w, const OdometryPose& p) {
   if (const auto* p2 = std::get_if<Pose2>(&p)) {
     w.u8(1);
     w.f64(p2->x());
@@ -257,7 +258,7 @@ inline void write_pose(BinaryWriter& w, const OdometryPose& p) {
   }
 }
 
-inline OdometryPose read_pose(BinaryReader& r) {
+inline OdometryPose memory_read_pose(BinaryReader& r) {
   const std::uint8_t kind = r.u8("pose kind");
   if (kind == 0) return {};
   if (kind == 1) {
@@ -274,27 +275,27 @@ inline OdometryPose read_pose(BinaryReader& r) {
   return cv::Affine3d(m);
 }
 
-inline void write_link(BinaryWriter& w, const PlaceLink& l) {
+inline void memory_write_link(BinaryWriter& w, const PlaceLink& l) {
   w.f64(l.bow_score);
   w.u8(static_cast<std::uint8_t>(l.status));
-  write_matx(w, l.fundamental);
+  memory_write_matx(w, l.fundamental);
   w.i32(l.matches);
   w.i32(l.inliers);
   w.f64(l.similarity);
 }
 
-inline VerificationStatus read_status(BinaryReader& r) {
+inline VerificationStatus memory_read_status(BinaryReader& r) {
   const std::uint8_t s = r.u8("verification status");
   if (s > static_cast<std::uint8_t>(VerificationStatus::too_few_inliers)) r.corrupt("unknown verification status");
   return static_cast<VerificationStatus>(s);
 }
 
-inline PlaceLink read_link(BinaryReader& r) {
+inline PlaceLink memory_read_link(BinaryReader& r) {
   PlaceLink l;
   l.bow_score = r.f64("BoW score");
   if (!(l.bow_score >= 0.0 && l.bow_score <= 1.0 + 1e-9)) r.corrupt("BoW score outside [0, 1]");
-  l.status = read_status(r);
-  l.fundamental = read_matx(r, "fundamental matrix");
+  l.status = memory_read_status(r);
+  l.fundamental = memory_read_matx(r, "fundamental matrix");
   l.matches = r.i32("matches");
   l.inliers = r.i32("inliers");
   if (l.matches < 0 || l.inliers < 0 || l.inliers > l.matches) r.corrupt("invalid match/inlier counts");
@@ -304,7 +305,7 @@ inline PlaceLink read_link(BinaryReader& r) {
 }
 
 /// Sections: tag + length + CRC, each read by a reader that names it.
-class SectionWriter {
+class MemorySectionWriter {
  public:
   void add(const char (&tag)[5], const std::string& bytes) {
     out_.bytes(tag, 4);
@@ -315,7 +316,7 @@ class SectionWriter {
   BinaryWriter out_;
 };
 
-inline BinaryReader open_section(BinaryReader& file, const char (&tag)[5]) {
+inline BinaryReader memory_open_section(BinaryReader& file, const char (&tag)[5]) {
   const std::string name = file.source() + " section '" + std::string(tag, 4) + "'";
   const std::size_t at = file.offset();
   if (file.remaining() < 16)
@@ -378,9 +379,9 @@ class VisualMemory {
   /// BoW score (every key image while no vocabulary exists yet), the best
   /// `localize_candidates` verified by an F-matrix; those with at least
   /// `min_localize_inliers` inliers, most inliers first.
-  [[nodiscard]] Localization localize(const cv::Mat& image) {
+  [[nodiscard]] MemoryLocalization localize(const cv::Mat& image) {
     detail::check(!image.empty(), "VisualMemory::localize: the query image is empty");
-    Localization out;
+    MemoryLocalization out;
     const VisualMap& map = selector_.map();
     if (map.keys.empty()) return out;
     const Features q = selector_.front_end().descriptor().extract(image);
@@ -417,6 +418,9 @@ class VisualMemory {
   [[nodiscard]] const VisualMap& map() const noexcept { return selector_.map(); }
   [[nodiscard]] std::size_t frames() const noexcept { return selector_.map().frames; }
   [[nodiscard]] std::size_t key_images() const noexcept { return selector_.map().keys.size(); }
+  /// The index of the last frame pushed (nullopt before the first): a program that
+  /// resumes a stream from a saved memory goes on with the frames after it.
+  [[nodiscard]] std::optional<std::size_t> last_frame_index() const noexcept { return last_index_; }
   [[nodiscard]] const std::vector<LoopEdge>& loops() const noexcept { return loops_; }
   /// Odometry poses of the key images (std::monostate where none was given).
   [[nodiscard]] const std::vector<OdometryPose>& poses() const noexcept { return poses_; }
@@ -425,14 +429,17 @@ class VisualMemory {
   [[nodiscard]] const MemoryOptions& options() const noexcept { return options_; }
   [[nodiscard]] Selector& selector() noexcept { return selector_; }
 
-  /// The memory file's bytes (format at the top of this header).
-  [[nodiscard]] std::string serialize() const {
-    detail::SectionWriter s;
-    s.add("opts", options_bytes());
-    s.add("keys", keys_bytes());
+  /// The memory file's bytes (format at the top of this header). `images` overrides
+  /// MemoryOptions::images for this file (e.g. none for a small copy; png or jpeg store
+  /// only the pixels the memory kept).
+  [[nodiscard]] std::string serialize(std::optional<ImageStorage> images = {}) const {
+    const ImageStorage storage = images.value_or(options_.images);
+    detail::MemorySectionWriter s;
+    s.add("opts", options_bytes(storage));
+    s.add("keys", keys_bytes(storage));
     s.add("link", links_bytes());
     s.add("loop", loops_bytes());
-    s.add("selc", selector_bytes());
+    s.add("selc", selector_bytes(storage));
     detail::BinaryWriter v;
     v.u8(vocabulary_.empty() ? 0 : 1);
     if (!vocabulary_.empty()) {
@@ -456,7 +463,9 @@ class VisualMemory {
 
   /// Writes the memory atomically (temporary file, fsync, rename, fsync of the folder):
   /// a crash during save leaves the previous file as it was.
-  void save(const std::filesystem::path& path) const { write_file_atomically(path, serialize()); }
+  void save(const std::filesystem::path& path, std::optional<ImageStorage> images = {}) const {
+    write_file_atomically(path, serialize(images));
+  }
 
   /// Parses a memory file's bytes; the policies are the caller's (their options are not
   /// in the file), the options are the file's. Anything invalid is a vmap::Error naming
@@ -475,12 +484,12 @@ class VisualMemory {
     if (const std::uint32_t n = file.u32("section count"); n != detail::memory_sections)
       file.corrupt("header: " + std::to_string(n) + " sections, expected " + std::to_string(detail::memory_sections));
 
-    auto opts = detail::open_section(file, "opts");
+    auto opts = detail::memory_open_section(file, "opts");
     const MemoryOptions options = read_options(opts);
     VisualMemory mem(std::move(descriptor), std::move(matcher), std::move(estimator), std::move(similarity), options);
 
     SelectorState<Features> state;
-    auto keys = detail::open_section(file, "keys");
+    auto keys = detail::memory_open_section(file, "keys");
     state.map.frames = static_cast<std::size_t>(keys.u64("frame count"));
     const std::uint32_t m = keys.u32("key image count");
     keys.require_items(m, 50, "key image count");
@@ -490,17 +499,17 @@ class VisualMemory {
       if (!state.map.keys.empty() && k.frame_index <= state.map.keys.back().frame_index)
         keys.corrupt("key image frame indices are not increasing");
       state.map.keys.push_back(std::move(k));
-      mem.poses_.push_back(detail::read_pose(keys));
+      mem.poses_.push_back(detail::memory_read_pose(keys));
     }
     keys.expect_end("the last key image");
 
-    auto links = detail::open_section(file, "link");
+    auto links = detail::memory_open_section(file, "link");
     const std::uint32_t p = links.u32("pair count");
     if (p != (m == 0 ? 0U : m - 1U)) links.corrupt("pair count " + std::to_string(p) + " for " + std::to_string(m) + " key images");
     for (std::uint32_t i = 0; i < p; ++i) {
       KeyPair pair;
-      pair.status = detail::read_status(links);
-      pair.fundamental = detail::read_matx(links, "fundamental matrix");
+      pair.status = detail::memory_read_status(links);
+      pair.fundamental = detail::memory_read_matx(links, "fundamental matrix");
       pair.matches = links.i32("matches");
       pair.inliers = links.i32("inliers");
       if (pair.matches < 0 || pair.inliers < 0 || pair.inliers > pair.matches) links.corrupt("invalid match/inlier counts");
@@ -510,7 +519,7 @@ class VisualMemory {
     }
     links.expect_end("the last pair");
 
-    auto loops = detail::open_section(file, "loop");
+    auto loops = detail::memory_open_section(file, "loop");
     const std::uint32_t e = loops.u32("loop edge count");
     loops.require_items(e, 8 + 97, "loop edge count");
     for (std::uint32_t i = 0; i < e; ++i) {
@@ -518,12 +527,12 @@ class VisualMemory {
       edge.from = loops.u32("loop from");
       edge.link.key = loops.u32("loop to");
       if (edge.from >= m || edge.link.key >= edge.from) loops.corrupt("loop edge between invalid key images");
-      edge.link = with_key(detail::read_link(loops), edge.link.key);
+      edge.link = with_key(detail::memory_read_link(loops), edge.link.key);
       mem.loops_.push_back(edge);
     }
     loops.expect_end("the last loop edge");
 
-    auto sel = detail::open_section(file, "selc");
+    auto sel = detail::memory_open_section(file, "selc");
     const std::uint8_t has_prev = sel.u8("previous frame flag");
     if (has_prev > 1) sel.corrupt("previous frame flag is not 0 or 1");
     if (has_prev == 1) {
@@ -537,14 +546,21 @@ class VisualMemory {
       prev.timestamp = k.timestamp;
       prev.image = std::move(k.image);
       state.previous = std::move(prev);
-      mem.previous_pose_ = detail::read_pose(sel);
+      mem.previous_pose_ = detail::memory_read_pose(sel);
     }
     const std::uint8_t has_score = sel.u8("previous score flag");
     if (has_score > 1 || (has_score == 1 && has_prev == 0)) sel.corrupt("invalid previous score flag");
     if (has_score == 1) state.previous_score = read_score(sel);
+    const std::uint8_t has_last = sel.u8("last frame flag");
+    if (has_last > 1 || (has_last == 0 && m > 0)) sel.corrupt("invalid last frame flag");
+    if (has_last == 1) {
+      mem.last_index_ = static_cast<std::size_t>(sel.u64("last frame index"));
+      const std::size_t at_least = state.previous ? state.previous->index : (m > 0 ? state.map.keys.back().frame_index : 0);
+      if (*mem.last_index_ < at_least) sel.corrupt("the last frame index is before the selector's frames");
+    }
     sel.expect_end("the selector state");
 
-    auto voc = detail::open_section(file, "voca");
+    auto voc = detail::memory_open_section(file, "voca");
     const std::uint8_t has_voc = voc.u8("vocabulary flag");
     if (has_voc > 1) voc.corrupt("vocabulary flag is not 0 or 1");
     if (has_voc == 1) {
@@ -558,7 +574,7 @@ class VisualMemory {
     }
     voc.expect_end("the vocabulary");
 
-    auto db = detail::open_section(file, "plcd");
+    auto db = detail::memory_open_section(file, "plcd");
     const std::uint64_t dlen = db.u64("database length");
     mem.database_ = PlaceDatabase<std::uint32_t>::deserialize(db.bytes(dlen, "database"), db.source() + " database");
     db.expect_end("the database");
@@ -608,6 +624,7 @@ class VisualMemory {
       on_new_key(*step.new_key, step.loops);
     }
     previous_pose_ = pose;
+    last_index_ = index;
   }
 
   /// Adds key image `key` to the place database and detects its loops; learns the
@@ -687,13 +704,13 @@ class VisualMemory {
 
   // ---- file sections ------------------------------------------------------------
 
-  std::string options_bytes() const {
+  std::string options_bytes(ImageStorage storage) const {
     const MemoryOptions& o = options_;
     detail::BinaryWriter w;
     w.f64(o.selector.tau);
     w.u8(static_cast<std::uint8_t>(o.selector.rule));
     w.u8(o.selector.skip_by_upper_bound ? 1 : 0);
-    w.u8(static_cast<std::uint8_t>(o.images));
+    w.u8(static_cast<std::uint8_t>(storage));
     w.i32(o.jpeg_quality);
     w.u64(o.vocabulary_after);
     w.i32(o.vocabulary.branching);
@@ -747,12 +764,12 @@ class VisualMemory {
   }
 
   void write_key(detail::BinaryWriter& w, std::size_t index, double timestamp, const std::string& name,
-                 const Features& f, const cv::Mat& image) const {
+                 const Features& f, const cv::Mat& image, ImageStorage storage) const {
     w.u64(index);
     w.f64(timestamp);
     w.str(name, detail::map_max_string, "VisualMemory::save: a key image name");
     detail::write_features(w, f);
-    detail::write_memory_image(w, image, options_.images, options_.jpeg_quality);
+    detail::write_memory_image(w, image, storage, options_.jpeg_quality);
   }
 
   static KeyImage read_key(detail::BinaryReader& r) {
@@ -765,15 +782,15 @@ class VisualMemory {
     return k;
   }
 
-  std::string keys_bytes() const {
+  std::string keys_bytes(ImageStorage storage) const {
     const VisualMap& map = selector_.map();
     detail::BinaryWriter w;
     w.u64(map.frames);
     w.u32(static_cast<std::uint32_t>(map.keys.size()));
     for (std::size_t i = 0; i < map.keys.size(); ++i) {
       const KeyImage& k = map.keys[i];
-      write_key(w, k.frame_index, k.timestamp, k.name, k.features, k.image);
-      detail::write_pose(w, poses_[i]);
+      write_key(w, k.frame_index, k.timestamp, k.name, k.features, k.image, storage);
+      detail::memory_write_pose(w, poses_[i]);
     }
     return std::move(w).take();
   }
@@ -784,7 +801,7 @@ class VisualMemory {
     w.u32(static_cast<std::uint32_t>(pairs.size()));
     for (const auto& p : pairs) {
       w.u8(static_cast<std::uint8_t>(p.status));
-      detail::write_matx(w, p.fundamental);
+      detail::memory_write_matx(w, p.fundamental);
       w.i32(p.matches);
       w.i32(p.inliers);
       w.f64(p.similarity);
@@ -798,19 +815,19 @@ class VisualMemory {
     for (const auto& e : loops_) {
       w.u32(e.from);
       w.u32(e.link.key);
-      detail::write_link(w, e.link);
+      detail::memory_write_link(w, e.link);
     }
     return std::move(w).take();
   }
 
-  std::string selector_bytes() const {
+  std::string selector_bytes(ImageStorage storage) const {
     const SelectorState<Features> s = selector_.state();
     detail::BinaryWriter w;
     w.u8(s.previous ? 1 : 0);
     if (s.previous) {
       const auto& p = *s.previous;
-      write_key(w, p.index, p.timestamp, p.name, p.item, p.image);
-      detail::write_pose(w, previous_pose_);
+      write_key(w, p.index, p.timestamp, p.name, p.item, p.image, storage);
+      detail::memory_write_pose(w, previous_pose_);
     }
     w.u8(s.previous_score ? 1 : 0);
     if (s.previous_score) {
@@ -821,13 +838,15 @@ class VisualMemory {
       w.f64(p.upper_bound);
       w.u8(p.verified_run ? 1 : 0);
       w.u8(static_cast<std::uint8_t>(p.verification.status));
-      detail::write_matx(w, p.verification.model);
+      detail::memory_write_matx(w, p.verification.model);
       w.i32(p.verification.inliers);
       w.i32(p.verification.matches);
       w.u8(static_cast<std::uint8_t>(p.verification.degeneracy));
       w.i32(p.verification.homography_inliers);
       w.f64(p.similarity);
     }
+    w.u8(last_index_ ? 1 : 0);
+    if (last_index_) w.u64(*last_index_);
     return std::move(w).take();
   }
 
@@ -838,8 +857,8 @@ class VisualMemory {
     const std::uint8_t run = r.u8("verified flag");
     if (run > 1) r.corrupt("verified flag is not 0 or 1");
     p.verified_run = run == 1;
-    p.verification.status = detail::read_status(r);
-    p.verification.model = detail::read_matx(r, "fundamental matrix");
+    p.verification.status = detail::memory_read_status(r);
+    p.verification.model = detail::memory_read_matx(r, "fundamental matrix");
     p.verification.inliers = r.i32("inliers");
     p.verification.matches = r.i32("matches");
     const std::uint8_t deg = r.u8("degeneracy");
@@ -860,6 +879,7 @@ class VisualMemory {
   std::vector<LoopEdge> loops_;
   std::vector<OdometryPose> poses_;  ///< per key image
   OdometryPose previous_pose_;       ///< of the last pushed frame (eq. 6's I_{j-1})
+  std::optional<std::size_t> last_index_;
 };
 
 // Named stacks: the paper's ORB 1000 + mutual NN + MAGSAC++ + eq. 5, and A-KAZE / SIFT.

@@ -76,6 +76,7 @@ vmap::OrbVisualMemory run(const std::vector<vmap::Frame>& frames, const vmap::Me
 
 void check_same(const vmap::OrbVisualMemory& a, const vmap::OrbVisualMemory& b) {
   CHECK(a.frames() == b.frames());
+  CHECK(a.last_frame_index() == b.last_frame_index());
   CHECK(a.map().key_indices() == b.map().key_indices());
   REQUIRE(a.map().pairs.size() == b.map().pairs.size());
   for (std::size_t i = 0; i < a.map().pairs.size(); ++i) {
@@ -331,6 +332,11 @@ TEST_CASE("map files: a map built with a start and a stride round-trips (frame i
   for (const auto& f : frames) sel.push(f);
   const auto& map = sel.map();
   CHECK(map.frames == 13);
+  // The memory records where a resumed stream goes on, in the sequence's index space.
+  auto mem = make_memory(small_options());
+  CHECK(!mem.last_frame_index());
+  for (const auto& f : frames) mem.push(f);
+  CHECK(mem.last_frame_index() == 8 + 4 * 12);
   REQUIRE(map.keys.size() >= 2);
   CHECK(map.keys.back().frame_index >= map.frames);  // the case load_map used to refuse
   vmap::save_map(map, dir / "map.vmap");
