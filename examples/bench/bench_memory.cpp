@@ -6,7 +6,8 @@
 //     out of the memory): fraction answered with a key image within --within frames of
 //     the query, and ms per query.
 //
-//   bench_memory [--shared DIR] [--every 100] [--hold-out 10] [--within 15] [--end N]
+//   bench_memory [--shared DIR] [--every 100] [--every-short 20] [--hold-out 10] [--within 15] [--end N]
+// (--every-short for rtabmap_loop, whose 84 frames hold no 100-frame interval to cut)
 #include <vmap/memory/visual_memory.hpp>
 
 #include <CLI/CLI.hpp>
@@ -76,10 +77,11 @@ bool same(const vmap::OrbVisualMemory& a, const vmap::OrbVisualMemory& b) {
 
 int main(int argc, char** argv) {
   std::string shared = VMAP_SHARED_DIR;
-  std::size_t every = 100, hold_out = 10, within = 15, end = 0;
+  std::size_t every = 100, every_short = 20, hold_out = 10, within = 15, end = 0;
   CLI::App app{"VisualMemory: resume equality, save/load cost, localization of held-out frames"};
   app.add_option("--shared", shared, "The shared data folder");
   app.add_option("--every", every, "Save and reload every n pushed frames in the interrupted run");
+  app.add_option("--every-short", every_short, "The same for rtabmap_loop (84 frames)");
   app.add_option("--hold-out", hold_out, "Keep every n-th frame out of the memory and localize it");
   app.add_option("--within", within, "A localization is right when its key image is within this many frames");
   app.add_option("--end", end, "Read frames [0, end) only (0: all)");
@@ -90,17 +92,19 @@ int main(int argc, char** argv) {
   struct Seq {
     const char* name;
     std::filesystem::path input;
+    std::size_t every;
   };
-  for (const Seq& s : {Seq{"tum_fr1_rpy", data / "tum_fr1_rpy/rgb.txt"}, Seq{"rtabmap_loop", data / "rtabmap_loop/images"}}) {
+  for (const Seq& s : {Seq{"tum_fr1_rpy", data / "tum_fr1_rpy/rgb.txt", every},
+                       Seq{"rtabmap_loop", data / "rtabmap_loop/images", every_short}}) {
     Run whole = run(s.input, end, 0, hold_out, dir / "m.vmem");
-    const Run cut = run(s.input, end, every, hold_out, dir / "m.vmem");
+    const Run cut = run(s.input, end, s.every, hold_out, dir / "m.vmem");
     const auto& m = *whole.mem;
     const std::size_t pushed = m.frames();
     std::printf("%s: %zu frames pushed (%zu held out), %zu key images, %zu loop edges, %.1f ms per push\n", s.name, pushed,
                 whole.held.size(), m.key_images(), m.loops().size(), whole.push_ms / static_cast<double>(pushed));
     std::printf("  resume: saved and reloaded %zu times (every %zu frames, %.1f ms per restart): key images %zu, loops "
                 "%zu -> %s\n",
-                cut.restarts, every, cut.restarts ? cut.resume_ms / static_cast<double>(cut.restarts) : 0.0,
+                cut.restarts, s.every, cut.restarts ? cut.resume_ms / static_cast<double>(cut.restarts) : 0.0,
                 cut.mem->key_images(), cut.mem->loops().size(), same(m, *cut.mem) ? "EQUAL" : "DIFFERENT");
     for (auto storage : {vmap::ImageStorage::none, vmap::ImageStorage::jpeg, vmap::ImageStorage::png}) {
       const char* label = storage == vmap::ImageStorage::none ? "none" : storage == vmap::ImageStorage::png ? "png" : "jpeg";

@@ -636,9 +636,11 @@ class VisualMemory {
       if (keys.size() < options_.vocabulary_after) return;
       std::vector<cv::Mat> sets;
       for (const auto& k : keys) sets.push_back(k.features.descriptors);
-      bool any = false;
-      for (const auto& d : sets) any = any || !d.empty();
-      if (!any) return;  // no descriptors yet (blank frames): try again at the next key image
+      std::size_t rows = 0;
+      for (const auto& d : sets) rows += static_cast<std::size_t>(d.rows);
+      // Too few descriptors to split into `branching` words (blank frames): try again
+      // at the next key image.
+      if (rows < static_cast<std::size_t>(std::max(options_.vocabulary.branching, 1))) return;
       vocabulary_ = AnyVocabulary::learn(sets, options_.vocabulary);
       database_ = PlaceDatabase<std::uint32_t>(vocabulary_.size(), options_.scoring);
       for (std::uint32_t k = 0; k < key; ++k) detect_and_add(k, found);

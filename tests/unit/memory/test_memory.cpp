@@ -18,6 +18,10 @@
 #include <string>
 #include <vector>
 
+// Every member of the shipped stacks compiles (binary ORB and float SIFT descriptors).
+template class vmap::VisualMemory<vmap::OrbDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator, vmap::InlierRatio>;
+template class vmap::VisualMemory<vmap::SiftDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator, vmap::InlierRatio>;
+
 namespace {
 
 std::filesystem::path sample_list() { return vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt"; }
@@ -298,6 +302,37 @@ TEST_CASE("memory files: truncated at every section, flipped bytes, wrong versio
   CHECK(message_of(file + "x").find("unexpected bytes") != std::string::npos);
   // The intact file still loads.
   check_same(vmap::OrbVisualMemory::deserialize(file), mem);
+}
+
+TEST_CASE("memory: bare images with timestamps and SE(3) poses; blank frames postpone the vocabulary") {
+  const auto& frames = sample_frames();
+  auto mem = make_memory(small_options());
+  // Blank frames: key images without descriptors; no vocabulary can be learned from them.
+  const cv::Mat blank(480, 640, CV_8UC1, cv::Scalar(90));
+  mem.push(blank, 0.5);
+  mem.push(blank, 0.6);
+  CHECK(mem.vocabulary().empty());
+  for (std::size_t i = 0; i < 20; ++i) {
+    cv::Matx44d m = cv::Matx44d::eye();
+    m(0, 3) = static_cast<double>(i);
+    mem.push(frames[i].image, 100.0 + static_cast<double>(i), cv::Affine3d(m));
+  }
+  CHECK(mem.frames() == 22);
+  CHECK(mem.last_frame_index() == 21);
+  CHECK(!mem.vocabulary().empty());
+  CHECK(mem.database().size() == mem.key_images());
+  REQUIRE(mem.key_images() >= 3);
+  CHECK(mem.map().keys[0].timestamp == 0.5);
+  const auto back = vmap::OrbVisualMemory::deserialize(mem.serialize());
+  // Keys 0 and 1 are the blank frames (pushed without a pose), then frames[i] is index i + 2.
+  CHECK(std::holds_alternative<std::monostate>(back.poses()[1]));
+  for (std::size_t k = 2; k < back.key_images(); ++k) {
+    const auto* p = std::get_if<cv::Affine3d>(&back.poses()[k]);
+    REQUIRE(p != nullptr);
+    CHECK(p->translation()[0] == static_cast<double>(back.map().keys[k].frame_index) - 2.0);
+    CHECK(back.map().keys[k].timestamp == 98.0 + static_cast<double>(back.map().keys[k].frame_index));
+  }
+  check_same(back, mem);
 }
 
 TEST_CASE("memory files: a save that dies before commit leaves the previous file loadable") {
