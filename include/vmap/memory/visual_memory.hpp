@@ -49,7 +49,9 @@
 // except the one I_{j-1} of eq. 6.
 //
 // Threading: push() and localize() modify scratch state of the descriptor and must not
-// run concurrently on one object; const members only read.
+// run concurrently on one object; const members only read. The memory is move-only (a
+// copy would share the descriptor's detector); separate objects (e.g. each thread
+// loading the same file) share nothing.
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
@@ -78,6 +80,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <type_traits>
 #include <utility>
 #include <variant>
 #include <vector>
@@ -357,6 +360,15 @@ class VisualMemory {
 
   explicit VisualMemory(const MemoryOptions& options, AnyVocabulary vocabulary = {})
       : VisualMemory(D{}, M{}, E{}, S{}, options, std::move(vocabulary)) {}
+
+  // Move-only: a copy would share the descriptor's detector (OrbDescriptor holds a
+  // cv::Ptr<cv::ORB> with scratch buffers), so two copies used from two threads would
+  // race. Two threads each load their own memory from the file instead.
+  VisualMemory(VisualMemory&&) noexcept(std::is_nothrow_move_constructible_v<Selector>) = default;
+  VisualMemory& operator=(VisualMemory&&) noexcept(std::is_nothrow_move_assignable_v<Selector>) = default;
+  VisualMemory(const VisualMemory&) = delete;
+  VisualMemory& operator=(const VisualMemory&) = delete;
+  ~VisualMemory() = default;
 
   /// Pushes a frame of a sequence (its index is its place in the sequence).
   MemoryStep push(const Frame& frame, const OdometryPose& pose = {}) {

@@ -16,11 +16,16 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <thread>
+#include <type_traits>
 #include <vector>
 
 // Every member of the shipped stacks compiles (binary ORB and float SIFT descriptors).
 template class vmap::VisualMemory<vmap::OrbDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator, vmap::InlierRatio>;
 template class vmap::VisualMemory<vmap::SiftDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator, vmap::InlierRatio>;
+
+static_assert(!std::is_copy_constructible_v<vmap::OrbVisualMemory>, "a copy would share the ORB detector");
+static_assert(std::is_move_constructible_v<vmap::OrbVisualMemory> && std::is_move_assignable_v<vmap::OrbVisualMemory>);
 
 namespace {
 
@@ -333,6 +338,32 @@ TEST_CASE("memory: bare images with timestamps and SE(3) poses; blank frames pos
     CHECK(back.map().keys[k].timestamp == 98.0 + static_cast<double>(back.map().keys[k].frame_index));
   }
   check_same(back, mem);
+}
+
+TEST_CASE("memory: two memories loaded from one file answer the same from two threads as serially") {
+  const auto dir = vmap::test::scratch_dir("memory_threads");
+  const auto& frames = sample_frames();
+  auto mem = make_memory(small_options());
+  for (std::size_t i = 0; i < 40; i += 2) mem.push(frames[i]);
+  mem.save(dir / "m.vmem");
+  auto answers = [&](vmap::OrbVisualMemory& m) {
+    std::vector<int> out;
+    for (std::size_t i = 1; i < 40; i += 4) {
+      const auto a = m.localize(frames[i].image);
+      out.push_back(a.ok() ? static_cast<int>(a.best()->key) * 10000 + a.best()->inliers : -1);
+    }
+    return out;
+  };
+  const auto serial = answers(mem);
+  auto a = load_memory(dir / "m.vmem");
+  auto b = load_memory(dir / "m.vmem");
+  std::vector<int> ra, rb;
+  std::thread ta([&] { ra = answers(a); });
+  std::thread tb([&] { rb = answers(b); });
+  ta.join();
+  tb.join();
+  CHECK(ra == serial);
+  CHECK(rb == serial);
 }
 
 TEST_CASE("memory files: a save that dies before commit leaves the previous file loadable") {
