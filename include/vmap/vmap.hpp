@@ -71,3 +71,6 @@
 #include <vmap/som/pose_io.hpp>
 #include <vmap/som/pose_map.hpp>
 #include <vmap/som/virtual_room.hpp>
+
+// memory/: the visual memory a robot keeps (key images, loops, localization, resume)
+#include <vmap/memory/visual_memory.hpp>

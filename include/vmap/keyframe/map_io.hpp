@@ -12,10 +12,12 @@
 //     u64    payload size in bytes (must equal the rest of the file)
 //     u32    CRC-32 (IEEE 802.3, as zlib) of the payload
 //   payload
-//     u64    frames n
+//     u64    frames n (frames pushed to the selector: eq. 7's n)
 //     u32    key images m
 //     m x key image
-//       u64  frame index (< n, strictly increasing)
+//       u64  frame index (strictly increasing). It is the frame's index in its sequence
+//            (Frame::index), not its position among the pushed frames: a map built with
+//            a start or a stride has indices >= n, so they are not compared with n.
 //       f64  timestamp
 //       str  name
 //       i32  norm (cv::NORM_HAMMING, NORM_HAMMING2, NORM_L1 or NORM_L2)
@@ -243,10 +245,10 @@ inline VisualMap parse_map(std::string_view file, const std::string& name, const
   // Each key image takes at least 49 bytes, so m is bounded by the file before any
   // allocation happens (keys are appended one by one).
   r.require_items(m, 49, "key image count");
+  if (m > map.frames) r.corrupt(std::to_string(m) + " key images for " + std::to_string(map.frames) + " frames");
   for (std::uint32_t i = 0; i < m; ++i) {
     KeyImage k;
     const std::uint64_t idx = r.u64("frame index");
-    if (idx >= map.frames) r.corrupt("key image frame index " + std::to_string(idx) + " >= frame count");
     if (!map.keys.empty() && idx <= map.keys.back().frame_index) r.corrupt("key image frame indices are not increasing");
     k.frame_index = static_cast<std::size_t>(idx);
     k.timestamp = r.f64("timestamp");

@@ -23,6 +23,7 @@
 
 #include <cmath>
 #include <cstddef>
+#include <concepts>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -92,6 +93,16 @@ struct PreparedFrame {
   std::string name;
   double timestamp = 0.0;
   cv::Mat image;  ///< kept only when SelectorOptions::keep_images
+};
+
+/// What a selector needs besides its options and policies to continue a sequence exactly
+/// where it stopped (VisualMemory saves it): the map, whose last key image is the current
+/// key, and the frame I_{j-1} of eq. 6 with its score against that key when it has one.
+template <class Item>
+struct SelectorState {
+  VisualMap map;
+  std::optional<PreparedFrame<Item>> previous;  ///< I_{j-1} when it is not the key image
+  std::optional<PairScore> previous_score;      ///< S(key, previous), when it was scored
 };
 
 /// Algorithm 1 over any front end. Streaming: push() one frame at a time; map() can be
@@ -208,6 +219,40 @@ class BasicKeyframeSelector {
     key_.reset();
     prev_.reset();
     prev_scored_ = false;
+  }
+
+  /// A copy of everything push() continues from (see SelectorState).
+  [[nodiscard]] SelectorState<Item> state() const {
+    SelectorState<Item> s{map_, prev_, std::nullopt};
+    if (prev_scored_) s.previous_score = prev_score_;
+    return s;
+  }
+
+  /// Continues from a saved state: the next push() behaves as it would have in the run
+  /// the state was taken from. The current key's item is its features in the map, so
+  /// this needs a front end whose Item is Features (the feature stack).
+  void restore(SelectorState<Item> s)
+    requires std::same_as<Item, Features>
+  {
+    const VisualMap& m = s.map;
+    detail::check(m.pairs.size() == (m.keys.empty() ? 0 : m.keys.size() - 1),
+                  "KeyframeSelector::restore: " + std::to_string(m.pairs.size()) + " pairs for " +
+                      std::to_string(m.keys.size()) + " key images");
+    detail::check(m.keys.empty() || m.frames >= m.keys.size(),
+                  "KeyframeSelector::restore: fewer frames than key images");
+    detail::check(!s.previous_score || s.previous, "KeyframeSelector::restore: a previous score without a previous frame");
+    detail::check(!s.previous || !m.keys.empty(), "KeyframeSelector::restore: a previous frame without a key image");
+    detail::check(!s.previous || s.previous->index > m.keys.back().frame_index,
+                  "KeyframeSelector::restore: the previous frame is not after the current key image");
+    reset();
+    map_ = std::move(s.map);
+    if (!map_.keys.empty()) {
+      const KeyImage& k = map_.keys.back();
+      key_ = Prepared{k.features, k.frame_index, k.name, k.timestamp, k.image};
+    }
+    prev_ = std::move(s.previous);
+    prev_scored_ = s.previous_score.has_value();
+    if (prev_scored_) prev_score_ = std::move(*s.previous_score);
   }
 
   /// The current key image's item (its features), nullptr before the first frame. The
