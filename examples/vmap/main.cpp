@@ -52,6 +52,7 @@ int main(int argc, char** argv) {
     app.footer(exit_codes_text);
     // Options a subcommand does not know go to the main program, which owns --config.
     app.fallthrough();
+    app.allow_config_extras(CLI::config_extras_mode::error);  // a misspelt key is an error
     auto& cmds = vmap::cli::commands();
     std::sort(cmds.begin(), cmds.end(), [](const auto& a, const auto& b) { return a.name < b.name; });
     std::vector<std::string> names;
@@ -86,7 +87,14 @@ int main(int argc, char** argv) {
     } catch (const CLI::CallForVersion& e) {
       return app.exit(e);
     } catch (const CLI::ParseError& e) {
-      std::fprintf(stderr, "%s: usage error: %s\n(see %s --help)\n", where.c_str(), e.what(), where.c_str());
+      std::string what = e.what();
+      const std::string extras = "INI was not able to parse ";
+      if (what.rfind(extras, 0) == 0) {  // CLI11's words for a config key that is no option
+        std::string key = what.substr(extras.size());
+        if (key.rfind(sub_name + ".", 0) == 0) key = key.substr(sub_name.size() + 1);
+        what = "--config: '" + key + "' is not an option of " + where;
+      }
+      std::fprintf(stderr, "%s: usage error: %s\n(see %s --help)\n", where.c_str(), what.c_str(), where.c_str());
       return ex::exit_usage;
     }
     for (const auto& [sub, run] : runners)
