@@ -348,9 +348,11 @@ inline void check_output_file(const std::filesystem::path& out, const std::strin
 /// Prepares the --out folder: refuses a folder that is an input or inside an input folder
 /// (so `build DIR --out DIR` cannot add its pictures to the frames it reads), an existing
 /// non-folder, and an unwritable folder; creates it when missing. A symbolic link to a
-/// folder is followed (the files are written inside the target folder). Returns the path.
+/// folder is followed (the files are written inside the target folder); each of `files`
+/// (the names the command will write there) must pass check_output_file. Returns the path.
 inline std::filesystem::path prepare_output_dir(const std::filesystem::path& dir, const std::string& option,
-                                                const std::vector<std::filesystem::path>& inputs) {
+                                                const std::vector<std::filesystem::path>& inputs,
+                                                const std::vector<std::string>& files = {}) {
   namespace fs = std::filesystem;
   std::error_code ec;
   const fs::path r = cli_detail::resolved(dir);
@@ -368,6 +370,7 @@ inline std::filesystem::path prepare_output_dir(const std::filesystem::path& dir
     fs::create_directories(dir, ec);
     if (ec) vmap::detail::fail(option + ": cannot create the folder '" + dir.string() + "': " + ec.message());
   }
+  for (const auto& f : files) check_output_file(dir / f, option, inputs);
   // Writable: create and remove a file, as the atomic writes will.
   std::string probe = (dir / ".vmap-write-test-XXXXXX").string();
   const int fd = ::mkstemp(probe.data());

@@ -143,7 +143,8 @@ std::function<int()> setup(CLI::App& app) {
     const auto camera = ex::load_camera_option(a.camera);
     const bool pictures = !a.out.empty();
     // Everything the command line can get wrong is refused before the first frame.
-    if (pictures) ex::prepare_output_dir(a.out, "--out", {a.input});
+    if (pictures)
+      ex::prepare_output_dir(a.out, "--out", {a.input}, {"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"});
     const vmap::SelectorOptions so{.tau = args->threshold, .rule = ex::parse_rule(a.rule), .keep_images = pictures};
     const auto estimator = ex::make_estimator(a.estimator);
     auto src = vmap::FrameSource::open(a.input, ex::source_options(a, true));

@@ -96,7 +96,7 @@ int run_detect(const DetectArgs& a, const CLI::App& app) {
   if (!a.names.empty()) ex::check_input_file(a.names, "--names");
   inputs.push_back(a.model);
   if (!a.names.empty()) inputs.push_back(a.names);
-  if (!a.out.empty()) ex::prepare_output_dir(a.out, "--out", inputs);
+  if (!a.out.empty()) ex::prepare_output_dir(a.out, "--out", inputs, {"detections.txt"});
   const std::vector<std::string> names = a.names.empty() ? std::vector<std::string>{} : vmap::read_class_names(a.names);
   // Detections for detections.txt are stored unfiltered (down to the floor); the printed
   // and drawn ones use --score.

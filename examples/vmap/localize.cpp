@@ -92,11 +92,8 @@ Experiment room_experiment(const Settings& s) {
   vmap::VirtualRoom room(vmap::load_posters(s.posters, static_cast<std::size_t>(4 * ro.posters_per_wall)), ro);
   vmap::AkazeDescriptor akaze;
   vmap::CircuitOptions co{.margin_m = s.margin, .laps = s.laps, .images_per_lap = s.images_per_lap, .seed = s.seed};
-  auto rec = vmap::record_circuit(room, akaze, vmap::square_circuit(ro, co));
-  Experiment e;
-  e.room_size = ro.size_m;
-  e.train_images = std::move(rec.images);
-  e.train_poses = std::move(rec.odometry);
+  // record_circuit's loop (capture_view at every sample), written out for the progress line.
+  const auto circuit = vmap::square_circuit(ro, co);
   // Test positions: half a step off the training samples, another noise draw.
   vmap::CircuitOptions qo = co;
   qo.laps = 1;
@@ -104,15 +101,27 @@ Experiment room_experiment(const Settings& s) {
   qo.seed = s.seed + 1000;
   const auto qc = vmap::square_circuit(ro, qo);
   const std::size_t n = std::min(s.tests, qc.size());
+  ex::Progress progress("vmap localize: rendering the room", circuit.size() + n * s.query_images, "views");
+  std::size_t views = 0;
+  Experiment e;
+  e.room_size = ro.size_m;
+  for (const auto& sample : circuit) {
+    e.train_images.push_back(vmap::capture_view(room, akaze, sample.truth).image);
+    e.train_poses.push_back(sample.odometry);
+    progress.update(++views);
+  }
   for (std::size_t k = 0; k < n; ++k) {
     const auto& sample = qc[k * qc.size() / n];
     Query q{{}, sample.truth};
-    for (std::size_t i = 0; i < s.query_images; ++i)
+    for (std::size_t i = 0; i < s.query_images; ++i) {
       q.images.push_back(vmap::capture_view(room, akaze, sample.truth,
                                             static_cast<double>(i) * s.pan_deg * std::numbers::pi / 180.0)
                              .image);
+      progress.update(++views);
+    }
     e.queries.push_back(std::move(q));
   }
+  progress.done();
   return e;
 }
 
@@ -406,12 +415,20 @@ std::function<int()> setup(CLI::App& app) {
     if (s->room && s->posters.empty()) s->posters = default_posters();
     ex::current_inputs() = s->room ? std::vector<std::string>{s->posters}
                                    : std::vector<std::string>{s->train, s->poses, s->query, s->query_poses};
+    if (!s->room) {
+      ex::check_input_file(s->poses, "--poses");
+      if (!s->query_poses.empty()) ex::check_input_file(s->query_poses, "--query-poses");
+    } else if (!s->posters.empty()) {
+      std::error_code ec;
+      if (!std::filesystem::is_directory(s->posters, ec))
+        ex::usage_error("--posters: '" + s->posters + "' is not a folder");
+    }
     const auto camera = ex::load_camera_option(s->camera);
     if (camera && !s->json) std::printf("camera %s\n", camera->file.string().c_str());
     if (!s->out.empty()) {
       std::vector<std::filesystem::path> inputs;
       for (const auto& i : ex::current_inputs()) inputs.emplace_back(i);
-      ex::prepare_output_dir(s->out, "--out", inputs);
+      ex::prepare_output_dir(s->out, "--out", inputs, {"map.png"});
     }
     if (s->histogram == "grid") return run_with(*s, vmap::GridHistogram{}, app);
     vmap::BowHistogramOptions bo;

@@ -101,9 +101,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
   }
   const auto camera = ex::load_camera_option(a.camera);
   if (!a.out.empty()) {
-    ex::prepare_output_dir(a.out, "--out", inputs);
-    for (const char* f : {"pr.csv", "pr.png"})
-      ex::check_output_file(std::filesystem::path(a.out) / f, "--out", inputs);
+    ex::prepare_output_dir(a.out, "--out", inputs, {"pr.csv", "pr.png"});
   }
   const std::vector<std::string> names = a.names.empty() ? std::vector<std::string>{} : vmap::read_class_names(a.names);
 

@@ -49,7 +49,7 @@ int run(const MatchArgs& args, const CLI::App& app) {
   using clock = std::chrono::steady_clock;
   ex::current_inputs() = {args.image_a, args.image_b};
   const auto camera = ex::load_camera_option(args.camera);
-  if (!args.out.empty()) ex::prepare_output_dir(args.out, "--out", {args.image_a, args.image_b});
+  if (!args.out.empty()) ex::prepare_output_dir(args.out, "--out", {args.image_a, args.image_b}, {"matches.png"});
   const cv::Mat a_img = read_image(args.image_a);
   const cv::Mat b_img = read_image(args.image_b);
   const vmap::FundamentalEstimator estimator(

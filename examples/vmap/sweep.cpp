@@ -55,7 +55,7 @@ std::function<int()> setup(CLI::App& app) {
     ex::current_inputs() = {a.input};
     ex::check_range(a);
     const auto camera = ex::load_camera_option(a.camera);
-    if (!a.out.empty()) ex::prepare_output_dir(a.out, "--out", {a.input});
+    if (!a.out.empty()) ex::prepare_output_dir(a.out, "--out", {a.input}, {"sweep.csv"});
     auto src = vmap::FrameSource::open(a.input, ex::source_options(a, true));
     const auto estimator = ex::make_estimator(a.estimator);
     const vmap::SweepOptions so{

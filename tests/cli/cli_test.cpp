@@ -203,6 +203,10 @@ TEST_CASE("cli: a symbolic link as an output file is refused") {
                (dir / "out").string()},
               "is a symbolic link");
   CHECK(slurp(dir / "target.csv") == "keep\n");
+  // The same for sweep's table, refused before any frame is read.
+  fs::create_symlink(dir / "target.csv", dir / "out" / "sweep.csv");
+  usage_error({"sweep", sample, "--out", (dir / "out").string()}, "is a symbolic link");
+  CHECK(slurp(dir / "target.csv") == "keep\n");
 }
 
 TEST_CASE("cli: --out naming an existing file fails before the work; a missing folder is created") {
@@ -240,11 +244,14 @@ TEST_CASE("cli: bad input files exit 1 with a one-line message naming them") {
   const Run cam = run_vmap({"build", sample, "--camera", (dir / "none.yaml").string()});
   CHECK(cam.code == 2);
   CHECK(cam.err.find("--camera: '") != std::string::npos);
+  const Run poses = run_vmap({"localize", "--train", sample, "--poses", dir.string(), "--every-other"});
+  CHECK(poses.code == 2);
+  CHECK(poses.err.find("--poses: '" + dir.string() + "' is a folder") != std::string::npos);
   write(dir / "broken.jpg", "not an image");
   const Run img = run_vmap({"match", (dir / "broken.jpg").string(), frame_b});
   CHECK(img.code == 1);
   CHECK(img.err.find("broken.jpg") != std::string::npos);
-  for (const Run* r : {&missing, &gtdir, &dev, &cam, &img}) {
+  for (const Run* r : {&missing, &gtdir, &dev, &cam, &poses, &img}) {
     CHECK(r->code != 134);
     CHECK(std::count(r->err.begin(), r->err.end(), '\n') == 1);
   }
