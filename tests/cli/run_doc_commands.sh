@@ -8,6 +8,8 @@
 # outputs land there and relative paths resolve as in the docs.
 #
 #   run_doc_commands.sh VMAP_BINARY SOURCE_DIR SCRATCH_DIR [SHARED_DIR] [--list]
+#
+# VMAP_DOC_ONLY=REGEX runs only the commands whose "file<TAB>command" line matches.
 set -uo pipefail
 vmap_bin=$1 src=$2 scratch=$3 shared=${4:-}
 list_only=${5:-}
@@ -31,7 +33,7 @@ extract() {
 }
 
 cd "$src" || exit 1
-mapfile -t commands < <(extract README.md examples/*.md)
+mapfile -t commands < <(extract README.md examples/*.md | grep -E -- "${VMAP_DOC_ONLY:-.}")
 if [ "$list_only" = "--list" ]; then printf '%s\n' "${commands[@]}"; exit 0; fi
 
 rm -rf "$scratch"
