@@ -72,4 +72,32 @@ inline cv::Mat contact_sheet(const std::vector<cv::Mat>& images, const std::vect
   return sheet;
 }
 
+/// The image with a white band above it holding `caption` (shrunk to fit the width).
+inline cv::Mat captioned(const cv::Mat& image, const std::string& caption) {
+  const cv::Mat img = as_bgr(image);
+  const int band = 30;
+  cv::Mat out(img.rows + band, img.cols, CV_8UC3, cv::Scalar::all(255));
+  img.copyTo(out(cv::Rect(0, band, img.cols, img.rows)));
+  double scale = 0.6;
+  int base = 0;
+  while (scale > 0.3 && cv::getTextSize(caption, cv::FONT_HERSHEY_SIMPLEX, scale, 1, &base).width > img.cols - 10)
+    scale -= 0.05;
+  cv::putText(out, caption, {5, band - 9}, cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+  return out;
+}
+
+/// Panels one above the other, left-aligned on white.
+inline cv::Mat stack_vertically(const std::vector<cv::Mat>& panels, int gap = 8) {
+  int width = 0, height = 0;
+  for (const auto& p : panels) width = std::max(width, p.cols), height += p.rows + gap;
+  if (panels.empty()) return {};
+  cv::Mat out(height - gap, width, CV_8UC3, cv::Scalar::all(255));
+  int y = 0;
+  for (const auto& p : panels) {
+    as_bgr(p).copyTo(out(cv::Rect(0, y, p.cols, p.rows)));
+    y += p.rows + gap;
+  }
+  return out;
+}
+
 }  // namespace vmap::examples

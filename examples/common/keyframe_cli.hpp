@@ -1,9 +1,10 @@
 #pragma once
 
 // Options and helpers shared by `vmap build` and `vmap sweep` (and the key-image
-// benchmark): the policy choice from the command line, the F-matrix options, and a
-// progress line on stderr.
+// benchmark): the policy choice from the command line, the F-matrix options and the
+// frame range.
 
+#include "common/cli_support.hpp"
 #include "common/policies.hpp"
 
 #include <vmap/core/error.hpp>
@@ -34,45 +35,53 @@ struct KeyframeArgs {
   std::size_t start = 0;
   std::size_t end = 0;  // 0: to the end
   std::size_t stride = 1;
-  bool json = false;
   std::string camera;  // calibration file; empty: raw pixels
+  std::string out;
+  bool json = false;
 
   [[nodiscard]] DescriptorChoice descriptor() const { return {features, nfeatures, model}; }
 };
 
+/// --features/--model/--nfeatures, shared by every subcommand that extracts features.
+inline void add_feature_options(CLI::App& app, std::string& features, std::string& model, int& nfeatures) {
+  app.add_option("--features", features, "Descriptor: orb, akaze, sift or xfeat (needs --model)");
+  app.add_option("--model", model, "Model file of a learned descriptor (xfeat)");
+  app.add_option("--nfeatures", nfeatures,
+                 "Keypoint budget per image (ORB, SIFT; top-k for XFeat), at most " + std::to_string(max_nfeatures))
+      ->check(count_in(1, max_nfeatures));
+}
+
 inline void add_keyframe_options(CLI::App& app, KeyframeArgs& a) {
-  app.add_option("INPUT", a.input, "Video file, image folder, list of image paths, or TUM rgb.txt")->required();
-  app.add_option("--features", a.features, "Descriptor: orb, akaze, sift, or a learned one (needs --model)")->capture_default_str();
-  app.add_option("--model", a.model, "Model file of a learned descriptor");
-  app.add_option("--nfeatures", a.nfeatures, "Keypoint budget per image (ORB, SIFT; top-k for XFeat)")
-      ->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  app.add_option("--estimator", a.estimator, "F-matrix estimation: magsac, ransac, lmeds or 8point")
-      ->capture_default_str();
-  app.add_option("--rule", a.rule, "New key image: previous (eq. 6) or current (Algorithm 1) frame")
-      ->capture_default_str();
-  app.add_option("--start", a.start, "First frame index to read");
-  app.add_option("--end", a.end, "One past the last frame index to read (0: to the end)");
-  app.add_option("--stride", a.stride, "Read every stride-th frame")->check(CLI::PositiveNumber);
-  app.add_flag("--json", a.json, "Print one JSON object instead of tables");
+  app.add_option("input", a.input, "Video file, image folder, list of image paths, or TUM rgb.txt")->required();
+  add_feature_options(app, a.features, a.model, a.nfeatures);
+  app.add_option("--estimator", a.estimator, "F-matrix estimation: magsac, ransac, lmeds or 8point");
+  app.add_option("--rule", a.rule, "New key image: previous (eq. 6) or current (Algorithm 1) frame");
+  app.add_option("--start", a.start, "First frame index to read")->check(count_in(0, max_frame_index));
+  app.add_option("--end", a.end, "One past the last frame index to read (0: to the end)")
+      ->check(count_in(0, max_frame_index));
+  app.add_option("--stride", a.stride, "Read every stride-th frame")->check(count_in(1, max_frame_index));
   app.add_option("--camera", a.camera,
                  "Calibration (ORB-SLAM YAML, ROS camera_info, KITTI calib.txt): undistort keypoints before the F-matrix");
+  app.add_flag("--json", a.json, "Print one JSON object on stdout (the table goes to stderr)");
 }
 
 inline KeyRule parse_rule(const std::string& name) {
   if (name == "previous") return KeyRule::previous_frame;
   if (name == "current") return KeyRule::current_frame;
-  detail::fail("--rule: unknown rule '" + name + "' (choose previous or current)");
+  usage_error("--rule: unknown rule '" + name + "' (choose previous or current)");
 }
 
 /// The paper's verification: F-matrix, 1 px, 0.99; the homography degeneracy check is
 /// off because the selection does not use it. With a calibration file the keypoints are
 /// undistorted first (the same type either way, so one instantiation serves both).
-inline Calibrated<FundamentalEstimator> make_estimator(const std::string& method, const std::string& camera = {}) {
-  return {camera.empty() ? std::nullopt : std::optional<Camera>(read_camera(camera)),
+inline Calibrated<FundamentalEstimator> make_estimator(const std::string& method,
+                                                      const std::optional<CameraOption>& camera = std::nullopt) {
+  return {camera ? std::optional<Camera>(camera->camera) : std::nullopt,
           FundamentalEstimator({.method = parse_method(method), .check_degeneracy = false})};
 }
 
+/// Frame range and decoding; each skipped frame is reported on stderr (the count is in
+/// the summary and the JSON, from FrameSource::skipped()).
 inline FrameSourceOptions source_options(const KeyframeArgs& a, bool grey) {
   FrameSourceOptions o;
   o.start = a.start;
@@ -85,29 +94,10 @@ inline FrameSourceOptions source_options(const KeyframeArgs& a, bool grey) {
   return o;
 }
 
-/// "frame 120/723, 19 key images" on stderr, rewritten in place, only on a terminal.
-class Progress {
- public:
-  explicit Progress(std::optional<std::size_t> total) : total_(total), tty_(isatty(STDERR_FILENO) != 0) {}
-  void update(std::size_t frames, std::size_t keys) {
-    if (!tty_ || (frames % 10 != 0)) return;
-    if (total_)
-      std::fprintf(stderr, "\rframe %zu/%zu, %zu key images ", frames, *total_, keys);
-    else
-      std::fprintf(stderr, "\rframe %zu, %zu key images ", frames, keys);
-    std::fflush(stderr);
-    shown_ = true;
-  }
-  void done() {
-    if (shown_) std::fprintf(stderr, "\r%60s\r", "");
-    shown_ = false;
-  }
-  ~Progress() { done(); }
-
- private:
-  std::optional<std::size_t> total_;
-  bool tty_;
-  bool shown_ = false;
-};
+/// --end before --start is a usage error, found before any frame is read.
+inline void check_range(const KeyframeArgs& a) {
+  if (a.end > 0 && a.end <= a.start)
+    usage_error("--end: must be > --start (" + std::to_string(a.start) + "), got " + std::to_string(a.end));
+}
 
 }  // namespace vmap::examples

@@ -51,7 +51,12 @@ inline cv::Mat draw_pr_curves(const std::vector<PrCurveSeries>& series, const st
   cv::putText(ylabel, "precision", cv::Point(5, 17), font, 0.55, ink, 1, cv::LINE_AA);
   cv::rotate(ylabel, ylabel, cv::ROTATE_90_COUNTERCLOCKWISE);
   ylabel.copyTo(canvas(cv::Rect(4, top + h / 2 - 50, ylabel.cols, ylabel.rows)));
-  cv::putText(canvas, title, cv::Point(left, 25), font, 0.55, ink, 1, cv::LINE_AA);
+  // The title starts at the plot's left edge; a long one is drawn smaller so it fits.
+  double title_scale = 0.55;
+  int base = 0;
+  while (title_scale > 0.3 && cv::getTextSize(title, font, title_scale, 1, &base).width > size.width - left - 5)
+    title_scale -= 0.025;
+  cv::putText(canvas, title, cv::Point(left, 25), font, title_scale, ink, 1, cv::LINE_AA);
   int legend_y = top + 20;
   for (const PrCurveSeries& s : series) {
     cv::Point prev;

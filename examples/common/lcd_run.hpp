@@ -19,6 +19,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstddef>
 #include <filesystem>
 #include <functional>
@@ -45,6 +46,7 @@ struct LoopRun {
   std::vector<LabelInfluence> influence;  ///< every label of the sample, schema order
   double seconds = 0.0;                   ///< reading, features, index, verification
   std::size_t verifications = 0;
+  std::size_t skipped = 0;                ///< unreadable frames (reported on stderr, not in results)
 
   [[nodiscard]] std::vector<LoopScore> scores() const {
     std::vector<LoopScore> out;
@@ -73,7 +75,12 @@ inline PrecomputedDetections load_labels(const std::vector<std::filesystem::path
 /// Runs LoopDetector over every frame with the given per-frame detections.
 inline LoopRun run_loops(const LoopRunConfig& config, const PrecomputedDetections& labels,
                          const std::function<void(const LoopResult&)>& on_frame = {}) {
-  auto source = FrameSource::open(config.input, {.grey = !config.colour});
+  FrameSourceOptions so;
+  so.grey = !config.colour;
+  so.on_skip = [](const SkippedFrame& s) {
+    std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", s.index, s.name.c_str(), s.reason.c_str());
+  };
+  auto source = FrameSource::open(config.input, so);
   const std::size_t frames = source.total().value_or(0);
   if (labels.frames_declared() && labels.frames() != frames)
     detail::fail("the labels cover " + std::to_string(labels.frames()) + " frames but '" + config.input.string() +
@@ -95,6 +102,7 @@ inline LoopRun run_loops(const LoopRunConfig& config, const PrecomputedDetection
     run.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     run.verifications = detector.verifications();
   });
+  run.skipped = source.skipped().size();
   return run;
 }
 

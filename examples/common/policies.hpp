@@ -4,6 +4,8 @@
 // the name of a descriptor or estimator picks the concrete type once, and the work
 // runs inside a generic lambda instantiated for each type (no virtual call per feature).
 
+#include "common/cli_support.hpp"
+
 #include <vmap/core/error.hpp>
 #include <vmap/features/akaze.hpp>
 #include <vmap/features/orb.hpp>
@@ -21,7 +23,7 @@ inline RobustMethod parse_method(const std::string& name) {
   if (name == "ransac") return RobustMethod::ransac;
   if (name == "lmeds") return RobustMethod::lmeds;
   if (name == "8point") return RobustMethod::eight_point;
-  detail::fail("--estimator: unknown method '" + name + "' (choose magsac, ransac, lmeds or 8point)");
+  usage_error("--estimator: unknown method '" + name + "' (choose magsac, ransac, lmeds or 8point)");
 }
 
 /// What the command line says about the descriptor to use.
@@ -41,10 +43,10 @@ decltype(auto) with_descriptor(const DescriptorChoice& c, F&& f) {
   if (c.name == "xfeat") {
     // A learned model is never looked up or downloaded: the user names the file.
     if (c.model.empty())
-      detail::fail("--features xfeat needs --model PATH (an XFeat ONNX export such as xfeat_320x224.onnx)");
+      usage_error("--features xfeat needs --model PATH (an XFeat ONNX export such as xfeat_320x224.onnx)");
     return std::forward<F>(f)(XFeatDescriptor({.model = c.model, .top_k = c.features}));
   }
-  detail::fail("--features: unknown descriptor '" + c.name + "' (choose orb, akaze, sift or xfeat)");
+  usage_error("--features: unknown descriptor '" + c.name + "' (choose orb, akaze, sift or xfeat)");
 }
 
 }  // namespace vmap::examples

@@ -1,6 +1,7 @@
 // `vmap detect`: run an ONNX object detector (YOLOX, NanoDet, FastestDet) through
 // cv::dnn on images or a sequence; print the detections, draw them, or store them
 // unfiltered in the precomputed-detections format for the loop-closure tools.
+#include "common/cli_support.hpp"
 #include "vmap/cli.hpp"
 
 #include <vmap/core/error.hpp>
@@ -18,10 +19,13 @@
 #include <cstdio>
 #include <filesystem>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
 namespace {
+
+namespace ex = vmap::examples;
 
 struct DetectArgs {
   std::vector<std::string> images;
@@ -30,9 +34,9 @@ struct DetectArgs {
   std::string model;
   std::string names;
   float score = 0.5f;
-  std::string draw;
+  std::string out;
+  bool draw = false;
   bool json = false;
-  std::string labels_out;
   float labels_floor = 0.1f;
 };
 
@@ -67,21 +71,36 @@ cv::Mat draw_detections(const cv::Mat& image, const std::vector<vmap::Detection>
   return canvas;
 }
 
-/// OUT.png for one image; OUT_<frame>.png for several.
-std::filesystem::path draw_path(const std::string& out, std::size_t frame, bool several) {
-  std::filesystem::path p(out);
-  if (!several) return p;
-  return p.parent_path() / (p.stem().string() + "_" + std::to_string(frame) + p.extension().string());
+/// The picture's name in --out: the image's own stem ("frame_<k>" for video frames), made
+/// unique with the frame index when two frames share a stem.
+std::string draw_name(const std::string& frame_name, std::size_t frame, std::set<std::string>& used) {
+  std::string stem = frame_name.find('#') != std::string::npos ? "frame_" + std::to_string(frame)
+                                                                : std::filesystem::path(frame_name).stem().string();
+  if (stem.empty()) stem = "frame_" + std::to_string(frame);
+  if (!used.insert(stem).second) {
+    stem += "_" + std::to_string(frame);
+    used.insert(stem);
+  }
+  return stem + ".png";
 }
 
-int run_detect(const DetectArgs& a) {
+int run_detect(const DetectArgs& a, const CLI::App& app) {
   if (a.images.empty() == a.sequence.empty())
-    vmap::detail::fail("detect: give either images or --sequence PATH (not both)");
-  vmap::detail::check(a.labels_floor >= 0.0f && a.labels_floor <= 1.0f, "--labels-floor must be in [0, 1]");
+    ex::usage_error("give either images or --sequence PATH (not both)");
+  if (a.draw && a.out.empty()) ex::usage_error("--draw writes into --out DIR: give --out");
+  std::vector<std::filesystem::path> inputs(a.images.begin(), a.images.end());
+  if (!a.sequence.empty()) inputs.push_back(a.sequence);
+  ex::current_inputs().assign(a.images.begin(), a.images.end());
+  if (!a.sequence.empty()) ex::current_inputs().push_back(a.sequence);
+  ex::check_input_file(a.model, "--model");
+  if (!a.names.empty()) ex::check_input_file(a.names, "--names");
+  inputs.push_back(a.model);
+  if (!a.names.empty()) inputs.push_back(a.names);
+  if (!a.out.empty()) ex::prepare_output_dir(a.out, "--out", inputs, {"detections.txt"});
   const std::vector<std::string> names = a.names.empty() ? std::vector<std::string>{} : vmap::read_class_names(a.names);
-  // Detections for --labels-out are stored unfiltered (down to the floor); the printed
+  // Detections for detections.txt are stored unfiltered (down to the floor); the printed
   // and drawn ones use --score.
-  const float threshold = a.labels_out.empty() ? a.score : std::min(a.score, a.labels_floor);
+  const float threshold = a.out.empty() ? a.score : std::min(a.score, a.labels_floor);
   vmap::AnyDetector detector = vmap::make_dnn_detector(
       vmap::parse_detector_format(a.detector), {.model = a.model, .score_threshold = threshold});
 
@@ -92,7 +111,13 @@ int run_detect(const DetectArgs& a) {
   };
   std::vector<std::filesystem::path> files(a.images.begin(), a.images.end());
   std::optional<vmap::FrameSource> source;
-  if (!a.sequence.empty()) source.emplace(vmap::FrameSource::open(a.sequence));
+  if (!a.sequence.empty()) {
+    vmap::FrameSourceOptions so;
+    so.on_skip = [](const vmap::SkippedFrame& sk) {
+      std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", sk.index, sk.name.c_str(), sk.reason.c_str());
+    };
+    source.emplace(vmap::FrameSource::open(a.sequence, so));
+  }
   std::size_t next_file = 0;
   auto next = [&]() -> std::optional<Item> {
     if (source) {
@@ -103,27 +128,35 @@ int run_detect(const DetectArgs& a) {
     if (next_file >= files.size()) return std::nullopt;
     const auto& p = files[next_file];
     cv::Mat img = cv::imread(p.string(), cv::IMREAD_COLOR);
-    if (img.empty()) vmap::detail::fail("detect: cannot read the image '" + p.string() + "'");
+    if (img.empty()) vmap::detail::fail("cannot read the image '" + p.string() + "'");
     return Item{next_file++, p.string(), std::move(img)};
   };
-  const bool several = source.has_value() || files.size() > 1;
 
   nlohmann::json out = nlohmann::json::array();
   std::string labels;
-  std::size_t frames = 0;
+  std::size_t frames = 0, done = 0;
+  std::set<std::string> used;
+  std::vector<std::string> written;
+  ex::Progress progress("vmap detect", source ? source->total() : std::optional<std::size_t>(files.size()));
   while (auto item = next()) {
     frames = std::max(frames, item->frame + 1);
     const std::vector<vmap::Detection> all = detector.detect(item->image);
     std::vector<vmap::Detection> shown;
     for (const auto& d : all) {
       if (d.score >= a.score) shown.push_back(d);
-      if (!a.labels_out.empty()) {
+      if (!a.out.empty()) {
         char line[160];
         std::snprintf(line, sizeof line, "%zu %d %.4f %.1f %.1f %.1f %.1f\n", item->frame, d.label,
                       static_cast<double>(d.score), static_cast<double>(d.box.x), static_cast<double>(d.box.y),
                       static_cast<double>(d.box.width), static_cast<double>(d.box.height));
         labels += line;
       }
+    }
+    std::string drawn;
+    if (a.draw) {
+      drawn = draw_name(item->name, item->frame, used);
+      vmap::write_image_atomically(std::filesystem::path(a.out) / drawn, draw_detections(item->image, shown, names));
+      written.push_back(drawn);
     }
     if (a.json) {
       nlohmann::json dets = nlohmann::json::array();
@@ -132,7 +165,10 @@ int run_detect(const DetectArgs& a) {
                         {"name", vmap::class_name(names, d.label)},
                         {"score", d.score},
                         {"box", {d.box.x, d.box.y, d.box.width, d.box.height}}});
-      out.push_back({{"image", item->name}, {"detections", dets}});
+      out.push_back({{"image", ex::path_string(item->name)},
+                     {"frame", item->frame},
+                     {"detections", dets},
+                     {"drawn", drawn.empty() ? nlohmann::json(nullptr) : nlohmann::json(drawn)}});
     } else {
       std::printf("%s: %zu detection%s\n", item->name.c_str(), shown.size(), shown.size() == 1 ? "" : "s");
       for (const auto& d : shown)
@@ -140,18 +176,40 @@ int run_detect(const DetectArgs& a) {
                     static_cast<double>(d.score), static_cast<double>(d.box.x), static_cast<double>(d.box.y),
                     static_cast<double>(d.box.width), static_cast<double>(d.box.height));
     }
-    if (!a.draw.empty())
-      vmap::write_image_atomically(draw_path(a.draw, item->frame, several),
-                                   draw_detections(item->image, shown, names));
+    progress.update(++done);
   }
-  if (a.json) std::printf("%s\n", out.dump(2).c_str());
-  if (!a.labels_out.empty()) {
+  const double seconds = progress.seconds();
+  const std::size_t skipped = source ? source->skipped().size() : 0;
+  progress.done(std::to_string(skipped) + " skipped");
+  if (!a.out.empty()) {
     char floor[32];
     std::snprintf(floor, sizeof floor, "%.2f", static_cast<double>(threshold));
     const std::string header = "# vmap detect --detector " + a.detector + " --model " +
                                std::filesystem::path(a.model).filename().string() + ", scores >= " + floor +
                                "\n# frame label score x y w h\n# frames " + std::to_string(frames) + "\n";
-    vmap::write_file_atomically(a.labels_out, header + labels);
+    vmap::write_file_atomically(std::filesystem::path(a.out) / "detections.txt", header + labels);
+    written.insert(written.begin(), "detections.txt");
+  }
+  if (a.json) {
+    nlohmann::json inputs_json = nlohmann::json::array();
+    for (const auto& i : a.images) inputs_json.push_back(ex::path_string(i));
+    nlohmann::json j{{"command", "detect"},
+                     {"inputs", inputs_json},
+                     {"sequence", a.sequence.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(a.sequence))},
+                     {"options", ex::options_json(app)},
+                     {"frames", done},
+                     {"skipped_frames", skipped},
+                     {"seconds", seconds},
+                     {"fps", seconds > 0 ? static_cast<double>(done) / seconds : 0.0},
+                     {"images", out},
+                     {"out", a.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(a.out))},
+                     {"files", written}};
+    ex::print_json(j);
+  } else {
+    if (skipped > 0) std::printf("skipped frames: %zu (unreadable, listed above)\n", skipped);
+    if (!a.out.empty())
+      std::printf("wrote %s/detections.txt%s\n", a.out.c_str(),
+                  a.draw ? (" and " + std::to_string(written.size() - 1) + " pictures").c_str() : "");
   }
   return 0;
 }
@@ -162,16 +220,19 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--sequence", args->sequence,
                  "Instead of images: a folder (natural order), an image list, a TUM rgb.txt or a video");
   app.add_option("--detector", args->detector, "Output format of the model: yolox, nanodet or fastestdet")
-      ->capture_default_str();
+      ->check(CLI::IsMember({"yolox", "nanodet", "fastestdet"}));
   app.add_option("--model", args->model, "ONNX model file")->required();
   app.add_option("--names", args->names, "Class names, one a line in output order (e.g. coco80.names)");
-  app.add_option("--score", args->score, "Print and draw detections scoring at least this")->capture_default_str();
-  app.add_option("--draw", args->draw, "Write the image with boxes and labels (OUT_<frame>.png for several images)");
-  app.add_flag("--json", args->json, "Print a JSON list of {image, detections: [{label, name, score, box}]}");
-  app.add_option("--labels-out", args->labels_out,
-                 "Store every detection scoring at least --labels-floor in the precomputed-detections format");
-  app.add_option("--labels-floor", args->labels_floor, "Lowest score stored by --labels-out")->capture_default_str();
-  return [args] { return run_detect(*args); };
+  app.add_option("--score", args->score, "Print and draw detections scoring at least this")
+      ->check(ex::real_in(0.0, 1.0));
+  app.add_option("--out", args->out,
+                 "Folder for detections.txt (every detection scoring at least --labels-floor, the "
+                 "precomputed-detections format of vmap loops --labels) and, with --draw, the pictures");
+  app.add_flag("--draw", args->draw, "Write each image with boxes and labels into --out as <image name>.png");
+  app.add_flag("--json", args->json, "Print one JSON object on stdout (per image: detections scoring >= --score)");
+  app.add_option("--labels-floor", args->labels_floor, "Lowest score stored in detections.txt")
+      ->check(ex::real_in(0.0, 1.0));
+  return [args, &app] { return run_detect(*args, app); };
 }
 
 const bool registered = vmap::cli::add_command({"detect", "Detect objects with an ONNX detector (cv::dnn)", setup});

@@ -1,6 +1,7 @@
 // `vmap localize`: learn a GCS map of images with poses and localize query images
 // (Trujillo-Romero 2024, DESIGN.md sec. 1.3). Either the virtual-room experiment
 // (--room) or a real sequence with a pose file (--train ... --poses ...).
+#include "common/cli_support.hpp"
 #include "common/error_stats.hpp"
 #include "vmap/cli.hpp"
 
@@ -20,6 +21,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <numeric>
@@ -30,6 +32,7 @@
 namespace {
 
 using vmap::Pose2;
+namespace ex = vmap::examples;
 
 struct Settings {
   bool room = false;
@@ -45,7 +48,8 @@ struct Settings {
   double margin = 1.5;
   std::size_t laps = 2, images_per_lap = 82, tests = 20;
   double pan_deg = 6.0;
-  std::string png, json;
+  std::string out;
+  bool json = false;
 };
 
 /// One test position: its query images and where it really is.
@@ -59,32 +63,37 @@ struct Experiment {
   std::vector<Pose2> train_poses;  // what the map is built from (odometry in the room)
   std::vector<Query> queries;
   std::optional<double> room_size;
+  std::size_t skipped = 0;  ///< unreadable frames of --train and --query
 };
 
-// The repository's sample frames: through VMAP_SOURCE_DIR when the build defines it,
-// else relative to the working folder (running from a checkout).
+// The poster photos when --posters is not given: the repository's sample frames, looked
+// up relative to the working folder (a checkout) and to the executable (a build tree,
+// build/<preset>/examples/vmap). No source path is compiled into the program, so an
+// installed vmap needs --posters.
 std::string default_posters() {
-  const std::filesystem::path rel = "examples/data/tum_fr1_rpy_60/rgb";
-#ifdef VMAP_SOURCE_DIR
-  if (std::filesystem::exists(std::filesystem::path(VMAP_SOURCE_DIR) / rel))
-    return (std::filesystem::path(VMAP_SOURCE_DIR) / rel).string();
-#endif
-  return std::filesystem::exists(rel) ? rel.string() : std::string();
+  namespace fs = std::filesystem;
+  const fs::path rel = "examples/data/tum_fr1_rpy_60/rgb";
+  std::error_code ec;
+  if (fs::is_directory(rel, ec)) return rel.string();
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    const fs::path from_build = exe.parent_path() / "../../.." / rel;
+    if (fs::is_directory(from_build, ec)) return from_build.lexically_normal().string();
+  }
+  return {};
 }
 
 Experiment room_experiment(const Settings& s) {
-  vmap::detail::check(!s.posters.empty(),
-                      "--posters: no poster folder given and the repository's examples/data/tum_fr1_rpy_60/rgb "
-                      "was not found (give --posters DIR with at least 16 photos)");
+  if (s.posters.empty())
+    ex::usage_error("--posters: no poster folder given and the repository's examples/data/tum_fr1_rpy_60/rgb was "
+                    "found neither under the working folder nor beside the program (give --posters DIR with at "
+                    "least 16 photos)");
   vmap::VirtualRoomOptions ro;
   vmap::VirtualRoom room(vmap::load_posters(s.posters, static_cast<std::size_t>(4 * ro.posters_per_wall)), ro);
   vmap::AkazeDescriptor akaze;
   vmap::CircuitOptions co{.margin_m = s.margin, .laps = s.laps, .images_per_lap = s.images_per_lap, .seed = s.seed};
-  auto rec = vmap::record_circuit(room, akaze, vmap::square_circuit(ro, co));
-  Experiment e;
-  e.room_size = ro.size_m;
-  e.train_images = std::move(rec.images);
-  e.train_poses = std::move(rec.odometry);
+  // record_circuit's loop (capture_view at every sample), written out for the progress line.
+  const auto circuit = vmap::square_circuit(ro, co);
   // Test positions: half a step off the training samples, another noise draw.
   vmap::CircuitOptions qo = co;
   qo.laps = 1;
@@ -92,15 +101,27 @@ Experiment room_experiment(const Settings& s) {
   qo.seed = s.seed + 1000;
   const auto qc = vmap::square_circuit(ro, qo);
   const std::size_t n = std::min(s.tests, qc.size());
+  ex::Progress progress("vmap localize: rendering the room", circuit.size() + n * s.query_images, "views");
+  std::size_t views = 0;
+  Experiment e;
+  e.room_size = ro.size_m;
+  for (const auto& sample : circuit) {
+    e.train_images.push_back(vmap::capture_view(room, akaze, sample.truth).image);
+    e.train_poses.push_back(sample.odometry);
+    progress.update(++views);
+  }
   for (std::size_t k = 0; k < n; ++k) {
     const auto& sample = qc[k * qc.size() / n];
     Query q{{}, sample.truth};
-    for (std::size_t i = 0; i < s.query_images; ++i)
+    for (std::size_t i = 0; i < s.query_images; ++i) {
       q.images.push_back(vmap::capture_view(room, akaze, sample.truth,
                                             static_cast<double>(i) * s.pan_deg * std::numbers::pi / 180.0)
                              .image);
+      progress.update(++views);
+    }
     e.queries.push_back(std::move(q));
   }
+  progress.done();
   return e;
 }
 
@@ -119,14 +140,20 @@ vmap::PoseFormat format_of(const std::string& name, const std::string& file) {
 // Frames and poses pair by order when the counts agree (TUM key-frame sets, KITTI, x y
 // theta lists); otherwise each frame takes the pose nearest in time (TUM
 // groundtruth.txt at 100 Hz against rgb.txt at 30 Hz), within 20 ms.
-Sequence read_sequence(const std::string& images, const std::string& poses, const std::string& format) {
+Sequence read_sequence(const std::string& images, const std::string& poses, const std::string& format,
+                       std::size_t& skipped) {
   Sequence out;
-  auto src = vmap::FrameSource::open(images);
+  vmap::FrameSourceOptions so;
+  so.on_skip = [](const vmap::SkippedFrame& sk) {
+    std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", sk.index, sk.name.c_str(), sk.reason.c_str());
+  };
+  auto src = vmap::FrameSource::open(images, so);
   std::vector<double> stamps;
   while (auto f = src.next()) {
     out.images.push_back(f->image);
     stamps.push_back(f->timestamp);
   }
+  skipped += src.skipped().size();
   const auto timed = vmap::read_poses(poses, format_of(format, poses));
   for (const auto& t : vmap::poses_for_frames(timed, stamps, poses, 0.02)) out.poses.push_back(t.pose);
   return out;
@@ -147,9 +174,8 @@ void add_queries(Experiment& e, const Sequence& q, const std::vector<std::size_t
 }
 
 Experiment sequence_experiment(const Settings& s) {
-  vmap::detail::check(!s.poses.empty(), "--train needs --poses");
-  const Sequence all = read_sequence(s.train, s.poses, s.pose_format);
   Experiment e;
+  const Sequence all = read_sequence(s.train, s.poses, s.pose_format, e.skipped);
   if (s.every_other) {
     std::vector<std::size_t> odd;
     for (std::size_t i = 0; i < all.images.size(); ++i) {
@@ -162,11 +188,9 @@ Experiment sequence_experiment(const Settings& s) {
     }
     add_queries(e, all, odd, s.query_images);
   } else {
-    vmap::detail::check(!s.query.empty() && !s.query_poses.empty(),
-                        "give --query and --query-poses, or --every-other to hold out the odd frames");
     e.train_images = all.images;
     e.train_poses = all.poses;
-    const Sequence q = read_sequence(s.query, s.query_poses, s.pose_format);
+    const Sequence q = read_sequence(s.query, s.query_poses, s.pose_format, e.skipped);
     std::vector<std::size_t> idx(q.images.size());
     std::iota(idx.begin(), idx.end(), std::size_t{0});
     add_queries(e, q, idx, s.query_images);
@@ -229,100 +253,171 @@ cv::Mat draw_map(const vmap::PoseMap<vmap::GcsXf>& map, const Experiment& e, con
 }
 
 
+/// The table goes to stdout, or nowhere with --json (stdout is then the JSON alone).
 template <class H>
-int run_with(const Settings& s, H histogram) {
+int run_with(const Settings& s, H histogram, const CLI::App& app) {
+  std::FILE* table = s.json ? nullptr : stdout;
+  auto say = [&](const char* fmt, auto... v) {
+    if (table) std::fprintf(table, fmt, v...);
+  };
   Experiment e = s.room ? room_experiment(s) : sequence_experiment(s);
   vmap::GcsOptions go{.lambda = s.lambda, .max_cells = s.neurons, .max_epochs = s.max_epochs, .seed = s.seed};
   vmap::GcsLocalizer<vmap::AkazeDescriptor, H> loc(vmap::AkazeDescriptor{}, std::move(histogram), go);
   const auto report = loc.train(e.train_images, e.train_poses);
-  std::printf("trained on %zu images: %zu neurons (%zu with a pose), %zu epochs; GCS training %.4f s "
-              "(features %.2f s, histograms %.2f s)\n",
-              e.train_images.size(), report.gcs.cells, loc.map().neurons_with_pose(), report.gcs.epochs,
-              report.gcs_seconds, report.feature_seconds, report.histogram_seconds);
+  say("trained on %zu images: %zu neurons (%zu with a pose), %zu epochs; GCS training %.4f s "
+      "(features %.2f s, histograms %.2f s)\n",
+      e.train_images.size(), report.gcs.cells, loc.map().neurons_with_pose(), report.gcs.epochs, report.gcs_seconds,
+      report.feature_seconds, report.histogram_seconds);
+  if (e.skipped > 0) say("skipped frames: %zu (unreadable, listed above)\n", e.skipped);
   std::vector<Row> rows;
   std::vector<double> errors;
-  std::printf("%4s %8s %8s %8s %8s %7s %7s %7s  %s\n", "#", "true x", "true y", "est x", "est y", "|dx|", "|dy|",
-              "error", "neurons (distance)");
+  std::size_t non_finite = 0;
+  say("%4s %8s %8s %8s %8s %7s %7s %7s  %s\n", "#", "true x", "true y", "est x", "est y", "|dx|", "|dy|", "error",
+      "neurons (distance)");
+  ex::Progress progress("vmap localize", e.queries.size(), "queries");
   for (std::size_t k = 0; k < e.queries.size(); ++k) {
     const auto& q = e.queries[k];
     Row r{q.truth, loc.localize(q.images), 0.0};
     r.error = r.estimate.pose.distance(r.truth);
-    errors.push_back(r.error);
+    if (std::isfinite(r.error))
+      errors.push_back(r.error);
+    else
+      ++non_finite;
     std::string ids;
     for (const auto& m : r.estimate.matches)
       ids += std::to_string(m.neuron) + (m.substituted ? "*" : "") + " (" + std::to_string(m.distance).substr(0, 5) + ") ";
-    std::printf("%4zu %8.3f %8.3f %8.3f %8.3f %7.3f %7.3f %7.3f  %s\n", k, r.truth.x(), r.truth.y(),
-                r.estimate.pose.x(), r.estimate.pose.y(), std::abs(r.estimate.pose.x() - r.truth.x()),
-                std::abs(r.estimate.pose.y() - r.truth.y()), r.error, ids.c_str());
+    say("%4zu %8.3f %8.3f %8.3f %8.3f %7.3f %7.3f %7.3f  %s\n", k, r.truth.x(), r.truth.y(), r.estimate.pose.x(),
+        r.estimate.pose.y(), std::abs(r.estimate.pose.x() - r.truth.x()), std::abs(r.estimate.pose.y() - r.truth.y()),
+        r.error, ids.c_str());
     rows.push_back(std::move(r));
+    progress.update(k + 1);
   }
-  const vmap::examples::ErrorStats sum = vmap::examples::error_stats(errors);
-  std::printf("position error over %zu queries of %zu image(s): median %.3f m, mean %.3f m, max %.3f m"
-              " (* = winner had no pose, nearest posed neuron used)\n",
-              errors.size(), s.query_images, sum.median, sum.mean, sum.max);
-  if (!s.png.empty()) {
-    vmap::write_image_atomically(s.png, draw_map(loc.map(), e, rows));
-    std::printf("map picture: %s\n", s.png.c_str());
+  const double query_seconds = progress.seconds();
+  progress.done();
+  const ex::ErrorStats sum = ex::error_stats(errors);
+  const bool stats_finite = std::isfinite(sum.median) && std::isfinite(sum.mean) && std::isfinite(sum.max);
+  if (stats_finite && !errors.empty())
+    say("position error over %zu queries of %zu image(s): median %.3f m, mean %.3f m, max %.3f m"
+        " (* = winner had no pose, nearest posed neuron used)\n",
+        errors.size(), s.query_images, sum.median, sum.mean, sum.max);
+  else
+    say("position error over %zu queries: not finite (the poses are too large to compare)\n", rows.size());
+  if (non_finite > 0) say("%zu queries with a non-finite error are left out of the figures\n", non_finite);
+  std::vector<std::string> written;
+  if (!s.out.empty()) {
+    vmap::write_image_atomically(std::filesystem::path(s.out) / "map.png", draw_map(loc.map(), e, rows));
+    written.push_back("map.png");
+    say("map picture: %s/map.png\n", s.out.c_str());
   }
-  if (!s.json.empty()) {
-    nlohmann::json j;
-    j["neurons"] = report.gcs.cells;
-    j["neurons_with_pose"] = loc.map().neurons_with_pose();
-    j["train_images"] = e.train_images.size();
-    j["train_seconds"] = report.gcs_seconds;
-    j["feature_seconds"] = report.feature_seconds;
-    j["histogram_seconds"] = report.histogram_seconds;
-    j["query_images"] = s.query_images;
-    j["queries"] = errors.size();
-    j["median_error_m"] = sum.median;
-    j["mean_error_m"] = sum.mean;
-    j["max_error_m"] = sum.max;
-    vmap::write_file_atomically(s.json, j.dump(2) + "\n");
+  if (s.json) {
+    nlohmann::json inputs;
+    if (s.room) {
+      inputs["posters"] = ex::path_string(s.posters);
+    } else {
+      inputs["train"] = ex::path_string(s.train);
+      inputs["poses"] = ex::path_string(s.poses);
+      if (!s.query.empty()) inputs["query"] = ex::path_string(s.query);
+      if (!s.query_poses.empty()) inputs["query_poses"] = ex::path_string(s.query_poses);
+    }
+    nlohmann::json j{{"command", "localize"},
+                     {"inputs", inputs},
+                     {"options", ex::options_json(app)},
+                     {"neurons", report.gcs.cells},
+                     {"neurons_with_pose", loc.map().neurons_with_pose()},
+                     {"epochs", report.gcs.epochs},
+                     {"train_images", e.train_images.size()},
+                     {"skipped_frames", e.skipped},
+                     {"seconds", report.gcs_seconds},
+                     {"feature_seconds", report.feature_seconds},
+                     {"histogram_seconds", report.histogram_seconds},
+                     {"query_seconds", query_seconds},
+                     {"query_images", s.query_images},
+                     {"queries", rows.size()},
+                     {"non_finite_errors", non_finite},
+                     {"median_error_m", errors.empty() ? nlohmann::json(nullptr) : ex::finite_or_null(sum.median)},
+                     {"mean_error_m", errors.empty() ? nlohmann::json(nullptr) : ex::finite_or_null(sum.mean)},
+                     {"max_error_m", errors.empty() ? nlohmann::json(nullptr) : ex::finite_or_null(sum.max)},
+                     {"out", s.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(s.out))},
+                     {"files", written}};
+    ex::print_json(j);
   }
   return 0;
 }
 
+/// Conflicting or missing options, refused before any work.
+void check_settings(const Settings& s, const CLI::App& app) {
+  auto given = [&](const char* name) { return app.get_option(name)->count() > 0; };
+  if (s.room) {
+    for (const char* o : {"--train", "--poses", "--query", "--query-poses", "--every-other", "--pose-format"})
+      if (given(o)) ex::usage_error(std::string("--room and ") + o + " conflict (the room makes its own images)");
+  } else {
+    if (s.train.empty()) ex::usage_error("give --room or --train (see vmap localize --help)");
+    for (const char* o : {"--posters", "--margin", "--laps", "--images-per-lap", "--tests", "--pan"})
+      if (given(o)) ex::usage_error(std::string(o) + " is an option of --room");
+    if (s.poses.empty()) ex::usage_error("--train needs --poses");
+    if (s.every_other && (!s.query.empty() || !s.query_poses.empty()))
+      ex::usage_error("--every-other and --query/--query-poses conflict (--every-other takes the queries from --train)");
+    if (!s.every_other && (s.query.empty() || s.query_poses.empty()))
+      ex::usage_error("give --query and --query-poses, or --every-other to hold out the odd frames");
+  }
+}
+
 std::function<int()> setup(CLI::App& app) {
   auto s = std::make_shared<Settings>();
-  s->posters = default_posters();
   app.add_flag("--room", s->room, "Run the virtual-room experiment (6 x 6 m, posters on the walls, laps of a square)");
-  app.add_option("--posters", s->posters, "Folder of photos for the room's posters (16 are used)")
-      ->default_str(s->posters);
+  app.add_option("--posters", s->posters,
+                 "Room: folder of photos for the posters (16 are used); default: examples/data/tum_fr1_rpy_60/rgb "
+                 "under the working folder or the build tree");
   app.add_option("--train", s->train, "Training images: video, image folder, list or TUM rgb.txt");
   app.add_option("--poses", s->poses, "Poses of the training images: TUM groundtruth, KITTI poses, or x y theta lines");
   app.add_option("--pose-format", s->pose_format, "auto | tum | kitti | xytheta")
-      ->check(CLI::IsMember({"auto", "tum", "kitti", "xytheta"}))
-      ->default_str("auto");
+      ->check(CLI::IsMember({"auto", "tum", "kitti", "xytheta"}));
   app.add_option("--query", s->query, "Query images (with --query-poses for their true poses)");
   app.add_option("--query-poses", s->query_poses, "True poses of the query images");
   app.add_flag("--every-other", s->every_other, "Train on the even frames of --train, localize the odd ones");
-  app.add_option("--neurons", s->neurons, "GCS cells (the paper: 100, 200, 300)")->default_val(100)->check(CLI::Range(3, 100000));
-  app.add_option("--lambda", s->lambda, "Insert a cell every lambda inputs")->default_val(50)->check(CLI::Range(1, 1000000));
-  app.add_option("--max-epochs", s->max_epochs, "Stop after this many epochs")->default_val(1000)->check(CLI::Range(1, 1000000));
+  app.add_option("--neurons", s->neurons, "GCS cells (the paper: 100, 200, 300)")->check(ex::count_in(3, 100000));
+  app.add_option("--lambda", s->lambda, "Insert a cell every lambda inputs")->check(ex::count_in(1, 1000000));
+  app.add_option("--max-epochs", s->max_epochs, "Stop after this many epochs")->check(ex::count_in(1, 1000000));
   app.add_option("--histogram", s->histogram, "bow (bag of binary words) | grid (keypoint grid)")
-      ->check(CLI::IsMember({"bow", "grid"}))
-      ->default_str("bow");
-  app.add_option("--words", s->words, "Vocabulary size of the bow histogram")->default_val(128)->check(CLI::Range(2, 100000));
+      ->check(CLI::IsMember({"bow", "grid"}));
+  app.add_option("--words", s->words, "Vocabulary size of the bow histogram")->check(ex::count_in(2, 100000));
   app.add_option("--images", s->query_images, "Query images per estimate (the paper: 1 or 2)")
-      ->default_val(2)
-      ->check(CLI::Range(1, 10));
-  app.add_option("--seed", s->seed, "Seed of the room's noise, the vocabulary and the GCS")->default_val(1);
-  app.add_option("--margin", s->margin, "Room: distance of the circuit from the walls (m)")->default_val(1.5);
-  app.add_option("--laps", s->laps, "Room: laps driven for training")->default_val(2)->check(CLI::Range(1, 100));
+      ->check(ex::count_in(1, 10));
+  app.add_option("--seed", s->seed, "Seed of the room's noise, the vocabulary and the GCS")
+      ->check(ex::count_in(0, std::numeric_limits<std::uint64_t>::max()));
+  app.add_option("--margin", s->margin, "Room: distance of the circuit from the walls (m), in (0, 3)")
+      ->check(ex::real_in(0.0, 2.99, true));
+  app.add_option("--laps", s->laps, "Room: laps driven for training")->check(ex::count_in(1, 100));
   app.add_option("--images-per-lap", s->images_per_lap, "Room: images per lap (2 x 82 = the paper's 164)")
-      ->default_val(82)
-      ->check(CLI::Range(4, 100000));
-  app.add_option("--tests", s->tests, "Room: test positions")->default_val(20)->check(CLI::Range(1, 100000));
-  app.add_option("--pan", s->pan_deg, "Room: the second query image is panned by this many degrees")->default_val(6.0);
-  app.add_option("--png", s->png, "Write a picture of the map (neurons, training path, estimates)");
-  app.add_option("--json", s->json, "Write a JSON summary (neurons, train_seconds, median/mean/max_error_m)");
-  return [s] {
-    if (!s->room && s->train.empty()) vmap::detail::fail("give --room or --train (see vmap localize --help)");
-    if (s->histogram == "grid") return run_with(*s, vmap::GridHistogram{});
+      ->check(ex::count_in(4, 100000));
+  app.add_option("--tests", s->tests, "Room: test positions")->check(ex::count_in(1, 100000));
+  app.add_option("--pan", s->pan_deg, "Room: the second query image is panned by this many degrees")
+      ->check(ex::real_in(-180.0, 180.0));
+  app.add_option("--out", s->out, "Folder for map.png, a picture of the map and the estimates (created if missing)");
+  app.add_flag("--json", s->json, "Print a JSON summary on stdout instead of the table");
+  return [s, &app] {
+    check_settings(*s, app);
+    if (s->room && s->posters.empty()) s->posters = default_posters();
+    ex::current_inputs() = s->room ? std::vector<std::string>{s->posters}
+                                   : std::vector<std::string>{s->train, s->poses, s->query, s->query_poses};
+    if (!s->room) {
+      ex::check_input_file(s->poses, "--poses");
+      if (!s->query_poses.empty()) ex::check_input_file(s->query_poses, "--query-poses");
+    } else if (!s->posters.empty()) {
+      std::error_code ec;
+      if (!std::filesystem::is_directory(s->posters, ec))
+        ex::usage_error("--posters: '" + s->posters + "' is not a folder");
+    }
+    if (!s->out.empty()) {
+      std::vector<std::filesystem::path> inputs;
+      for (const auto& i : ex::current_inputs()) inputs.emplace_back(i);
+      ex::prepare_output_dir(s->out, "--out", inputs, {"map.png"});
+    }
+    if (s->histogram == "grid") return run_with(*s, vmap::GridHistogram{}, app);
     vmap::BowHistogramOptions bo;
     bo.vocabulary.words = s->words;
     bo.vocabulary.seed = s->seed;
-    return run_with(*s, vmap::BowHistogram(bo));
+    return run_with(*s, vmap::BowHistogram(bo), app);
   };
 }
 

@@ -1,6 +1,8 @@
 // `vmap match A B`: extract, match and verify one image pair and say what came out:
 // the quickest way to see whether two views share enough for a fundamental matrix.
+#include "common/cli_support.hpp"
 #include "common/draw.hpp"
+#include "common/keyframe_cli.hpp"
 #include "common/policies.hpp"
 #include "vmap/cli.hpp"
 
@@ -20,33 +22,42 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <system_error>
+#include <vector>
 
 namespace {
+
+namespace ex = vmap::examples;
 
 struct MatchArgs {
   std::string image_a, image_b;
   vmap::examples::DescriptorChoice descriptor;
   std::string estimator = "magsac";
-  double threshold = 1.0;
+  double epipolar_px = 1.0;
+  std::string camera;
   std::string out;
   bool json = false;
-  std::string camera;  // calibration file; empty: raw pixels
 };
 
 cv::Mat read_image(const std::string& path) {
-  if (!std::filesystem::exists(path)) vmap::detail::fail("image '" + path + "' does not exist");
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) vmap::detail::fail("image '" + path + "' does not exist");
+  if (std::filesystem::is_directory(path, ec)) vmap::detail::fail("image '" + path + "' is a folder");
   cv::Mat img = cv::imread(path, cv::IMREAD_UNCHANGED);
   if (img.empty()) vmap::detail::fail("image '" + path + "' cannot be decoded");
   return img;
 }
 
-int run(const MatchArgs& args) {
+int run(const MatchArgs& args, const CLI::App& app) {
   using clock = std::chrono::steady_clock;
+  ex::current_inputs() = {args.image_a, args.image_b};
+  const auto camera = ex::load_camera_option(args.camera);
+  if (!args.out.empty()) ex::prepare_output_dir(args.out, "--out", {args.image_a, args.image_b}, {"matches.png"});
   const cv::Mat a_img = read_image(args.image_a);
   const cv::Mat b_img = read_image(args.image_b);
   const vmap::Calibrated<vmap::FundamentalEstimator> estimator(
-      args.camera.empty() ? std::nullopt : std::optional<vmap::Camera>(vmap::read_camera(args.camera)),
-      vmap::FundamentalEstimator({.method = vmap::examples::parse_method(args.estimator), .threshold_px = args.threshold}));
+      camera ? std::optional<vmap::Camera>(camera->camera) : std::nullopt,
+      vmap::FundamentalEstimator({.method = vmap::examples::parse_method(args.estimator), .threshold_px = args.epipolar_px}));
   const vmap::BruteForceMatcher matcher;
   return vmap::examples::with_descriptor(args.descriptor, [&](auto descriptor) {
     const auto t0 = clock::now();
@@ -59,28 +70,41 @@ int run(const MatchArgs& args) {
     const auto t3 = clock::now();
     const double s = vmap::InlierRatio{}(a, b, v);
     auto ms = [](auto d) { return std::chrono::duration<double, std::milli>(d).count(); };
+    auto sec = [](auto d) { return std::chrono::duration<double>(d).count(); };
+    std::vector<std::string> written;
+    if (!args.out.empty()) {
+      char caption[200];
+      std::snprintf(caption, sizeof caption, "%zu | %zu features, %zu matches, %d inliers, S = %.3f", a.size(), b.size(),
+                    m.size(), v.inliers, s);
+      vmap::write_image_atomically(std::filesystem::path(args.out) / "matches.png",
+                                   ex::captioned(ex::draw_verified_matches(a_img, a, b_img, b, m, v), caption));
+      written.push_back("matches.png");
+    }
     if (args.json) {
-      nlohmann::json j = {{"image_a", args.image_a},
-                          {"image_b", args.image_b},
+      nlohmann::json j = {{"command", "match"},
+                          {"inputs", {ex::path_string(args.image_a), ex::path_string(args.image_b)}},
+                          {"options", ex::options_json(app)},
                           {"features_a", a.size()},
                           {"features_b", b.size()},
                           {"matches", m.size()},
                           {"status", std::string(vmap::to_string(v.status))},
                           {"inliers", v.inliers},
-                          {"similarity", s},
+                          {"similarity", ex::finite_or_null(s)},
                           {"degenerate", v.degeneracy != vmap::Degeneracy::none},
                           {"homography_inliers", v.homography_inliers},
-                          {"ms_extract", ms(t1 - t0)},
-                          {"ms_match", ms(t2 - t1)},
-                          {"ms_verify", ms(t3 - t2)},
-                          {"camera", args.camera}};
-      std::printf("%s\n", j.dump(2).c_str());
+                          {"seconds", sec(t3 - t0)},
+                          {"extract_seconds", sec(t1 - t0)},
+                          {"match_seconds", sec(t2 - t1)},
+                          {"verify_seconds", sec(t3 - t2)},
+                          {"out", args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(args.out))},
+                          {"files", written}};
+      ex::print_json(j);
     } else {
+      if (camera) std::printf("camera        %s\n", camera->file.string().c_str());
       std::printf("features      %zu | %zu (%s)\n", a.size(), b.size(), args.descriptor.name.c_str());
       std::printf("matches       %zu (mutual nearest neighbours)\n", m.size());
       std::printf("verification  %s (%s, %.2f px)\n", std::string(vmap::to_string(v.status)).c_str(),
-                  args.estimator.c_str(), args.threshold);
-      if (!args.camera.empty()) std::printf("camera        %s (keypoints undistorted)\n", args.camera.c_str());
+                  args.estimator.c_str(), args.epipolar_px);
       std::printf("inliers       %d\n", v.inliers);
       std::printf("similarity    %.3f  (eq. 5: inliers / max(|D_a|, |D_b|))\n", s);
       if (v.ok())
@@ -89,10 +113,8 @@ int run(const MatchArgs& args) {
       std::printf("time          extract %.1f ms, match %.1f ms, verify %.1f ms\n", ms(t1 - t0), ms(t2 - t1),
                   ms(t3 - t2));
     }
-    if (!args.out.empty()) {
-      vmap::write_image_atomically(args.out, vmap::examples::draw_verified_matches(a_img, a, b_img, b, m, v));
-      if (!args.json) std::printf("wrote         %s (inliers green, outliers blue)\n", args.out.c_str());
-    }
+    if (!args.out.empty() && !args.json)
+      std::printf("wrote         %s/matches.png (inliers green, outliers blue)\n", args.out.c_str());
     return 0;
   });
 }
@@ -102,20 +124,14 @@ const bool registered = vmap::cli::add_command(
        auto args = std::make_shared<MatchArgs>();
        app.add_option("image_a", args->image_a, "First image")->required();
        app.add_option("image_b", args->image_b, "Second image")->required();
-       app.add_option("--features", args->descriptor.name, "orb, akaze, sift or xfeat")->capture_default_str();
-       app.add_option("--model", args->descriptor.model, "Model file of a learned descriptor (xfeat)");
-       app.add_option("--nfeatures", args->descriptor.features, "Keypoint budget per image (ORB, SIFT; top-k for XFeat)")
-           ->capture_default_str()
-           ->check(CLI::PositiveNumber);
-       app.add_option("--estimator", args->estimator, "magsac, ransac, lmeds or 8point")->capture_default_str();
-       app.add_option("--threshold", args->threshold, "Epipolar distance threshold in pixels")
-           ->capture_default_str()
-           ->check(CLI::PositiveNumber);
-       app.add_option("--out", args->out, "Write a PNG of the verified matches here");
-       app.add_flag("--json", args->json, "Print one JSON object");
-       app.add_option("--camera", args->camera,
-                      "Calibration (ORB-SLAM YAML, ROS camera_info, KITTI calib.txt): undistort keypoints first");
-       return [args] { return run(*args); };
+       ex::add_feature_options(app, args->descriptor.name, args->descriptor.model, args->descriptor.features);
+       app.add_option("--estimator", args->estimator, "magsac, ransac, lmeds or 8point");
+       app.add_option("--epipolar-px", args->epipolar_px, "Epipolar distance threshold in pixels")
+           ->check(ex::real_in(0.0, 1000.0, true));
+       app.add_option("--camera", args->camera, "Calibration (ORB-SLAM YAML, ROS camera_info, KITTI calib.txt): undistort keypoints first");
+       app.add_option("--out", args->out, "Folder for matches.png, the verified matches (created if missing)");
+       app.add_flag("--json", args->json, "Print one JSON object on stdout");
+       return [args, &app] { return run(*args, app); };
      }});
 
 }  // namespace

@@ -1,6 +1,7 @@
 // `vmap sweep INPUT`: the visual-map paper's threshold table (García-Pintos et al. 2023):
 // for each tau the number of key images, min / max / mean verified matches between
 // consecutive key images, and the quality (eq. 7); the best-quality row is marked.
+#include "common/cli_support.hpp"
 #include "common/keyframe_cli.hpp"
 #include "common/policies.hpp"
 #include "vmap/cli.hpp"
@@ -14,6 +15,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -24,8 +26,7 @@ namespace ex = vmap::examples;
 
 struct SweepArgs {
   ex::KeyframeArgs common;
-  std::vector<double> taus = {0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9};
-  std::string csv;
+  std::vector<double> thresholds = {0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9};
   bool single_thread = false;
 };
 
@@ -44,27 +45,38 @@ std::string csv_table(const vmap::SweepResult& r) {
 std::function<int()> setup(CLI::App& app) {
   auto args = std::make_shared<SweepArgs>();
   ex::add_keyframe_options(app, args->common);
-  app.add_option("--taus", args->taus, "Thresholds, comma-separated, each in (0, 1]")
+  app.add_option("--thresholds,--taus", args->thresholds, "Thresholds tau, comma-separated, each in (0, 1]")
       ->delimiter(',')
-      ->capture_default_str();
-  app.add_option("--csv", args->csv, "Also write the table to this CSV file");
+      ->check(ex::real_in(0.0, 1.0, true));
+  app.add_option("--out", args->common.out, "Folder for sweep.csv, the table as CSV (created if missing)");
   app.add_flag("--single-thread", args->single_thread, "Decode and extract on the matching thread");
-  return [args]() -> int {
+  return [args, &app]() -> int {
     const auto& a = args->common;
-    for (double t : args->taus)
-      if (!(t > 0.0 && t <= 1.0)) vmap::detail::fail("--taus: every threshold must be in (0, 1], got " + std::to_string(t));
+    ex::current_inputs() = {a.input};
+    ex::check_range(a);
+    const auto camera = ex::load_camera_option(a.camera);
+    if (!a.out.empty()) ex::prepare_output_dir(a.out, "--out", {a.input}, {"sweep.csv"});
     auto src = vmap::FrameSource::open(a.input, ex::source_options(a, true));
-    const auto estimator = ex::make_estimator(a.estimator, a.camera);
-    const vmap::SweepOptions so{.taus = args->taus, .rule = ex::parse_rule(a.rule), .pipelined = !args->single_thread};
-    const auto t0 = std::chrono::steady_clock::now();
+    const auto estimator = ex::make_estimator(a.estimator, camera);
+    const vmap::SweepOptions so{
+        .taus = args->thresholds, .rule = ex::parse_rule(a.rule), .pipelined = !args->single_thread};
+    // The sweep runs inside the library without a per-frame callback: one line when it ends.
+    ex::Progress progress("vmap sweep", src.total());
     const vmap::SweepResult r = ex::with_descriptor(a.descriptor(), [&](auto descriptor) {
       return vmap::sweep_thresholds(src, std::move(descriptor), vmap::BruteForceMatcher{}, estimator,
                                     vmap::InlierRatio{}, so);
     });
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double seconds = progress.seconds();
+    const std::size_t skipped = src.skipped().size();
+    progress.update(r.frames);
+    progress.done(std::to_string(r.rows.size()) + " thresholds, " + std::to_string(skipped) + " skipped");
     if (r.frames == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
     const double fps = seconds > 0 ? static_cast<double>(r.frames) / seconds : 0.0;
-    if (!args->csv.empty()) vmap::write_file_atomically(args->csv, csv_table(r));
+    std::vector<std::string> written;
+    if (!a.out.empty()) {
+      vmap::write_file_atomically(std::filesystem::path(a.out) / "sweep.csv", csv_table(r));
+      written.push_back("sweep.csv");
+    }
     if (a.json) {
       nlohmann::json rows = nlohmann::json::array();
       for (const auto& row : r.rows)
@@ -73,23 +85,26 @@ std::function<int()> setup(CLI::App& app) {
                         {"key_images", row.stats.key_images},
                         {"min_matches", row.stats.min_matches},
                         {"max_matches", row.stats.max_matches},
-                        {"mean_matches", row.stats.mean_matches},
-                        {"quality", row.stats.quality},
+                        {"mean_matches", ex::finite_or_null(row.stats.mean_matches)},
+                        {"quality", ex::finite_or_null(row.stats.quality)},
                         {"key_frames", row.key_frames}});
-      nlohmann::json j{{"rows", rows},
+      nlohmann::json j{{"command", "sweep"},
+                       {"input", ex::path_string(a.input)},
+                       {"options", ex::options_json(app)},
+                       {"rows", rows},
                        {"best_threshold", r.best_threshold()},
                        {"frames", r.frames},
+                       {"skipped_frames", skipped},
                        {"seconds", seconds},
                        {"fps", fps},
-                       {"features", a.features},
-                       {"estimator", a.estimator},
-                       {"rule", a.rule},
-                       {"camera", a.camera}};
-      std::printf("%s\n", j.dump().c_str());
+                       {"out", a.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(a.out))},
+                       {"files", written}};
+      ex::print_json(j);
       return 0;
     }
-    std::printf("vmap sweep: %s (%s + mutual NN + %s, %zu frames)\n\n", a.input.c_str(), a.features.c_str(),
-                a.estimator.c_str(), r.frames);
+    std::printf("vmap sweep: %s (%s + mutual NN + %s, %zu frames%s)%s\n\n", a.input.c_str(), a.features.c_str(),
+                a.estimator.c_str(), r.frames, skipped > 0 ? (", " + std::to_string(skipped) + " skipped").c_str() : "",
+                camera ? (", camera " + camera->file.string()).c_str() : "");
     std::printf("  %9s  %10s  %7s  %7s  %8s  %7s\n", "threshold", "key images", "min", "max", "mean", "quality");
     for (std::size_t k = 0; k < r.rows.size(); ++k) {
       const auto& s = r.rows[k].stats;
@@ -99,6 +114,7 @@ std::function<int()> setup(CLI::App& app) {
     std::printf("\n  min / max / mean: verified matches between consecutive key images\n");
     std::printf("  %zu thresholds in %.2f s (%.1f frames/s); %zu of %zu pair scores from the cache\n", r.rows.size(),
                 seconds, fps, r.pair_requests - r.pairs_scored, r.pair_requests);
+    if (!written.empty()) std::printf("  wrote %s/sweep.csv\n", a.out.c_str());
     return 0;
   };
 }

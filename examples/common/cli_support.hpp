@@ -1,0 +1,479 @@
+#pragma once
+
+// What every `vmap` subcommand shares so that they behave as one tool: exit codes, usage
+// errors, validators that name the option, the YAML `--config` reader, the `options`
+// echo and the JSON writer, output paths checked before the work starts, the progress
+// meter, and the `--camera` hook.
+
+#include <vmap/core/error.hpp>
+#include <vmap/io/calibration.hpp>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <optional>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <system_error>
+#include <utility>
+#include <vector>
+
+namespace vmap::examples {
+
+/// Exit codes of `vmap` (documented in `vmap --help` and the README).
+inline constexpr int exit_ok = 0;       ///< the command ran
+inline constexpr int exit_failure = 1;  ///< bad input (a file, an image) or a failed run
+inline constexpr int exit_usage = 2;    ///< bad command line: unknown subcommand or option, bad value, conflict
+
+/// A command-line mistake found after parsing (conflicting options, an output that is
+/// an input): exit code 2, like CLI11's own parse errors.
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+[[noreturn]] inline void usage_error(const std::string& what) { throw UsageError(what); }
+
+/// The inputs of the running subcommand, so that an error from deep inside OpenCV or the
+/// standard library is still reported with the input it came from.
+inline std::vector<std::string>& current_inputs() {
+  static std::vector<std::string> inputs;
+  return inputs;
+}
+
+/// " (input: a, b)" or "".
+inline std::string input_note() {
+  std::string s;
+  for (const auto& i : current_inputs())
+    if (!i.empty()) s += (s.empty() ? " (input: " : ", ") + i;
+  return s.empty() ? s : s + ")";
+}
+
+/// Messages on one line: newlines of OpenCV's or the library's messages become spaces.
+inline std::string one_line(std::string s) {
+  std::replace(s.begin(), s.end(), '\n', ' ');
+  while (!s.empty() && s.back() == ' ') s.pop_back();
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------
+// Validators: each message is printed by CLI11 as "--option: message".
+
+namespace cli_detail {
+
+inline bool all_digits(const std::string& s) {
+  return !s.empty() && std::all_of(s.begin(), s.end(), [](unsigned char c) { return c >= '0' && c <= '9'; });
+}
+
+}  // namespace cli_detail
+
+/// A whole number in [lo, hi] written in decimal digits: "-1" is refused as "must be >= lo"
+/// instead of wrapping around to 18446744073709551615, and values above hi are refused
+/// before any conversion.
+inline CLI::Validator count_in(unsigned long long lo, unsigned long long hi) {
+  return CLI::Validator(
+      [lo, hi](std::string& s) -> std::string {
+        std::string t = s;
+        if (!t.empty() && t.front() == '+') t.erase(0, 1);
+        if (!t.empty() && t.front() == '-') return "must be >= " + std::to_string(lo) + ", got '" + s + "'";
+        if (!cli_detail::all_digits(t)) return "must be a whole number, got '" + s + "'";
+        const std::string digits = t.substr(std::min(t.find_first_not_of('0'), t.size() - 1));
+        const std::string max = std::to_string(hi);
+        if (digits.size() > max.size() || (digits.size() == max.size() && digits > max))
+          return "must be <= " + max + ", got '" + s + "'";
+        const unsigned long long v = std::stoull(digits);
+        if (v < lo) return "must be >= " + std::to_string(lo) + ", got '" + s + "'";
+        s = digits;
+        return {};
+      },
+      "INT in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+}
+
+/// A finite real number in [lo, hi] (nan and inf refused with the option's name).
+inline CLI::Validator real_in(double lo, double hi, bool open_low = false) {
+  char desc[96];
+  std::snprintf(desc, sizeof desc, "REAL in %s%g, %g]", open_low ? "(" : "[", lo, hi);
+  return CLI::Validator(
+      [lo, hi, open_low](std::string& s) -> std::string {
+        char* end = nullptr;
+        const double v = std::strtod(s.c_str(), &end);
+        if (s.empty() || end != s.c_str() + s.size()) return "must be a number, got '" + s + "'";
+        if (!std::isfinite(v)) return "must be a finite number, got '" + s + "'";
+        char buf[128];
+        if (v < lo || (open_low && v == lo) || v > hi) {
+          std::snprintf(buf, sizeof buf, "must be in %s%g, %g], got '%s'", open_low ? "(" : "[", lo, hi, s.c_str());
+          return buf;
+        }
+        return {};
+      },
+      desc);
+}
+
+/// The largest keypoint budget accepted by --nfeatures (documented in the README): more
+/// than any image gives, small enough that the per-image buffers stay bounded.
+inline constexpr unsigned long long max_nfeatures = 100000;
+/// Bounds of frame indices and strides (--start, --end, --stride).
+inline constexpr unsigned long long max_frame_index = 1000000000ULL;
+
+// ---------------------------------------------------------------------------------------
+// Closest subcommand for "unknown subcommand 'bild'; did you mean 'build'?".
+
+inline std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diag = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diag = up;
+    }
+  }
+  return row[b.size()];
+}
+
+/// The candidate nearest to `word` within an edit distance of 3 (or one it starts), if any.
+inline std::optional<std::string> closest(const std::string& word, const std::vector<std::string>& candidates) {
+  std::optional<std::string> best;
+  std::size_t best_d = 4;
+  for (const auto& c : candidates) {
+    const std::size_t d = c.rfind(word, 0) == 0 && !word.empty() ? 1 : edit_distance(word, c);
+    if (d < best_d) best_d = d, best = c;
+  }
+  return best;
+}
+
+// ---------------------------------------------------------------------------------------
+// --config FILE: a YAML cv::FileStorage file whose keys are the long option names
+// ("features: akaze", "nfeatures: 500", "taus: [0.2, 0.3]", "json: 1", "input: rgb.txt").
+// Keys may be at the top level or under a section named after the subcommand; "-" and
+// "_" are interchangeable in keys. Values given on the command line win (CLI11 applies a
+// config value only to an option that was not given).
+
+class YamlConfig : public CLI::Config {
+ public:
+  explicit YamlConfig(std::string subcommand) : subcommand_(std::move(subcommand)) {}
+
+  std::string to_config(const CLI::App*, bool, bool, std::string) const override { return {}; }
+
+  std::vector<CLI::ConfigItem> from_config(std::istream& in) const override {
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    cv::FileStorage fs;
+    try {
+      fs.open(text.rfind("%YAML", 0) == 0 ? text : "%YAML:1.0\n" + text,
+              cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
+    } catch (const cv::Exception& e) {
+      throw CLI::ConfigError("--config: not a YAML file OpenCV can read (" + std::string(e.err) + ")");
+    }
+    if (!fs.isOpened()) throw CLI::ConfigError("--config: not a YAML file OpenCV can read");
+    cv::FileNode root = fs.root();
+    if (!root.isMap()) throw CLI::ConfigError("--config: the file must be a YAML map of option names to values");
+    const cv::FileNode section = root[subcommand_];
+    std::vector<CLI::ConfigItem> found;
+    auto add = [&](const cv::FileNode& map) {
+      for (const auto& node : map) {
+        if (node.isMap()) continue;  // another subcommand's section
+        CLI::ConfigItem item;
+        if (!subcommand_.empty()) item.parents = {subcommand_};
+        item.name = node.name();
+        std::replace(item.name.begin(), item.name.end(), '_', '-');
+        if (node.isSeq()) {
+          for (const auto& v : node) item.inputs.push_back(scalar(v, item.name));
+        } else {
+          item.inputs.push_back(scalar(node, item.name));
+        }
+        found.push_back(std::move(item));
+      }
+    };
+    add(root);
+    if (section.isMap()) add(section);
+    return found;
+  }
+
+ private:
+  static std::string scalar(const cv::FileNode& n, const std::string& key) {
+    if (n.isInt()) return std::to_string(static_cast<int>(n));
+    if (n.isReal()) {
+      char buf[40];
+      std::snprintf(buf, sizeof buf, "%.17g", static_cast<double>(n));
+      return buf;
+    }
+    if (n.isString()) return static_cast<std::string>(n);
+    throw CLI::ConfigError("--config: the value of '" + key + "' must be a number, a string or a list of them");
+  }
+  std::string subcommand_;
+};
+
+// ---------------------------------------------------------------------------------------
+// JSON.
+
+/// A file name for JSON: valid UTF-8 stays as it is; other bytes become U+FFFD when the
+/// object is dumped (see dump_json), so a Latin-1 name never aborts --json.
+inline std::string path_string(const std::filesystem::path& p) { return p.string(); }
+
+/// One JSON document on stdout; invalid UTF-8 in strings is replaced, not an exception.
+inline void print_json(const nlohmann::json& j) {
+  const std::string s = j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
+  std::printf("%s\n", s.c_str());
+  std::fflush(stdout);
+}
+
+namespace cli_detail {
+
+inline nlohmann::json typed_value(const std::string& s) {
+  if (s == "true") return true;
+  if (s == "false") return false;
+  if (!s.empty()) {
+    char* end = nullptr;
+    const double v = std::strtod(s.c_str(), &end);
+    if (end == s.c_str() + s.size() && std::isfinite(v) &&
+        s.find_first_not_of("0123456789+-.eE") == std::string::npos) {
+      if (s.find_first_of(".eE") == std::string::npos && std::abs(v) < 9e15) return static_cast<long long>(v);
+      return v;
+    }
+  }
+  return s;
+}
+
+}  // namespace cli_detail
+
+/// Every option of a subcommand with its value (given on the command line, in --config,
+/// or the default), keyed by its long name with "_" for "-": the JSON's `options`.
+/// Positional inputs, --help, --config and --json itself are not options of the run.
+inline nlohmann::json options_json(const CLI::App& app) {
+  nlohmann::json out = nlohmann::json::object();
+  for (const CLI::Option* opt : app.get_options()) {
+    if (opt->get_lnames().empty()) continue;  // positional
+    const std::string name = opt->get_lnames().front();
+    if (name == "help" || name == "config" || name == "json") continue;
+    std::string key = name;
+    std::replace(key.begin(), key.end(), '-', '_');
+    if (opt->get_expected_max() == 0) {  // a flag
+      out[key] = opt->count() > 0 && opt->as<bool>();
+      continue;
+    }
+    std::vector<std::string> values = opt->results();
+    if (values.empty()) {
+      const std::string d = opt->get_default_str();
+      if (d.empty()) {
+        out[key] = nullptr;
+        continue;
+      }
+      // Vector defaults print as "[0.1,0.2]".
+      std::string inner = d;
+      if (inner.size() >= 2 && inner.front() == '[' && inner.back() == ']') inner = inner.substr(1, inner.size() - 2);
+      values.clear();
+      std::stringstream ss(inner);
+      std::string v;
+      const bool list = opt->get_expected_max() > 1;
+      if (list)
+        while (std::getline(ss, v, ',')) values.push_back(v);
+      else
+        values.push_back(d);
+    }
+    if (opt->get_expected_max() > 1) {
+      nlohmann::json arr = nlohmann::json::array();
+      for (const auto& v : values) arr.push_back(cli_detail::typed_value(v));
+      out[key] = arr;
+    } else {
+      out[key] = cli_detail::typed_value(values.back());
+    }
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------
+// Inputs and outputs, checked before any work starts.
+
+namespace cli_detail {
+
+inline std::filesystem::path resolved(const std::filesystem::path& p) {
+  std::error_code ec;
+  auto r = std::filesystem::weakly_canonical(p, ec);
+  if (ec) r = std::filesystem::absolute(p, ec).lexically_normal();
+  return r;
+}
+
+/// a == b or a lies inside folder b.
+inline bool inside(const std::filesystem::path& a, const std::filesystem::path& b) {
+  auto ia = a.begin();
+  for (auto ib = b.begin(); ib != b.end(); ++ib, ++ia) {
+    if (ib->empty()) continue;  // trailing "/"
+    if (ia == a.end() || *ia != *ib) return false;
+  }
+  return true;
+}
+
+/// The folder an input's frames live in when it is a folder, else nothing.
+inline bool is_folder(const std::filesystem::path& p) {
+  std::error_code ec;
+  return std::filesystem::is_directory(p, ec);
+}
+
+}  // namespace cli_detail
+
+/// Refuses an output file that is one of the inputs (after resolving symbolic links and
+/// "..") or a symbolic link (outputs are replaced by rename, which would replace the link
+/// itself, not write through it: give the link's target instead), or an existing folder.
+/// Creates the output's folder when it is missing and checks that it is writable.
+inline void check_output_file(const std::filesystem::path& out, const std::string& option,
+                              const std::vector<std::filesystem::path>& inputs) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::is_symlink(out, ec))
+    usage_error(option + ": '" + out.string() +
+                "' is a symbolic link; vmap replaces output files by rename and does not write through links "
+                "(give the link's target)");
+  const fs::path r = cli_detail::resolved(out);
+  for (const auto& in : inputs)
+    if (!in.empty() && cli_detail::resolved(in) == r)
+      usage_error(option + ": '" + out.string() + "' is also an input; refusing to overwrite it");
+  if (fs::is_directory(out, ec)) usage_error(option + ": '" + out.string() + "' is a folder, not a file");
+}
+
+/// Prepares the --out folder: refuses a folder that is an input or inside an input folder
+/// (so `build DIR --out DIR` cannot add its pictures to the frames it reads), an existing
+/// non-folder, and an unwritable folder; creates it when missing. A symbolic link to a
+/// folder is followed (the files are written inside the target folder); each of `files`
+/// (the names the command will write there) must pass check_output_file. Returns the path.
+inline std::filesystem::path prepare_output_dir(const std::filesystem::path& dir, const std::string& option,
+                                                const std::vector<std::filesystem::path>& inputs,
+                                                const std::vector<std::string>& files = {}) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path r = cli_detail::resolved(dir);
+  for (const auto& in : inputs) {
+    if (in.empty()) continue;
+    const fs::path ri = cli_detail::resolved(in);
+    if (ri == r) usage_error(option + ": '" + dir.string() + "' is also an input; refusing to write into it");
+    if (cli_detail::is_folder(in) && cli_detail::inside(r, ri))
+      usage_error(option + ": '" + dir.string() + "' is inside the input folder '" + in.string() +
+                  "'; its files would become frames of the next run (give another folder)");
+  }
+  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+    usage_error(option + ": '" + dir.string() + "' exists and is not a folder");
+  if (!fs::exists(dir, ec)) {
+    fs::create_directories(dir, ec);
+    if (ec) vmap::detail::fail(option + ": cannot create the folder '" + dir.string() + "': " + ec.message());
+  }
+  for (const auto& f : files) check_output_file(dir / f, option, inputs);
+  // Writable: create and remove a file, as the atomic writes will.
+  std::string probe = (dir / ".vmap-write-test-XXXXXX").string();
+  const int fd = ::mkstemp(probe.data());
+  if (fd < 0)
+    vmap::detail::fail(option + ": cannot write into the folder '" + dir.string() + "': " +
+                       std::error_code(errno, std::generic_category()).message());
+  ::close(fd);
+  ::unlink(probe.c_str());
+  return dir;
+}
+
+/// An input file that must exist and be a readable regular file (not a folder or device).
+inline void check_input_file(const std::filesystem::path& p, const std::string& option) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const auto st = fs::status(p, ec);
+  if (ec || !fs::exists(st)) usage_error(option + ": '" + p.string() + "' does not exist");
+  if (fs::is_directory(st)) usage_error(option + ": '" + p.string() + "' is a folder, not a file");
+  if (!fs::is_regular_file(st)) usage_error(option + ": '" + p.string() + "' is not a regular file");
+  std::ifstream f(p);
+  if (!f) vmap::detail::fail(option + ": '" + p.string() + "' cannot be read (permission?)");
+}
+
+/// The --camera option: the calibration file read by vmap::read_camera (ORB-SLAM /
+/// TUM YAML, ROS camera_info, KITTI calib.txt), after the checks every input file gets.
+struct CameraOption {
+  std::filesystem::path file;
+  vmap::Camera camera;
+};
+
+inline std::optional<CameraOption> load_camera_option(const std::string& path) {
+  if (path.empty()) return std::nullopt;
+  check_input_file(path, "--camera");
+  return CameraOption{path, vmap::read_camera(path)};
+}
+
+// ---------------------------------------------------------------------------------------
+// Progress on stderr: "build  120/723 frames  25.1 fps  ETA 24 s", rewritten in place when
+// stderr is a terminal; otherwise one summary line at the end for runs over a second.
+
+class Progress {
+ public:
+  Progress(std::string label, std::optional<std::size_t> total, std::string unit = "frames")
+      : label_(std::move(label)), unit_(std::move(unit)), total_(total), tty_(isatty(STDERR_FILENO) != 0),
+        t0_(clock::now()), last_(t0_) {}
+  Progress(const Progress&) = delete;
+  Progress& operator=(const Progress&) = delete;
+
+  /// `done` items so far; `extra` is appended ("19 key images").
+  void update(std::size_t done, const std::string& extra = {}) {
+    done_ = done;
+    if (!tty_) return;
+    const auto now = clock::now();
+    if (now - last_ < std::chrono::milliseconds(200) && !(total_ && done == *total_)) return;
+    last_ = now;
+    const double s = seconds();
+    const double rate = s > 0 ? static_cast<double>(done) / s : 0.0;
+    char line[256];
+    if (total_ && *total_ > 0) {
+      const double eta = rate > 0 ? static_cast<double>(*total_ - std::min(done, *total_)) / rate : 0.0;
+      std::snprintf(line, sizeof line, "\r%s  %zu/%zu %s  %.1f/s  ETA %.0f s%s%s ", label_.c_str(), done, *total_,
+                    unit_.c_str(), rate, eta, extra.empty() ? "" : "  ", extra.c_str());
+    } else {
+      std::snprintf(line, sizeof line, "\r%s  %zu %s  %.1f/s%s%s ", label_.c_str(), done, unit_.c_str(), rate,
+                    extra.empty() ? "" : "  ", extra.c_str());
+    }
+    std::fputs(line, stderr);
+    std::fflush(stderr);
+    width_ = std::max(width_, std::string(line).size());
+  }
+
+  /// Clears the line (terminal) or prints the summary line (not a terminal, runs >= 1 s).
+  void done(const std::string& extra = {}) {
+    if (finished_) return;
+    finished_ = true;
+    if (tty_) {
+      if (width_ > 0) std::fprintf(stderr, "\r%*s\r", static_cast<int>(width_), "");
+      return;
+    }
+    const double s = seconds();
+    if (s < 1.0) return;
+    std::fprintf(stderr, "%s: %zu %s in %.1f s (%.1f/s)%s%s\n", label_.c_str(), done_, unit_.c_str(), s,
+                 static_cast<double>(done_) / s, extra.empty() ? "" : ", ", extra.c_str());
+  }
+  ~Progress() {
+    if (tty_ && !finished_ && width_ > 0) std::fprintf(stderr, "\r%*s\r", static_cast<int>(width_), "");
+  }
+
+  [[nodiscard]] double seconds() const { return std::chrono::duration<double>(clock::now() - t0_).count(); }
+
+ private:
+  using clock = std::chrono::steady_clock;
+  std::string label_, unit_;
+  std::optional<std::size_t> total_;
+  bool tty_;
+  clock::time_point t0_, last_;
+  std::size_t done_ = 0;
+  std::size_t width_ = 0;
+  bool finished_ = false;
+};
+
+/// A figure for JSON: finite numbers as numbers, inf/NaN as null (and `ok` says so).
+inline nlohmann::json finite_or_null(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
+
+}  // namespace vmap::examples

@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# Runs every `vmap` command shown in README.md and examples/*.md, as written, and fails
+# when one exits non-zero. A command is a line inside a fenced code block that starts
+# with `vmap `, `$ vmap ` or `build/release/examples/vmap ` (continued over lines ending
+# in a backslash); synopsis lines (with `[`, `INPUT` or `IMAGE...`) are not commands.
+# The program is replaced by the built one; the commands run in a scratch folder laid
+# out like the repository (examples/ and ../shared reached through links), so their
+# outputs land there and relative paths resolve as in the docs.
+#
+#   run_doc_commands.sh VMAP_BINARY SOURCE_DIR SCRATCH_DIR [SHARED_DIR] [--list]
+#
+# VMAP_DOC_ONLY=REGEX runs only the commands whose "file<TAB>command" line matches.
+set -uo pipefail
+vmap_bin=$1 src=$2 scratch=$3 shared=${4:-}
+list_only=${5:-}
+
+extract() {
+  awk '
+    /^```/ { inblock = !inblock; next }
+    !inblock { next }
+    {
+      line = $0
+      if (cont != "") { line = cont " " line; cont = "" }
+      if (line ~ /\\$/) { sub(/\\$/, "", line); cont = line; next }
+      sub(/^[ \t]*\$ /, "", line)
+      if (line !~ /^[ \t]*(vmap|build\/release\/examples\/vmap) (build|sweep|match|detect|loops|localize|vocabulary) /) next
+      if (line ~ /\[|INPUT|IMAGE\.\.\./) next
+      sub(/[ \t]+#.*$/, "", line)
+      gsub(/[ \t]+/, " ", line)
+      sub(/^[ \t]*(vmap|build\/release\/examples\/vmap) /, "", line)
+      print FILENAME "\t" line
+    }' "$@"
+}
+
+cd "$src" || exit 1
+mapfile -t commands < <(extract README.md examples/*.md | grep -E -- "${VMAP_DOC_ONLY:-.}")
+if [ "$list_only" = "--list" ]; then printf '%s\n' "${commands[@]}"; exit 0; fi
+
+rm -rf "$scratch"
+mkdir -p "$scratch/repo"
+ln -s "$src/examples" "$scratch/repo/examples"
+if [ -n "$shared" ] && [ -d "$shared" ]; then ln -s "$shared" "$scratch/shared"; fi
+cd "$scratch/repo" || exit 1
+
+passed=0 failed=0 skipped=0
+for entry in "${commands[@]}"; do
+  file=${entry%%$'\t'*} cmd=${entry#*$'\t'}
+  if [[ "$cmd" == *../shared/* ]] && [ ! -d ../shared ]; then
+    echo "skip ($file, needs ../shared): vmap $cmd"
+    skipped=$((skipped + 1))
+    continue
+  fi
+  start=$(date +%s)
+  if eval "\"$vmap_bin\" $cmd" >"$scratch/last.out" 2>"$scratch/last.err"; then
+    echo "ok   ($file, $(( $(date +%s) - start )) s): vmap $cmd"
+    passed=$((passed + 1))
+  else
+    rc=$?
+    echo "FAIL ($file, exit $rc): vmap $cmd"
+    sed 's/^/    /' "$scratch/last.err" | tail -5
+    failed=$((failed + 1))
+  fi
+done
+echo "$passed passed, $failed failed, $skipped skipped"
+[ "$failed" -eq 0 ] || exit 1
+[ "$passed" -gt 0 ] || exit 77
