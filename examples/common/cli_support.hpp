@@ -6,6 +6,7 @@
 // meter, and the `--camera` hook.
 
 #include <vmap/core/error.hpp>
+#include <vmap/io/atomic_file.hpp>
 #include <vmap/io/calibration.hpp>
 
 #include <CLI/CLI.hpp>
@@ -382,6 +383,33 @@ inline std::filesystem::path prepare_output_dir(const std::filesystem::path& dir
   ::unlink(probe.c_str());
   return dir;
 }
+
+/// The --out folder of a command that writes several files (build, loops, detect): the
+/// files are written into a temporary folder that replaces DIR in one step when the
+/// command succeeds (vmap::AtomicDirectory), so after a crash or kill -9 a reader sees
+/// the whole old set or the whole new set, never a mix. Checked before the work starts;
+/// an existing folder is replaced only when it is empty or an earlier vmap output.
+class OutputFolder {
+ public:
+  OutputFolder(const std::filesystem::path& dir, const std::string& option,
+               const std::vector<std::filesystem::path>& inputs, const std::vector<std::string>& files)
+      : dir_(dir) {
+    prepare_output_dir(dir, option, inputs, files);
+    try {
+      set_.emplace(dir);
+    } catch (const vmap::Error& e) {
+      usage_error(option + ": " + e.what());
+    }
+  }
+  /// Where to write the file `name` of the set until commit().
+  [[nodiscard]] std::filesystem::path operator/(const std::string& name) const { return set_->path() / name; }
+  [[nodiscard]] const std::filesystem::path& dir() const noexcept { return dir_; }
+  void commit() { set_->commit(); }
+
+ private:
+  std::filesystem::path dir_;
+  std::optional<vmap::AtomicDirectory> set_;
+};
 
 /// An input file that must exist and be a readable regular file (not a folder or device).
 inline void check_input_file(const std::filesystem::path& p, const std::string& option) {

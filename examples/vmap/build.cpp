@@ -23,6 +23,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -102,7 +103,7 @@ cv::Mat pair_picture(const vmap::VisualMap& map, std::size_t i, Selector& sel, c
 }
 
 template <class Selector>
-std::vector<std::string> write_outputs(const std::filesystem::path& dir, const vmap::VisualMap& map, Selector& sel) {
+std::vector<std::string> write_outputs(const ex::OutputFolder& dir, const vmap::VisualMap& map, Selector& sel) {
   std::vector<std::string> written;
   vmap::save_map(map, dir / "map.vmap");
   written.push_back("map.vmap");
@@ -143,8 +144,9 @@ std::function<int()> setup(CLI::App& app) {
     const auto camera = ex::load_camera_option(a.camera);
     const bool pictures = !a.out.empty();
     // Everything the command line can get wrong is refused before the first frame.
-    if (pictures)
-      ex::prepare_output_dir(a.out, "--out", {a.input}, {"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"});
+    std::optional<ex::OutputFolder> out_dir;
+    if (pictures) out_dir.emplace(a.out, "--out", std::vector<std::filesystem::path>{a.input},
+                                  std::vector<std::string>{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"});
     const vmap::SelectorOptions so{.tau = args->threshold, .rule = ex::parse_rule(a.rule), .keep_images = pictures};
     const auto estimator = ex::make_estimator(a.estimator, camera);
     auto src = vmap::FrameSource::open(a.input, ex::source_options(a, true));
@@ -168,7 +170,8 @@ std::function<int()> setup(CLI::App& app) {
       if (pictures) {
         vmap::VisualMap coloured = map;
         colour_key_images(coloured, src);
-        written = write_outputs(a.out, coloured, sel);
+        written = write_outputs(*out_dir, coloured, sel);
+        out_dir->commit();
       }
       if (a.json) {
         nlohmann::json j{{"command", "build"},
