@@ -39,7 +39,7 @@ struct KeyframeArgs {
 
 inline void add_keyframe_options(CLI::App& app, KeyframeArgs& a) {
   app.add_option("INPUT", a.input, "Video file, image folder, list of image paths, or TUM rgb.txt")->required();
-  app.add_option("--features", a.features, "Descriptor: orb, akaze, sift, or a learned one (needs --model)")->capture_default_str();
+  app.add_option("--features", a.features, "Descriptor: orb, akaze, sift, xfeat or xfeat-dense (the last two need --model)")->capture_default_str();
   app.add_option("--model", a.model, "Model file of a learned descriptor");
   app.add_option("--nfeatures", a.nfeatures, "Keypoint budget per image (ORB, SIFT; top-k for XFeat)")
       ->capture_default_str()

@@ -120,7 +120,8 @@ std::function<int()> setup(CLI::App& app) {
     const vmap::SelectorOptions so{.tau = args->tau, .rule = ex::parse_rule(a.rule), .keep_images = pictures};
     const auto estimator = ex::make_estimator(a.estimator);
     return ex::with_descriptor(a.descriptor(), [&](auto descriptor) -> int {
-      vmap::KeyframeSelector sel(std::move(descriptor), vmap::BruteForceMatcher{}, estimator, vmap::InlierRatio{}, so);
+      const auto matcher = ex::matcher_for(descriptor);
+      vmap::KeyframeSelector sel(std::move(descriptor), matcher, estimator, vmap::InlierRatio{}, so);
       ex::Progress progress(expected);
       const auto t0 = std::chrono::steady_clock::now();
       vmap::run_selector(src, sel, {.pipelined = !args->single_thread},

@@ -58,7 +58,8 @@ std::function<int()> setup(CLI::App& app) {
     const vmap::SweepOptions so{.taus = args->taus, .rule = ex::parse_rule(a.rule), .pipelined = !args->single_thread};
     const auto t0 = std::chrono::steady_clock::now();
     const vmap::SweepResult r = ex::with_descriptor(a.descriptor(), [&](auto descriptor) {
-      return vmap::sweep_thresholds(src, std::move(descriptor), vmap::BruteForceMatcher{}, estimator,
+      const auto matcher = ex::matcher_for(descriptor);
+      return vmap::sweep_thresholds(src, std::move(descriptor), matcher, estimator,
                                     vmap::InlierRatio{}, so);
     });
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
