@@ -333,10 +333,10 @@ int main(int argc, char** argv) {
       bench_dataset("kitti07_160", shared / "data/kitti07_160/image_0", repeats);
     }
     if (part != "orb") {
-      // 120 frames each: the dense front end costs ~0.2-0.5 s a frame on this CPU.
+      // 60 frames each: the dense front end costs ~0.2-0.5 s a frame on this CPU.
       const auto model = shared / "models/xfeat_anysize.onnx";
-      bench_learned("tum_fr1_rpy", shared / "data/tum_fr1_rpy/rgb.txt", model, 120, repeats);
-      bench_learned("kitti07_160", shared / "data/kitti07_160/image_0", model, 120, repeats);
+      bench_learned("tum_fr1_rpy", shared / "data/tum_fr1_rpy/rgb.txt", model, 60, repeats);
+      bench_learned("kitti07_160", shared / "data/kitti07_160/image_0", model, 60, repeats);
     }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_keyframes: %s\n", e.what());
