@@ -1,20 +1,27 @@
 // Key-image selection throughput: vmap against ../shared/baselines/keyframes_opencv.cpp
 // in the same run (ORB 1000 + mutual NN + MAGSAC 1 px 0.99, S = inliers / max, eq. 6,
-// tau 0.3), where vmap's time goes, and a 9-threshold sweep against one build.
+// tau 0.3), where vmap's time goes, and a 9-threshold sweep against one build. Then the
+// learned configurations of issue 12 against ORB, time per frame on one core and on two
+// (cv::setNumThreads): XFeat native (any-size model at the image's resolution, top-k
+// 1000) and the detector-free XFeat dense front end (PairKeyframeSelector).
 //
-// usage: bench_keyframes [REPEATS=2] [SHARED_DIR]
+// usage: bench_keyframes [REPEATS=2] [SHARED_DIR] [PART=all|orb|learned]
 // Each timing is the best of REPEATS runs; vmap and the baseline alternate, so both see
 // the same machine load. Ratios are what counts on a shared machine.
 #include <vmap/core/concepts.hpp>
 #include <vmap/features/orb.hpp>
 #include <vmap/geometry/fundamental.hpp>
 #include <vmap/geometry/similarity.hpp>
+#include <vmap/hooks/xfeat.hpp>
+#include <vmap/hooks/xfeat_dense.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/keyframe/pipeline.hpp>
 #include <vmap/keyframe/selector.hpp>
 #include <vmap/keyframe/sweep.hpp>
 #include <vmap/matching/brute_force.hpp>
+
+#include <opencv2/core/utility.hpp>
 
 #include <sys/resource.h>
 
@@ -242,14 +249,95 @@ void bench_dataset(const std::string& label, const std::filesystem::path& input,
   std::filesystem::remove(list);
 }
 
+// ---- learned configurations against ORB (issue 12) ------------------------------------
+
+struct ConfigRun {
+  double seconds = 1e30;  // best wall time of the repeats
+  vmap::VisualMap map;
+};
+
+/// One streaming selection (no pipelining: the selector's thread plus OpenCV's own pool
+/// of cv::getNumThreads() threads), best of `repeats`.
+template <class MakeSelector>
+ConfigRun time_config(const std::vector<cv::Mat>& frames, int repeats, MakeSelector make) {
+  ConfigRun best;
+  for (int r = 0; r < repeats; ++r) {
+    auto sel = make();  // model loading is not timed
+    const auto t0 = Clock::now();
+    for (const cv::Mat& f : frames) sel.push(f);
+    const double s = since(t0);
+    if (s < best.seconds) {
+      best.seconds = s;
+      best.map = sel.take_map();
+    }
+  }
+  return best;
+}
+
+void bench_learned(const std::string& label, const std::filesystem::path& input, const std::filesystem::path& model,
+                   std::size_t count, int repeats) {
+  constexpr double tau = 0.3;
+  std::vector<cv::Mat> frames;
+  {
+    auto src = vmap::FrameSource::open(input, {.end = count, .grey = true});
+    while (auto f = src.next()) frames.push_back(f->image);
+  }
+  const double n = static_cast<double>(frames.size());
+  const vmap::SelectorOptions so{.tau = tau};
+  std::printf("\n== %s: learned configurations against ORB, first %zu frames, tau %.1f, best of %d ==\n",
+              label.c_str(), frames.size(), tau, repeats);
+  std::printf("  %-34s %7s %5s %7s %6s %11s %11s %9s\n", "", "threads", "keys", "mean", "Q", "ms/frame", "x ORB",
+              "x 1 thr");
+  std::vector<double> one_core(3, 0.0);
+  for (const int threads : {1, 2}) {
+    cv::setNumThreads(threads);
+    const ConfigRun orb = time_config(frames, repeats, [&] {
+      return vmap::KeyframeSelector(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                                    vmap::FundamentalEstimator(kMagsac), vmap::InlierRatio{}, so);
+    });
+    const ConfigRun native = time_config(frames, repeats, [&] {
+      return vmap::KeyframeSelector(vmap::XFeatDescriptor({.model = model, .top_k = 1000}),
+                                    vmap::BruteForceMatcher{}, vmap::FundamentalEstimator(kMagsac),
+                                    vmap::InlierRatio{}, so);
+    });
+    const ConfigRun dense = time_config(frames, repeats, [&] {
+      return vmap::PairKeyframeSelector(vmap::XFeatDenseMatcher({.model = model}),
+                                        vmap::FundamentalEstimator(kMagsac), so);
+    });
+    const ConfigRun* runs[] = {&orb, &native, &dense};
+    const char* names[] = {"ORB 1000 + MAGSAC", "XFeat native top-1000 + MAGSAC", "XFeat dense (PairMatcher) + MAGSAC"};
+    for (std::size_t k = 0; k < 3; ++k) {
+      const auto st = runs[k]->map.stats();
+      const double ms = 1e3 * runs[k]->seconds / n;
+      if (threads == 1) one_core[k] = ms;
+      std::printf("  %-34s %7d %5zu %7.1f %6.3f %11.1f %10.1fx %8.2fx\n", names[k], threads, st.key_images,
+                  st.mean_matches, st.quality, ms, runs[k]->seconds / orb.seconds, one_core[k] / ms);
+    }
+  }
+  cv::setNumThreads(-1);  // back to OpenCV's default
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const int repeats = argc > 1 ? std::max(1, std::atoi(argv[1])) : 2;
   const std::filesystem::path shared = argc > 2 ? argv[2] : VMAP_SHARED_DIR;
+  const std::string part = argc > 3 ? argv[3] : "all";
+  if (part != "all" && part != "orb" && part != "learned") {
+    std::fprintf(stderr, "bench_keyframes: PART must be all, orb or learned, got '%s'\n", part.c_str());
+    return 2;
+  }
   try {
-    bench_dataset("tum_fr1_rpy", shared / "data/tum_fr1_rpy/rgb.txt", repeats);
-    bench_dataset("kitti07_160", shared / "data/kitti07_160/image_0", repeats);
+    if (part != "learned") {
+      bench_dataset("tum_fr1_rpy", shared / "data/tum_fr1_rpy/rgb.txt", repeats);
+      bench_dataset("kitti07_160", shared / "data/kitti07_160/image_0", repeats);
+    }
+    if (part != "orb") {
+      // 60 frames each: the dense front end costs ~0.2-0.5 s a frame on this CPU.
+      const auto model = shared / "models/xfeat_anysize.onnx";
+      bench_learned("tum_fr1_rpy", shared / "data/tum_fr1_rpy/rgb.txt", model, 60, repeats);
+      bench_learned("kitti07_160", shared / "data/kitti07_160/image_0", model, 60, repeats);
+    }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_keyframes: %s\n", e.what());
     return 1;

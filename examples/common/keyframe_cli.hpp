@@ -44,8 +44,8 @@ struct KeyframeArgs {
 
 /// --features/--model/--nfeatures, shared by every subcommand that extracts features.
 inline void add_feature_options(CLI::App& app, std::string& features, std::string& model, int& nfeatures) {
-  app.add_option("--features", features, "Descriptor: orb, akaze, sift or xfeat (needs --model)");
-  app.add_option("--model", model, "Model file of a learned descriptor (xfeat)");
+  app.add_option("--features", features, "Descriptor: orb, akaze, sift, xfeat or xfeat-dense (the last two need --model)");
+  app.add_option("--model", model, "Model file of a learned descriptor (xfeat, xfeat-dense)");
   app.add_option("--nfeatures", nfeatures,
                  "Keypoint budget per image (ORB, SIFT; top-k for XFeat), at most " + std::to_string(max_nfeatures))
       ->check(count_in(1, max_nfeatures));

@@ -12,8 +12,11 @@
 #include <vmap/features/sift.hpp>
 #include <vmap/geometry/fundamental.hpp>
 #include <vmap/hooks/xfeat.hpp>
+#include <vmap/hooks/xfeat_dense.hpp>
+#include <vmap/matching/brute_force.hpp>
 
 #include <string>
+#include <type_traits>
 #include <utility>
 
 namespace vmap::examples {
@@ -28,7 +31,7 @@ inline RobustMethod parse_method(const std::string& name) {
 
 /// What the command line says about the descriptor to use.
 struct DescriptorChoice {
-  std::string name = "orb";  ///< orb, akaze, sift, xfeat
+  std::string name = "orb";  ///< orb, akaze, sift, xfeat, xfeat-dense
   int features = 1000;       ///< keypoint budget (ORB, SIFT; XFeat's top-k)
   std::string model;         ///< model file, for learned descriptors
 };
@@ -46,7 +49,23 @@ decltype(auto) with_descriptor(const DescriptorChoice& c, F&& f) {
       usage_error("--features xfeat needs --model PATH (an XFeat ONNX export such as xfeat_320x224.onnx)");
     return std::forward<F>(f)(XFeatDescriptor({.model = c.model, .top_k = c.features}));
   }
-  usage_error("--features: unknown descriptor '" + c.name + "' (choose orb, akaze, sift or xfeat)");
+  if (c.name == "xfeat-dense") {
+    // Detector-free: every 1/8 cell of the image is a candidate (--nfeatures unused).
+    if (c.model.empty())
+      usage_error("--features xfeat-dense needs --model PATH (an XFeat ONNX export such as xfeat_anysize.onnx)");
+    return std::forward<F>(f)(XFeatDenseDescriptor({.model = c.model}));
+  }
+  usage_error("--features: unknown descriptor '" + c.name + "' (choose orb, akaze, sift, xfeat or xfeat-dense)");
+}
+
+/// The matcher that goes with a descriptor: mutual NN by brute force, or for XFeat's
+/// dense grid the same mutual NN by blocked matrix products (thousands of candidates).
+template <class D>
+auto matcher_for(const D&) {
+  if constexpr (std::is_same_v<D, XFeatDenseDescriptor>)
+    return DenseMutualMatcher{};
+  else
+    return BruteForceMatcher({.mode = MatchMode::mutual});
 }
 
 }  // namespace vmap::examples

@@ -154,7 +154,8 @@ std::function<int()> setup(CLI::App& app) {
       src = vmap::FrameSource::open(a.input, ex::source_options(a, false));
     const auto expected = expected_frames(src, a);
     return ex::with_descriptor(a.descriptor(), [&](auto descriptor) -> int {
-      vmap::KeyframeSelector sel(std::move(descriptor), vmap::BruteForceMatcher{}, estimator, vmap::InlierRatio{}, so);
+      const auto matcher = ex::matcher_for(descriptor);
+      vmap::KeyframeSelector sel(std::move(descriptor), matcher, estimator, vmap::InlierRatio{}, so);
       ex::Progress progress("vmap build", expected);
       vmap::run_selector(src, sel, {.pipelined = !args->single_thread}, [&](const vmap::FrameResult&) {
         progress.update(sel.map().frames, std::to_string(sel.map().keys.size()) + " key images");

@@ -63,7 +63,8 @@ std::function<int()> setup(CLI::App& app) {
     // The sweep runs inside the library without a per-frame callback: one line when it ends.
     ex::Progress progress("vmap sweep", src.total());
     const vmap::SweepResult r = ex::with_descriptor(a.descriptor(), [&](auto descriptor) {
-      return vmap::sweep_thresholds(src, std::move(descriptor), vmap::BruteForceMatcher{}, estimator,
+      const auto matcher = ex::matcher_for(descriptor);
+      return vmap::sweep_thresholds(src, std::move(descriptor), matcher, estimator,
                                     vmap::InlierRatio{}, so);
     });
     const double seconds = progress.seconds();

@@ -183,6 +183,9 @@ class PairFrontEnd {
   /// A pair matcher has no per-image features: key images keep none.
   [[nodiscard]] Features features_of(const cv::Mat&) const { return {}; }
 
+  [[nodiscard]] const P& matcher() const noexcept { return matcher_; }
+  [[nodiscard]] const E& estimator() const noexcept { return estimator_; }
+
  private:
   static void check_cells(const Correspondences& c) {
     if (c.cells <= 0)

@@ -1,0 +1,275 @@
+#pragma once
+
+// A detector-free front end from XFeat's dense map (DESIGN.md sec. 2-3), the visual-map
+// paper's "detector-free" configuration (García-Pintos et al. 2023 use LoFTR) with a
+// network that runs in OpenCV 4.6 on the CPU:
+//   - every cell of the 1/8 grid is a candidate, placed at its best pixel (the argmax
+//     of the cell's 64 keypoint logits, the dustbin left out) and described by the
+//     cell's own 64-d descriptor, L2-normalised; no detector, no threshold, no NMS;
+//   - mutual nearest neighbours over the two grids (largest dot product of the unit
+//     descriptors) are the correspondences;
+//   - the number of cells is the denominator of eq. 5, as for LoFTR's coarse level.
+// Three pieces:
+//   - XFeatDenseDescriptor (a Descriptor): the grid of one image as Features, one
+//     keypoint per cell in row-major order, so |D| = cells;
+//   - DenseMutualMatcher (a Matcher): mutual NN of unit float descriptors by blocked
+//     matrix products (Eigen), the same matches as L2 cross-checking at a fraction of
+//     cv::batchDistance's cost on 4800 x 4800 candidates;
+//   - XFeatDenseMatcher (a PairMatcher, for PairKeyframeSelector): both of the above on
+//     an image pair, with the network outputs of the last three images cached by
+//     content, so a frame goes through the network once although the selector pairs it
+//     with the key image now and may make it the key image later.
+// The FeatureFrontEnd<XFeatDenseDescriptor, DenseMutualMatcher, Estimator, InlierRatio>
+// stack and PairFrontEnd<XFeatDenseMatcher, Estimator> select the same key images (the
+// same points in the same order reach the estimator, and S = inliers / cells in both);
+// the threshold sweep runs the first, the streaming selector either.
+
+#include <vmap/core/concepts.hpp>
+#include <vmap/core/error.hpp>
+#include <vmap/core/features.hpp>
+#include <vmap/hooks/pair_matcher.hpp>
+#include <vmap/hooks/xfeat.hpp>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace vmap {
+
+struct XFeatDenseOptions {
+  std::filesystem::path model;  ///< XFeat ONNX export, fixed-size or any-size (required)
+  /// Network input size, as XFeatOptions::input_size: (0, 0) = the fixed-size model's
+  /// own size, or the image's own resolution (centred multiple-of-32 crop) for an
+  /// any-size model.
+  cv::Size input_size{};
+};
+
+/// Every cell of XFeat's 1/8 grid as a keypoint (its best pixel) with the cell's 64-d
+/// descriptor (NORM_L2, unit length). Keypoints are in row-major cell order; response
+/// is the softmax probability of the chosen pixel. One object per thread.
+class XFeatDenseDescriptor {
+ public:
+  explicit XFeatDenseDescriptor(XFeatDenseOptions options)
+      : options_(std::move(options)), net_(options_.model, options_.input_size, "XFeat dense") {}
+
+  [[nodiscard]] Features extract(const cv::Mat& image) {
+    const detail::XFeatMaps& m = net_.run(image);
+    const int plane = m.cells();
+    Features f;
+    f.norm = cv::NORM_L2;
+    f.image_size = image.size();
+    f.keypoints.reserve(static_cast<std::size_t>(plane));
+    f.descriptors.create(plane, 64, CV_32F);
+    const float size = 8.0f * std::max(m.scale.x, m.scale.y);
+    float prob[64];
+    for (int cy = 0; cy < m.h8; ++cy)
+      for (int cx = 0; cx < m.w8; ++cx) {
+        detail::cell_softmax(m, cx, cy, prob);
+        const int k = static_cast<int>(std::max_element(prob, prob + 64) - prob);  // first of equals
+        const float x = static_cast<float>(cx * 8 + k % 8), y = static_cast<float>(cy * 8 + k / 8);
+        f.keypoints.emplace_back(m.to_image(x, y), size, -1.0f, prob[k]);
+        const int cell = cy * m.w8 + cx;
+        float* d = f.descriptors.ptr<float>(cell);
+        float norm = 0.0f;
+        for (int ch = 0; ch < 64; ++ch) {
+          d[ch] = m.dense[ch * plane + cell];
+          norm += d[ch] * d[ch];
+        }
+        const float inv = norm > 0.0f ? 1.0f / std::sqrt(norm) : 0.0f;
+        for (int ch = 0; ch < 64; ++ch) d[ch] *= inv;
+      }
+    return f;
+  }
+
+  [[nodiscard]] const XFeatDenseOptions& options() const noexcept { return options_; }
+  [[nodiscard]] XFeatModelKind model_kind() const noexcept { return net_.kind(); }
+  /// The network input size for an image of this size; its cells are (W/8) x (H/8).
+  [[nodiscard]] cv::Size network_size(cv::Size image) const { return net_.network_size(image); }
+
+ private:
+  XFeatDenseOptions options_;
+  detail::XFeatNet net_;
+};
+
+static_assert(Descriptor<XFeatDenseDescriptor>);
+
+/// Mutual nearest neighbours of unit-length float descriptors (NORM_L2), by the largest
+/// dot product, which for unit vectors is the smallest L2 distance. DMatch::distance is
+/// that L2 distance. Ties go to the lower index. Holds nothing: `match` is const and
+/// safe to call from several threads at once.
+class DenseMutualMatcher {
+ public:
+  [[nodiscard]] Matches match(const Features& a, const Features& b) const {
+    Matches out;
+    if (a.descriptors.empty() || b.descriptors.empty()) return out;
+    check(a);
+    check(b);
+    detail::check(a.descriptors.cols == b.descriptors.cols,
+                  "DenseMutualMatcher: descriptors differ in length (" + std::to_string(a.descriptors.cols) + " vs " +
+                      std::to_string(b.descriptors.cols) + ")");
+    using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    const cv::Mat da = a.descriptors.isContinuous() ? a.descriptors : a.descriptors.clone();
+    const cv::Mat db = b.descriptors.isContinuous() ? b.descriptors : b.descriptors.clone();
+    const int na = da.rows, nb = db.rows, dim = da.cols;
+    const Eigen::Map<const RowMajor> A(da.ptr<float>(), na, dim), B(db.ptr<float>(), nb, dim);
+    std::vector<float> row_best(static_cast<std::size_t>(na)), col_best(static_cast<std::size_t>(nb),
+                                                                        -std::numeric_limits<float>::infinity());
+    std::vector<int> row_arg(static_cast<std::size_t>(na), -1), col_arg(static_cast<std::size_t>(nb), -1);
+    // Blocks of rows of a against all of b: the block's products stay in cache, and each
+    // column of the (column-major) block is scanned once for both maxima.
+    constexpr int block = 256;
+    Eigen::MatrixXf s;
+    for (int r0 = 0; r0 < na; r0 += block) {
+      const int n = std::min(block, na - r0);
+      s.noalias() = A.middleRows(r0, n) * B.transpose();
+      float* rb = row_best.data() + r0;
+      int* ra = row_arg.data() + r0;
+      std::fill(rb, rb + n, -std::numeric_limits<float>::infinity());
+      for (int j = 0; j < nb; ++j) {
+        const float* col = s.data() + static_cast<std::ptrdiff_t>(j) * n;
+        float best = col_best[static_cast<std::size_t>(j)];
+        int arg = col_arg[static_cast<std::size_t>(j)];
+        for (int i = 0; i < n; ++i) {
+          const float v = col[i];
+          if (v > best) {
+            best = v;
+            arg = r0 + i;
+          }
+          if (v > rb[i]) {
+            rb[i] = v;
+            ra[i] = j;
+          }
+        }
+        col_best[static_cast<std::size_t>(j)] = best;
+        col_arg[static_cast<std::size_t>(j)] = arg;
+      }
+    }
+    for (int i = 0; i < na; ++i) {
+      const int j = row_arg[static_cast<std::size_t>(i)];
+      if (j < 0 || col_arg[static_cast<std::size_t>(j)] != i) continue;
+      // |x - y|^2 = 2 - 2 x.y for unit vectors.
+      const float d2 = std::max(0.0f, 2.0f - 2.0f * row_best[static_cast<std::size_t>(i)]);
+      out.emplace_back(i, j, std::sqrt(d2));
+    }
+    return out;
+  }
+
+ private:
+  static void check(const Features& f) {
+    if (f.descriptors.type() != CV_32F || f.norm != cv::NORM_L2)
+      detail::fail("DenseMutualMatcher: needs CV_32F descriptors compared with NORM_L2 (unit vectors), got " +
+                   cv::typeToString(f.descriptors.type()) + " with norm " + std::to_string(f.norm));
+    if (f.descriptors.rows != static_cast<int>(f.keypoints.size()))
+      detail::fail("DenseMutualMatcher: descriptor rows and keypoint count differ");
+  }
+};
+
+static_assert(Matcher<DenseMutualMatcher>);
+
+/// The dense front end as a PairMatcher: grids of both images (each image through the
+/// network once while it is among the last three seen), mutual NN, and
+/// Correspondences::cells = the larger grid (eq. 5's denominator). One object per
+/// thread.
+class XFeatDenseMatcher {
+ public:
+  explicit XFeatDenseMatcher(XFeatDenseOptions options) : descriptor_(std::move(options)) {}
+
+  [[nodiscard]] Correspondences match_pair(const cv::Mat& a, const cv::Mat& b) {
+    // Both lookups before any insertion, so neither image evicts the other; the
+    // entries never move (capacity reserved up front; a copied matcher may lack it).
+    cache_.reserve(capacity);
+    Entry* ea = find(a);
+    Entry* eb = find(b);
+    if (!ea) ea = insert(a, eb);
+    if (!eb) eb = insert(b, ea);
+    const std::shared_ptr<const Features> fa = ea->features, fb = eb->features;
+    const Matches m = matcher_.match(*fa, *fb);
+    Correspondences c;
+    c.points_a.reserve(m.size());
+    c.points_b.reserve(m.size());
+    c.confidence.reserve(m.size());
+    for (const cv::DMatch& d : m) {
+      c.points_a.push_back(fa->keypoints[static_cast<std::size_t>(d.queryIdx)].pt);
+      c.points_b.push_back(fb->keypoints[static_cast<std::size_t>(d.trainIdx)].pt);
+      // The cosine of the two descriptors: 1 - |x - y|^2 / 2.
+      c.confidence.push_back(std::clamp(1.0f - 0.5f * d.distance * d.distance, 0.0f, 1.0f));
+    }
+    c.cells = static_cast<int>(std::max(fa->size(), fb->size()));
+    return c;
+  }
+
+  /// The grid of one image as Features (cached as in match_pair).
+  [[nodiscard]] const Features& features(const cv::Mat& image) {
+    cache_.reserve(capacity);
+    Entry* e = find(image);
+    return *(e ? e : insert(image, nullptr))->features;
+  }
+
+  /// Images run through the network so far (cache misses).
+  [[nodiscard]] std::size_t network_runs() const noexcept { return runs_; }
+  [[nodiscard]] const XFeatDenseDescriptor& descriptor() const noexcept { return descriptor_; }
+
+ private:
+  struct Entry {
+    cv::Mat image;  // a copy: the caller may reuse its buffer
+    std::shared_ptr<const Features> features;
+    std::uint64_t born = 0;  // insertion order
+  };
+
+  // The selector's live images: the key image, the previous frame (eq. 6 makes it the
+  // next key image) and the current frame. The oldest insertion that is not the other
+  // image of the pair is evicted: the key image, inserted long ago, stays while it is
+  // paired, and the two newest frames stay.
+  static constexpr std::size_t capacity = 3;
+
+  static bool same_pixels(const cv::Mat& x, const cv::Mat& y) {
+    if (x.size() != y.size() || x.type() != y.type()) return false;
+    const std::size_t row = static_cast<std::size_t>(x.cols) * x.elemSize();
+    for (int r = 0; r < x.rows; ++r)
+      if (std::memcmp(x.ptr(r), y.ptr(r), row) != 0) return false;
+    return true;
+  }
+
+  Entry* find(const cv::Mat& image) {
+    detail::check(!image.empty(), "XFeatDenseMatcher: the image is empty (0 x 0)");
+    for (Entry& e : cache_)
+      if (same_pixels(e.image, image)) return &e;
+    return nullptr;
+  }
+
+  /// Runs the network on `image` and caches it, never evicting `keep`.
+  Entry* insert(const cv::Mat& image, const Entry* keep) {
+    Entry fresh{image.clone(), std::make_shared<const Features>(descriptor_.extract(image)), ++born_};
+    ++runs_;
+    if (cache_.size() < capacity) {
+      cache_.push_back(std::move(fresh));
+      return &cache_.back();
+    }
+    Entry* oldest = nullptr;
+    for (Entry& e : cache_)
+      if (&e != keep && (!oldest || e.born < oldest->born)) oldest = &e;
+    *oldest = std::move(fresh);
+    return oldest;
+  }
+
+  XFeatDenseDescriptor descriptor_;
+  DenseMutualMatcher matcher_;
+  std::vector<Entry> cache_;  // at most `capacity`, reserved: entry addresses stay valid
+  std::uint64_t born_ = 0;
+  std::size_t runs_ = 0;
+};
+
+static_assert(PairMatcher<XFeatDenseMatcher>);
+
+}  // namespace vmap
