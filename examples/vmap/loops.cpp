@@ -1,14 +1,20 @@
-// `vmap loops`: LFM-LCD loop closure over a sequence, evaluated against ground truth.
+// `vmap loops`: loop closure over a sequence. Prints the loops found (query frame,
+// matched frame, inliers, bag-of-words score); with ground truth, also the evaluation.
 //
+//   vmap loops ../shared/data/rtabmap_loop/images --labels examples/data/rtabmap_loop_yolox.txt
 //   vmap loops ../shared/data/rtabmap_loop/images
 //       --gt ../shared/data/rtabmap_loop/gt_loop_matrix_84x84.txt
 //       --labels examples/data/rtabmap_loop_yolox.txt --plot pr.png --csv pr.csv
 //
+// Candidates (--rank): tree (LFM-LCD: every frame of the label tree's leaf), tree_ranked
+// (the leaf ranked by bag-of-words score, the top k verified; the default with labels),
+// bow (every older frame ranked, no labels; the default without), all (every frame older
+// than the window: brute force). The ranked modes need a vocabulary: --vocabulary FILE
+// (from `vmap vocabulary`), else one is learned on the sequence itself.
 // Labels come from precomputed-detections files (--labels; several files, e.g. of
 // different COCO detectors, are pooled into one label source) or from a cv::dnn detector
 // run here (--detector MODEL.onnx). Ground truth is a 0/1 matrix (--gt) or derived from
-// TUM poses (--gt-poses, with --gt-distance / --gt-angle). `--index all` verifies every
-// frame older than the window instead of asking the tree (the brute-force reference).
+// TUM poses (--gt-poses, with --gt-distance / --gt-angle).
 #include "common/lcd_plot.hpp"
 #include "common/lcd_run.hpp"
 #include "vmap/cli.hpp"
@@ -37,7 +43,8 @@ struct LoopsArgs {
   std::vector<std::string> labels;
   std::string detector;
   std::string detector_format;
-  std::string index = "tree";
+  std::string rank;  // empty: tree_ranked with labels, bow without
+  vmap::examples::VocabularyChoice vocabulary;
   std::vector<int> label_order;
   bool json = false;
   bool verbose = false;
@@ -73,29 +80,44 @@ vmap::PrecomputedDetections detect_all(const LoopsArgs& a, double& ms_per_frame)
   return vmap::PrecomputedDetections(per_frame);
 }
 
+vmap::CandidateIndex parse_rank(const std::string& rank) {
+  if (rank == "tree") return vmap::CandidateIndex::tree;
+  if (rank == "tree_ranked") return vmap::CandidateIndex::tree_ranked;
+  if (rank == "bow") return vmap::CandidateIndex::bow;
+  if (rank == "all") return vmap::CandidateIndex::brute_force;
+  vmap::detail::fail("--rank: unknown '" + rank + "' (choose tree, tree_ranked, bow or all)");
+}
+
+/// A progress line on stderr, rewritten in place.
+void progress(const char* what, std::size_t done, std::size_t total) {
+  if (done == total || done % 10 == 0) std::fprintf(stderr, "\r%s %zu/%zu", what, done, total);
+  if (done == total) std::fprintf(stderr, "\n");
+}
+
 int run(LoopsArgs& a) {
   auto& c = a.config;
   c.input = a.input;
   c.label_order = a.label_order;
-  if (a.index == "tree")
-    c.detector.index = vmap::CandidateIndex::tree;
-  else if (a.index == "all")
-    c.detector.index = vmap::CandidateIndex::brute_force;
-  else
-    vmap::detail::fail("--index: unknown '" + a.index + "' (choose tree or all)");
-  vmap::detail::check(a.gt.empty() != a.gt_poses.empty(), "give exactly one of --gt MATRIX and --gt-poses POSES");
+  const bool have_labels = !a.labels.empty() || !a.detector.empty();
+  if (a.rank.empty()) a.rank = have_labels ? "tree_ranked" : "bow";
+  c.detector.index = parse_rank(a.rank);
+  vmap::detail::check(a.gt.empty() || a.gt_poses.empty(), "give at most one of --gt MATRIX and --gt-poses POSES");
   vmap::detail::check(a.labels.empty() || a.detector.empty(), "give --labels or --detector, not both");
+  const bool uses_tree = c.detector.index == vmap::CandidateIndex::tree || c.detector.index == vmap::CandidateIndex::tree_ranked;
+  vmap::detail::check(have_labels || !uses_tree, "--rank " + a.rank +
+                                                     " needs labels: give --labels FILE or --detector MODEL "
+                                                     "(or --rank bow / all, which need none)");
 
   // The ground truth is checked against the sequence before any frame is processed.
   const std::size_t total = vmap::FrameSource::open(a.input).total().value_or(0);
-  vmap::LoopGroundTruth gt;
-  if (a.gt.empty()) {
+  std::optional<vmap::LoopGroundTruth> gt;
+  if (!a.gt_poses.empty()) {
     const auto poses = vmap::load_tum_poses(a.gt_poses);
     vmap::detail::check(poses.size() == total, a.gt_poses + ": " + std::to_string(poses.size()) +
                                                    " poses but the sequence has " + std::to_string(total) + " frames");
     gt = vmap::ground_truth_from_poses(
         poses, {.max_distance = a.gt_distance, .max_angle_deg = a.gt_angle, .window = c.detector.window});
-  } else {
+  } else if (!a.gt.empty()) {
     gt = vmap::LoopGroundTruth::load(a.gt, total);
   }
 
@@ -105,19 +127,66 @@ int run(LoopsArgs& a) {
     labels = vmap::examples::load_labels({a.labels.begin(), a.labels.end()});
   } else if (!a.detector.empty()) {
     labels = detect_all(a, detect_ms);
-  } else {
-    vmap::detail::check(c.detector.index == vmap::CandidateIndex::brute_force,
-                        "the tree needs labels: give --labels FILE or --detector MODEL (or --index all)");
   }
 
-  vmap::examples::LoopRun result = vmap::examples::run_loops(c, labels, [&](const vmap::LoopResult& r) {
-    if (!a.verbose) return;
-    std::fprintf(stderr, "frame %3zu  candidates %3zu  best %4s  inliers %4d  %s\n", r.frame, r.candidates,
-                 r.best ? std::to_string(*r.best).c_str() : "-", r.inliers, std::string(vmap::to_string(r.status)).c_str());
-  });
+  const auto features = vmap::examples::extract_features(
+      a.input, c.descriptor, [](std::size_t done, std::size_t n) { progress("features: frame", done, n); });
+  std::shared_ptr<const vmap::AnyVocabulary> vocabulary;
+  std::string vocabulary_note;
+  if (vmap::ranks(c.detector.index)) {
+    const auto t0 = std::chrono::steady_clock::now();
+    if (!a.vocabulary.file.empty()) {
+      vocabulary = std::make_shared<const vmap::AnyVocabulary>(vmap::AnyVocabulary::load(a.vocabulary.file));
+      vocabulary_note = "vocabulary " + a.vocabulary.file.string();
+    } else {
+      std::fprintf(stderr, "no --vocabulary: learning one on the sequence itself (%zu frames, branching %d, depth %d)...\n",
+                   features.frames.size(), a.vocabulary.branching(), a.vocabulary.depth);
+      vocabulary = std::make_shared<const vmap::AnyVocabulary>(vmap::examples::learn_vocabulary(features.frames, a.vocabulary));
+      vocabulary_note = "vocabulary learned on the sequence itself";
+    }
+    char buf[120];
+    std::snprintf(buf, sizeof buf, " (%zu words, %.2f s)", vocabulary->size(), vmap::examples::seconds_since(t0));
+    vocabulary_note += buf;
+  }
+
+  vmap::examples::LoopRun result =
+      vmap::examples::run_loops(c, features, labels, vocabulary, [&](const vmap::LoopResult& r) {
+        if (!a.verbose) return;
+        std::fprintf(stderr, "frame %3zu  candidates %3zu  verified %3zu  best %4s  inliers %4d  %s\n", r.frame,
+                     r.candidates, r.verifications, r.best ? std::to_string(*r.best).c_str() : "-", r.inliers,
+                     std::string(vmap::to_string(r.status)).c_str());
+      });
   const std::size_t frames = result.results.size();
-  const auto s = vmap::examples::summarize(result, gt, c.detector.min_inliers);
-  const auto agree = result.agreement(gt, c.detector.window);
+
+  nlohmann::json loops = nlohmann::json::array();
+  for (const auto& r : result.results)
+    if (r.loop())
+      loops.push_back({{"query", r.frame}, {"match", *r.best}, {"inliers", r.inliers}, {"bow_score", r.bow_score},
+                       {"similarity", r.similarity}});
+  if (!gt) {
+    if (a.json) {
+      nlohmann::json j = {{"frames", frames},
+                          {"rank", a.rank},
+                          {"verifications", result.verifications},
+                          {"ms_per_frame", result.ms_per_frame()},
+                          {"min_inliers", c.detector.min_inliers},
+                          {"loops", loops}};
+      std::printf("%s\n", j.dump(2).c_str());
+      return 0;
+    }
+    std::printf("frames %zu, candidates %s%s%s; %zu verifications (%.1f per frame), %.1f ms per frame\n", frames,
+                a.rank.c_str(), vocabulary_note.empty() ? "" : ", ", vocabulary_note.c_str(), result.verifications,
+                static_cast<double>(result.verifications) / static_cast<double>(std::max<std::size_t>(1, frames)),
+                result.ms_per_frame());
+    std::printf("%zu loops (inliers >= %d):\n", loops.size(), c.detector.min_inliers);
+    for (const auto& l : loops)
+      std::printf("  frame %4zu -> frame %4zu  inliers %4d  bow score %.3f\n", l["query"].get<std::size_t>(),
+                  l["match"].get<std::size_t>(), l["inliers"].get<int>(), l["bow_score"].get<double>());
+    return 0;
+  }
+
+  const auto s = vmap::examples::summarize(result, *gt, c.detector.min_inliers);
+  const auto agree = result.agreement(*gt, c.detector.window);
 
   if (!a.csv.empty()) {
     std::string csv = "threshold,true_positives,false_positives,precision,recall\n";
@@ -132,10 +201,10 @@ int run(LoopsArgs& a) {
   if (!a.plot.empty()) {
     const std::filesystem::path p = std::filesystem::path(a.input).lexically_normal();
     char title[200];
-    std::snprintf(title, sizeof title, "%s, %s index: recall@100%%P %.3f, %zu verifications",
-                  (p.parent_path().filename() / p.filename()).string().c_str(), a.index.c_str(),
+    std::snprintf(title, sizeof title, "%s, %s: recall@100%%P %.3f, %zu verifications",
+                  (p.parent_path().filename() / p.filename()).string().c_str(), a.rank.c_str(),
                   s.at_full_precision.recall, s.verifications);
-    vmap::write_image_atomically(a.plot, vmap::examples::draw_pr_curves({{s.curve, "vmap " + a.index}}, title));
+    vmap::write_image_atomically(a.plot, vmap::examples::draw_pr_curves({{s.curve, "vmap " + a.rank}}, title));
   }
 
   if (a.json) {
@@ -148,7 +217,8 @@ int run(LoopsArgs& a) {
                         {"recall_at_100_precision", s.at_full_precision.recall},
                         {"verifications", s.verifications},
                         {"ms_per_frame", s.ms_per_frame},
-                        {"index", a.index},
+                        {"rank", a.rank},
+                        {"top_k", c.detector.top_k},
                         {"min_inliers", c.detector.min_inliers},
                         {"threshold_at_100_precision", s.at_full_precision.true_positives > 0
                                                            ? nlohmann::json(s.at_full_precision.threshold)
@@ -158,12 +228,13 @@ int run(LoopsArgs& a) {
                         {"distinct_label_vectors", agree.distinct_vectors},
                         {"equal_vector_pairs", agree.leaf_pairs},
                         {"loop_queries", agree.loop_queries},
-                        {"loop_queries_with_equal_vector", agree.reachable_queries}};
+                        {"loop_queries_with_equal_vector", agree.reachable_queries},
+                        {"loops", loops}};
     std::printf("%s\n", j.dump(2).c_str());
     return 0;
   }
   std::printf("frames %zu, query frames with a ground-truth loop %zu\n", s.frames, s.loops_gt);
-  if (c.detector.index == vmap::CandidateIndex::tree) {
+  if (uses_tree) {
     std::printf("labels (score >= %.2f, eq. 5 influence in [%.2f, %.2f]), large to small:\n",
                 static_cast<double>(c.detector.labels.min_score), c.influence.min_influence, c.influence.max_influence);
     for (const auto& l : result.influence)
@@ -177,7 +248,8 @@ int run(LoopsArgs& a) {
                 agree.distinct_vectors, agree.leaf_pairs, agree.pairs, agree.max_reduction(), agree.reachable_queries,
                 agree.loop_queries);
   }
-  std::printf("index %s: %zu verifications (%.1f per frame), %.1f ms per frame%s\n", a.index.c_str(), s.verifications,
+  if (!vocabulary_note.empty()) std::printf("%s, top k %zu\n", vocabulary_note.c_str(), c.detector.top_k);
+  std::printf("candidates %s: %zu verifications (%.1f per frame), %.1f ms per frame%s\n", a.rank.c_str(), s.verifications,
               static_cast<double>(s.verifications) / static_cast<double>(std::max<std::size_t>(1, frames)),
               s.ms_per_frame, detect_ms > 0 ? "" : " (detections precomputed)");
   if (detect_ms > 0) std::printf("detector: %.1f ms per frame\n", detect_ms);
@@ -208,8 +280,21 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--detector", a->detector, "Run this ONNX detector (cv::dnn) over the frames instead of --labels");
   app.add_option("--detector-format", a->detector_format,
                  "yolox, nanodet or fastestdet (default: guessed from the model's file name)");
-  app.add_option("--index", a->index, "Candidates: tree (LFM-LCD) or all (every frame older than the window)")
+  app.add_option("--rank,--index", a->rank,
+                 "Candidates: tree (LFM-LCD), tree_ranked (the tree's leaf ranked by bag of words, top k verified), "
+                 "bow (every older frame ranked, no labels) or all (every frame older than the window). Default: "
+                 "tree_ranked with labels, bow without");
+  app.add_option("--top-k", d.top_k, "tree_ranked / bow: verify this many best-ranked candidates")->capture_default_str();
+  app.add_option("--min-bow-score", d.min_bow_score, "tree_ranked / bow: do not verify candidates scoring below this")
       ->capture_default_str();
+  app.add_option("--temporal", d.temporal_consistency,
+                 "Accept a loop only when this many previous frames matched a nearby place (0: off)")
+      ->capture_default_str();
+  app.add_option("--vocabulary", a->vocabulary.file,
+                 "tree_ranked / bow: a vocabulary from `vmap vocabulary` (default: learn one on the sequence)");
+  app.add_option("--words", a->vocabulary.words, "Vocabulary learned here: at most this many words")
+      ->capture_default_str();
+  app.add_option("--depth", a->vocabulary.depth, "Vocabulary learned here: depth L of the tree")->capture_default_str();
   app.add_option("--window", d.window, "Frames this recent are never candidates")->capture_default_str();
   app.add_option("--min-candidates", d.min_candidates, "m: backtrack up the tree until this many candidates")
       ->capture_default_str();
@@ -223,18 +308,16 @@ std::function<int()> setup(CLI::App& app) {
       ->delimiter(',');
   app.add_option("--sample", a->config.sample, "Frames whose labels form the eq. 5 sample (0: all)")
       ->capture_default_str();
-  app.add_option("--features", a->config.descriptor.name, "orb, akaze or sift")->capture_default_str();
+  app.add_option("--features", a->config.descriptor.name, "orb, akaze, sift or xfeat")->capture_default_str();
+  app.add_option("--model", a->config.descriptor.model, "--features xfeat: the XFeat ONNX model");
   app.add_option("--nfeatures", a->config.descriptor.features, "Keypoint budget per image (ORB, SIFT; top-k for XFeat)")->capture_default_str();
   app.add_option("--csv", a->csv, "Write the PR curve (threshold, TP, FP, precision, recall) as CSV");
   app.add_option("--plot", a->plot, "Write the PR curve as a PNG plot");
   app.add_flag("--json", a->json, "Print the figures as JSON");
   app.add_flag("--verbose", a->verbose, "Print one line per frame to stderr (candidates, best, inliers, status)");
-  return [a] {
-    a->config.colour = !a->detector.empty();
-    return run(*a);
-  };
+  return [a] { return run(*a); };
 }
 
-const bool registered = vmap::cli::add_command({"loops", "Loop closure (LFM-LCD) evaluated against ground truth", setup});
+const bool registered = vmap::cli::add_command({"loops", "Loop closure: the loops of a sequence, evaluated with --gt", setup});
 
 }  // namespace
