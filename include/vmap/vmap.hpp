@@ -37,6 +37,11 @@
 #include <vmap/hooks/precomputed_detections.hpp>
 #include <vmap/hooks/xfeat.hpp>
 
+#include <vmap/place/bow.hpp>
+#include <vmap/place/consistency.hpp>
+#include <vmap/place/database.hpp>
+#include <vmap/place/vocabulary.hpp>
+
 #include <vmap/keyframe/front_end.hpp>
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/keyframe/pipeline.hpp>
@@ -58,4 +63,3 @@
 #include <vmap/som/pose_io.hpp>
 #include <vmap/som/pose_map.hpp>
 #include <vmap/som/virtual_room.hpp>
-#include <vmap/som/vocabulary.hpp>

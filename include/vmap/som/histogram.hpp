@@ -4,19 +4,21 @@
 // DESIGN.md sec. 1.3 step 3): a fixed-length vector from an image's A-KAZE keypoints
 // and descriptors. Two policies:
 //  - BowHistogram: bag of binary words over a vocabulary learned from the training
-//    images (k-majority, vocabulary.hpp), L1- or L2-normalised;
+//    images (k-majority: the flat, depth-1 place/vocabulary.hpp tree), L1- or
+//    L2-normalised word counts;
 //  - GridHistogram: a cheaper spatial grid of keypoint counts and mean responses,
 //    nothing to learn.
 
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
-#include <vmap/som/vocabulary.hpp>
+#include <vmap/place/vocabulary.hpp>
 
 #include <Eigen/Core>
 
 #include <algorithm>
 #include <concepts>
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -43,6 +45,15 @@ inline void normalise(Eigen::VectorXf& v, HistogramNorm n) {
 }
 }  // namespace detail
 
+/// The flat vocabulary a BowHistogram learns: `words` k-majority clusters of the
+/// training descriptors (a BinaryVocabularyTree of branching `words` and depth 1).
+struct VocabularyOptions {
+  int words = 64;                       ///< vocabulary size k, 2..4096 (empty clusters are dropped)
+  int iterations = 8;                   ///< k-majority rounds, >= 1
+  std::size_t max_descriptors = 20000;  ///< random sample learned from, >= words (bounds the time)
+  std::uint64_t seed = 1;               ///< the sample and the k-means++ seeding
+};
+
 struct BowHistogramOptions {
   VocabularyOptions vocabulary{};       ///< how the words are learned in fit()
   HistogramNorm norm = HistogramNorm::l2;  ///< normalisation of the word counts
@@ -53,7 +64,7 @@ struct BowHistogramOptions {
 class BowHistogram {
  public:
   explicit BowHistogram(const BowHistogramOptions& options = {}) : options_(options) {}
-  BowHistogram(BinaryVocabulary vocabulary, const BowHistogramOptions& options = {})
+  BowHistogram(BinaryVocabularyTree vocabulary, const BowHistogramOptions& options = {})
       : options_(options), vocabulary_(std::move(vocabulary)) {}
 
   /// Learns the vocabulary from the training images' descriptors.
@@ -61,23 +72,28 @@ class BowHistogram {
     std::vector<cv::Mat> d;
     d.reserve(training.size());
     for (const auto& f : training) d.push_back(f.descriptors);
-    vocabulary_ = BinaryVocabulary::learn(d, options_.vocabulary);
+    const auto& o = options_.vocabulary;
+    vocabulary_ = BinaryVocabularyTree::learn(d, {.branching = o.words,
+                                                  .depth = 1,
+                                                  .iterations = o.iterations,
+                                                  .max_descriptors = o.max_descriptors,
+                                                  .seed = o.seed});
   }
 
   [[nodiscard]] Eigen::VectorXf operator()(const Features& f) const {
     detail::check(vocabulary_.size() > 0, "BowHistogram: no vocabulary (call fit() with training features first)");
-    Eigen::VectorXf h = Eigen::VectorXf::Zero(vocabulary_.size());
-    for (int w : vocabulary_.assign(f.descriptors)) h[w] += 1.0f;
+    Eigen::VectorXf h = Eigen::VectorXf::Zero(static_cast<Eigen::Index>(vocabulary_.size()));
+    for (std::uint32_t w : vocabulary_.assign(f.descriptors)) h[static_cast<Eigen::Index>(w)] += 1.0f;
     detail::normalise(h, options_.norm);
     return h;
   }
 
   [[nodiscard]] std::size_t dimension() const noexcept { return static_cast<std::size_t>(vocabulary_.size()); }
-  [[nodiscard]] const BinaryVocabulary& vocabulary() const noexcept { return vocabulary_; }
+  [[nodiscard]] const BinaryVocabularyTree& vocabulary() const noexcept { return vocabulary_; }
 
  private:
   BowHistogramOptions options_;
-  BinaryVocabulary vocabulary_;
+  BinaryVocabularyTree vocabulary_;
 };
 
 struct GridHistogramOptions {

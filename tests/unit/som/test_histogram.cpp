@@ -1,7 +1,7 @@
 #include <vmap/features/akaze.hpp>
 #include <vmap/som/histogram.hpp>
 #include <vmap/som/nearest_wall.hpp>
-#include <vmap/som/vocabulary.hpp>
+#include <vmap/place/vocabulary.hpp>
 
 #include "support/shared_data.hpp"
 
@@ -55,7 +55,7 @@ TEST_CASE("k-majority recovers the centres of binary clusters, deterministically
   const cv::Mat data = noisy_copies(centres, 200, 0.05, 3);
   // split over "images" as the histogram's fit does
   const std::vector<cv::Mat> sets{data.rowRange(0, 300), data.rowRange(300, 800)};
-  const auto v = vmap::BinaryVocabulary::learn(sets, {.words = 4, .iterations = 10, .seed = 2});
+  const auto v = vmap::BinaryVocabularyTree::learn(sets, {.branching = 4, .depth = 1, .iterations = 10, .seed = 2});
   REQUIRE(v.size() == 4);
   // each true centre has a word within a few bits (majority of 200 copies at 5 % flips)
   for (int c = 0; c < 4; ++c) {
@@ -63,14 +63,14 @@ TEST_CASE("k-majority recovers the centres of binary clusters, deterministically
     for (int w = 0; w < 4; ++w) best = std::min(best, cv::norm(centres.row(c), v.words().row(w), cv::NORM_HAMMING));
     CHECK(best <= 2.0);
   }
-  const auto again = vmap::BinaryVocabulary::learn(sets, {.words = 4, .iterations = 10, .seed = 2});
+  const auto again = vmap::BinaryVocabularyTree::learn(sets, {.branching = 4, .depth = 1, .iterations = 10, .seed = 2});
   CHECK(cv::norm(v.words(), again.words(), cv::NORM_HAMMING) == 0.0);
   // bad input
-  CHECK_THROWS_AS(vmap::BinaryVocabulary::learn({data.rowRange(0, 3)}, {.words = 4}), vmap::Error);
-  CHECK_THROWS_AS(vmap::BinaryVocabulary::learn({data, data.colRange(0, 32).clone()}, {.words = 4}), vmap::Error);
-  CHECK_THROWS_AS(vmap::BinaryVocabulary::learn({data}, {.words = 0}), vmap::Error);
+  CHECK_THROWS_AS(vmap::BinaryVocabularyTree::learn({data.rowRange(0, 3)}, {.branching = 4}), vmap::Error);
+  CHECK_THROWS_AS(vmap::BinaryVocabularyTree::learn({data, data.colRange(0, 32).clone()}, {.branching = 4}), vmap::Error);
+  CHECK_THROWS_AS(vmap::BinaryVocabularyTree::learn({data}, {.branching = 0}), vmap::Error);
   cv::Mat floats(10, 8, CV_32F, cv::Scalar(1));
-  CHECK_THROWS_AS(vmap::BinaryVocabulary::learn({floats}, {.words = 2}), vmap::Error);
+  CHECK_THROWS_AS(vmap::BinaryVocabularyTree::learn({floats}, {.branching = 2}), vmap::Error);
 }
 
 TEST_CASE("BowHistogram counts words exactly and normalises") {
@@ -78,13 +78,13 @@ TEST_CASE("BowHistogram counts words exactly and normalises") {
   cv::Mat d;
   cv::vconcat(std::vector<cv::Mat>{words.row(0), words.row(0), words.row(2), words.row(0)}, d);
   const auto f = with_descriptors(d);
-  const vmap::BowHistogram l1(vmap::BinaryVocabulary(words), {.norm = vmap::HistogramNorm::l1});
+  const vmap::BowHistogram l1(vmap::BinaryVocabularyTree::from_words(words), {.norm = vmap::HistogramNorm::l1});
   const Eigen::VectorXf h1 = l1(f);
   REQUIRE(h1.size() == 3);
   CHECK(h1[0] == doctest::Approx(0.75));
   CHECK(h1[1] == 0.0f);
   CHECK(h1[2] == doctest::Approx(0.25));
-  const vmap::BowHistogram l2{vmap::BinaryVocabulary(words)};
+  const vmap::BowHistogram l2{vmap::BinaryVocabularyTree::from_words(words)};
   const Eigen::VectorXf h2 = l2(f);
   CHECK(h2.norm() == doctest::Approx(1.0));
   CHECK(h2[0] == doctest::Approx(3.0 / std::sqrt(10.0)));
