@@ -183,7 +183,9 @@ int main(int argc, char** argv) {
     std::map<std::string, std::shared_ptr<const vmap::AnyVocabulary>> other;
     for (const std::string name : {"orb", "sift"}) {
       double extract_s = 0.0;
-      const auto frames = features_of(other_inputs, {.name = name}, extract_s);
+      vmap::examples::DescriptorChoice choice;
+      choice.name = name;
+      const auto frames = features_of(other_inputs, choice, extract_s);
       const auto t0 = std::chrono::steady_clock::now();
       const vmap::AnyVocabulary v = vmap::examples::learn_vocabulary(frames, vocabulary);
       const double learn_s = seconds_since(t0);
