@@ -28,7 +28,7 @@ struct ConsistencyState {
   int consecutive = 0;  ///< 0 after a query with no match
   Id island_begin{};    ///< smallest matched id of the island (meaningless when consecutive == 0)
   Id island_end{};      ///< largest matched id of the island
-  std::optional<Id> last;  ///< the previous query's best match, if any
+  std::optional<Id> last{};  ///< the previous query's best match, if any
 
   friend bool operator==(const ConsistencyState&, const ConsistencyState&) = default;
 };

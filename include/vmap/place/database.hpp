@@ -24,15 +24,19 @@
 #include <vmap/place/detail/format.hpp>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <concepts>
+#include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <map>
 #include <optional>
 #include <string>
 #include <string_view>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -50,9 +54,9 @@ template <class Id = std::uint32_t>
 struct QueryFilter {
   /// Only these ids are candidates (e.g. the frames of a label-tree leaf); ids not in
   /// the database are ignored. Unset: every image.
-  std::optional<std::vector<Id>> only;
+  std::optional<std::vector<Id>> only{};
   /// Ids >= this are ignored (the most recent frames, trivially similar to the query).
-  std::optional<Id> exclude_from;
+  std::optional<Id> exclude_from{};
 };
 
 /// Inverted-file place database.
@@ -167,13 +171,16 @@ class PlaceDatabase {
         auto& acc = scratch();
         accumulate(qn, acc);
         for (std::uint32_t s : cand) keep(s, acc.value[s]);
-        acc.reset();
+        std::fill_n(acc.value.begin(), slots_.size(), 0.0);
       }
     } else {
       auto& acc = scratch();
       accumulate(qn, acc);
-      for (std::uint32_t s : acc.touched) keep(s, acc.value[s]);
-      acc.reset();
+      for (std::uint32_t s = 0; s < slots_.size(); ++s)
+        if (acc.value[s] != 0.0) {
+          keep(s, acc.value[s]);
+          acc.value[s] = 0.0;
+        }
     }
 
     auto better = [](const PlaceMatch<Id>& a, const PlaceMatch<Id>& b) {
@@ -233,9 +240,13 @@ class PlaceDatabase {
       w.u64(static_cast<std::uint64_t>(static_cast<std::conditional_t<std::is_signed_v<Id>, std::int64_t, std::uint64_t>>(id)));
       const auto& v = slots_[slot].bow;
       w.u32(static_cast<std::uint32_t>(v.size()));
-      for (const auto& e : v.entries) {
-        w.u32(e.word);
-        w.f32(e.weight);
+      if constexpr (entries_as_bytes) {
+        w.bytes(v.entries.data(), v.entries.size() * sizeof(BowEntry));  // {u32 word, f32 weight} as stored
+      } else {
+        for (const auto& e : v.entries) {
+          w.u32(e.word);
+          w.f32(e.weight);
+        }
       }
     }
     return detail::wrap_payload(file_magic(), file_version, std::move(w).take());
@@ -253,6 +264,8 @@ class PlaceDatabase {
     const std::uint64_t n = r.u64("image count");
     r.require_items(n, 12, "image count");  // an image takes at least 12 bytes
     std::optional<Id> previous;
+    std::vector<std::pair<Id, BowVector>> images;
+    images.reserve(static_cast<std::size_t>(n));
     for (std::uint64_t i = 0; i < n; ++i) {
       using Wide = std::conditional_t<std::is_signed_v<Id>, std::int64_t, std::uint64_t>;
       const auto wide = static_cast<Wide>(r.u64("image id"));
@@ -264,9 +277,14 @@ class PlaceDatabase {
       r.require_items(e, 8, "entry count");
       BowVector v;
       v.entries.resize(e);
-      for (auto& x : v.entries) {
-        x.word = r.u32("word");
-        x.weight = r.f32("weight");
+      if constexpr (entries_as_bytes) {
+        const auto block = r.bytes(std::uint64_t{e} * sizeof(BowEntry), "entries");
+        std::memcpy(v.entries.data(), block.data(), block.size());
+      } else {
+        for (auto& x : v.entries) {
+          x.word = r.u32("word");
+          x.weight = r.f32("weight");
+        }
       }
       try {
         detail::check_bow(v, db.words_, "an image's vector");
@@ -277,9 +295,21 @@ class PlaceDatabase {
         if (x.weight <= 0.0f) r.corrupt("an image's vector has a zero weight");
       if (!v.empty() && std::fabs(detail::scoring_norm(v, db.scoring_) - 1.0) > 1e-3)
         r.corrupt("an image's vector is not normalised");
-      db.insert(id, std::move(v));
+      images.emplace_back(id, std::move(v));
     }
     r.expect_end("the last image");
+    // The posting lists sized once from the word counts: no regrowth while loading, and
+    // no spare capacity afterwards.
+    std::vector<std::uint32_t> per_word;
+    for (const auto& [id, v] : images)
+      for (const auto& e : v.entries) {
+        if (e.word >= per_word.size()) per_word.resize(e.word + std::size_t{1}, 0);
+        ++per_word[e.word];
+      }
+    db.postings_.resize(per_word.size());
+    for (std::size_t w = 0; w < per_word.size(); ++w) db.postings_[w].reserve(per_word[w]);
+    db.slots_.reserve(images.size());
+    for (auto& [id, v] : images) db.insert(id, std::move(v));
     return db;
   }
 
@@ -301,6 +331,12 @@ class PlaceDatabase {
   static constexpr std::string_view file_magic() noexcept { return {"VMAPBOWD", 8}; }
 
  private:
+  /// A BowEntry is laid out as the file's {u32 word, f32 weight} on a little-endian host:
+  /// vectors are then copied as blocks.
+  static constexpr bool entries_as_bytes = std::endian::native == std::endian::little && sizeof(BowEntry) == 8 &&
+                                           offsetof(BowEntry, word) == 0 && offsetof(BowEntry, weight) == 4 &&
+                                           std::is_trivially_copyable_v<BowEntry>;
+
   struct Posting {
     std::uint32_t slot;
     float weight;  ///< normalised
@@ -310,15 +346,12 @@ class PlaceDatabase {
     BowVector bow;      ///< normalised, no zero weights
     double norm = 1.0;  ///< the scoring's norm of `bow` as stored (1 up to float rounding)
   };
-  /// Per-thread accumulator over slots: only touched entries are non-zero, and reset()
-  /// zeroes just those, so a warm query does not allocate.
+  /// Per-thread accumulator over slots, all zero between queries, so a warm query does
+  /// not allocate. Images that share no word keep 0 (every shared term is > 0), so the
+  /// scored ones are found by one sequential pass over the slots afterwards, which costs
+  /// less than tracking them in the hot loop.
   struct Scratch {
     std::vector<double> value;
-    std::vector<std::uint32_t> touched;
-    void reset() {
-      for (std::uint32_t s : touched) value[s] = 0.0;
-      touched.clear();
-    }
   };
   static Scratch& scratch() {
     thread_local Scratch s;
@@ -329,12 +362,14 @@ class PlaceDatabase {
   /// word order (the order shared_with() uses, so both give bit-equal sums).
   void accumulate(const std::vector<BowEntry>& qn, Scratch& acc) const {
     if (acc.value.size() < slots_.size()) acc.value.resize(slots_.size(), 0.0);
+    double* value = acc.value.data();
     for (const auto& e : qn) {
       if (e.word >= postings_.size()) continue;
-      for (const auto& p : postings_[e.word]) {
-        double& v = acc.value[p.slot];
-        if (v == 0.0) acc.touched.push_back(p.slot);
-        v += detail::shared_term(e.weight, p.weight, scoring_);
+      const double q = e.weight;
+      if (scoring_ == BowScoring::l1) {
+        for (const auto& p : postings_[e.word]) value[p.slot] += std::min(q, static_cast<double>(p.weight));
+      } else {
+        for (const auto& p : postings_[e.word]) value[p.slot] += q * static_cast<double>(p.weight);
       }
     }
   }

@@ -179,7 +179,8 @@ class VocabularyTree {
                                         " columns (at most " + std::to_string(max_cols) + ")");
     std::mt19937_64 rng(o.seed);
     std::shuffle(rows.begin(), rows.end(), rng);
-    if (rows.size() > o.max_descriptors) rows.resize(o.max_descriptors);
+    // The sample is one cv::Mat: at most INT_MAX rows whatever max_descriptors says.
+    rows.resize(std::min({rows.size(), o.max_descriptors, static_cast<std::size_t>(std::numeric_limits<int>::max())}));
     cv::Mat sample(static_cast<int>(rows.size()), cols, Traits::descriptor_type);
     for (std::size_t r = 0; r < rows.size(); ++r)
       std::copy(rows[r], rows[r] + cols, sample.ptr<value_type>(static_cast<int>(r)));
@@ -363,7 +364,11 @@ class VocabularyTree {
     w.u32(static_cast<std::uint32_t>(branching_));
     w.u32(static_cast<std::uint32_t>(depth_));
     w.u64(nodes());
-    for (std::uint32_t c : child_count_) w.u32(c);
+    if constexpr (std::endian::native == std::endian::little) {
+      w.bytes(child_count_.data(), child_count_.size() * sizeof(std::uint32_t));
+    } else {
+      for (std::uint32_t c : child_count_) w.u32(c);
+    }
     for (std::size_t n = 0; n < nodes(); ++n) {
       const value_type* p = centres_.ptr<value_type>(static_cast<int>(n));
       if constexpr (std::is_same_v<value_type, float>) {
@@ -382,7 +387,7 @@ class VocabularyTree {
     auto r = detail::open_payload(bytes, file_magic(), file_version, "vocabulary", "vocabulary file '" + name + "'");
     const std::uint8_t kind = r.u8("kind");
     if (kind != Traits::file_kind)
-      r.corrupt(std::string("holds a ") + (kind == 0 ? "binary" : kind == 1 ? "float" : "unknown") +
+      r.corrupt(std::string("holds a") + (kind == 0 ? " binary" : kind == 1 ? " float" : "n unknown") +
                 " vocabulary, not a " + Traits::name + " one");
     VocabularyTree v;
     v.cols_ = r.i32("descriptor columns");
@@ -398,7 +403,12 @@ class VocabularyTree {
     r.require_items(n, 4 + row_bytes, "node count");
     if (n < 1 || n > std::numeric_limits<std::uint32_t>::max() / 2) r.corrupt("node count " + std::to_string(n) + " is invalid");
     v.child_count_.resize(static_cast<std::size_t>(n));
-    for (auto& c : v.child_count_) c = r.u32("child count");
+    if constexpr (std::endian::native == std::endian::little) {
+      const auto block = r.bytes(n * 4, "child counts");  // one copy for a million nodes
+      std::memcpy(v.child_count_.data(), block.data(), block.size());
+    } else {
+      for (auto& c : v.child_count_) c = r.u32("child count");
+    }
     if (const std::string problem = v.tree_problem(); !problem.empty()) r.corrupt(problem);
     v.index();
     v.centres_.create(static_cast<int>(n), v.cols_, Traits::descriptor_type);

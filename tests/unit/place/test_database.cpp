@@ -72,7 +72,7 @@ TEST_CASE("filters: only a candidate set, and excluding recent ids") {
     // exclude_from: ids >= 150 ignored
     std::vector<bool> below(300, false);
     for (std::size_t i = 0; i < 150; ++i) below[i] = true;
-    vmap::test::check_same_ranking(r.db.query(q, 10, {.only = std::nullopt, .exclude_from = 150U}),
+    vmap::test::check_same_ranking(r.db.query(q, 10, {.exclude_from = 150U}),
                                    vmap::test::brute_force_top(r.bows, r.present, q, 10, vmap::BowScoring::l1, &below));
     // only: a small set (scored directly) and a large one (through the inverted file),
     // with an unknown id and a repeated one that must not matter
@@ -86,7 +86,7 @@ TEST_CASE("filters: only a candidate set, and excluding recent ids") {
       }
       only.push_back(only.front());
       only.push_back(12345);
-      vmap::test::check_same_ranking(r.db.query(q, 10, {.only = only, .exclude_from = std::nullopt}),
+      vmap::test::check_same_ranking(r.db.query(q, 10, {.only = only}),
                                      vmap::test::brute_force_top(r.bows, r.present, q, 10, vmap::BowScoring::l1, &allowed));
       // both filters at once
       std::vector<bool> both(300, false);
@@ -94,7 +94,7 @@ TEST_CASE("filters: only a candidate set, and excluding recent ids") {
       vmap::test::check_same_ranking(r.db.query(q, 10, {.only = only, .exclude_from = 100U}),
                                      vmap::test::brute_force_top(r.bows, r.present, q, 10, vmap::BowScoring::l1, &both));
     }
-    CHECK(r.db.query(q, 10, {.only = std::vector<std::uint32_t>{}, .exclude_from = std::nullopt}).empty());
+    CHECK(r.db.query(q, 10, {.only = std::vector<std::uint32_t>{}}).empty());
   }
 }
 
@@ -169,7 +169,7 @@ TEST_CASE("signed ids, any order of insertion, ties by increasing id") {
   CHECK(m[0].score == doctest::Approx(1.0));
   CHECK(m[3].id == 5);
   CHECK(m[3].score == doctest::Approx(0.5));
-  const auto ex = db.query(a, 10, {.only = std::nullopt, .exclude_from = 2});
+  const auto ex = db.query(a, 10, {.exclude_from = 2});
   REQUIRE(ex.size() == 1);
   CHECK(ex[0].id == -3);
 }
@@ -190,7 +190,7 @@ TEST_CASE("concurrent const queries give the serial results") {
         for (int round = 0; round < 5; ++round)
           for (std::size_t i = 0; i < queries.size(); ++i) {
             const std::size_t k = (i + static_cast<std::size_t>(t) * 7) % queries.size();
-            const auto filter = k % 3 == 0 ? vmap::QueryFilter<std::uint32_t>{.only = std::nullopt, .exclude_from = 1000U}
+            const auto filter = k % 3 == 0 ? vmap::QueryFilter<std::uint32_t>{.exclude_from = 1000U}
                                            : vmap::QueryFilter<std::uint32_t>{};
             const auto got = r.db.query(queries[k], 10, filter);
             const auto want = k % 3 == 0 ? std::vector<vmap::PlaceMatch<std::uint32_t>>{} : serial[k];

@@ -23,7 +23,7 @@ std::string reheader(std::string bytes) {
   vmap::detail::BinaryWriter h;
   h.bytes(std::string_view(bytes.data(), 12));
   h.u64(payload.size());
-  h.u32(vmap::detail::crc32(payload));
+  h.u32(vmap::detail::crc32(payload));  // io/binary.hpp's CRC: the files' checksum is the same
   return std::move(h).take() + payload;
 }
 
@@ -71,6 +71,19 @@ void fuzz(const std::string& good, Parse parse, int mutations) {
 }
 
 }  // namespace
+
+TEST_CASE("the eight-bytes-a-step CRC-32 equals io/binary.hpp's") {
+  std::mt19937 rng(1);
+  std::string s;
+  for (std::size_t n = 0; n < 300; ++n) {
+    CHECK(vmap::detail::crc32_fast(s) == vmap::detail::crc32(s));
+    s.push_back(static_cast<char>(rng() & 0xFF));
+  }
+  s.resize(1 << 20);
+  for (auto& c : s) c = static_cast<char>(rng() & 0xFF);
+  CHECK(vmap::detail::crc32_fast(s) == vmap::detail::crc32(s));
+  CHECK(vmap::detail::crc32_fast("123456789") == 0xCBF43926U);  // the standard check value
+}
 
 TEST_CASE_TEMPLATE("vocabulary files: round trip and fuzzing", Tree, vmap::BinaryVocabularyTree, vmap::FloatVocabularyTree) {
   constexpr bool binary = std::is_same_v<Tree, vmap::BinaryVocabularyTree>;

@@ -7,6 +7,7 @@
 #include <vmap/core/error.hpp>
 #include <vmap/io/binary.hpp>
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -18,13 +19,45 @@ namespace vmap::detail {
 
 inline constexpr std::size_t place_header_size = 24;
 
+/// Slicing-by-8 tables of the CRC-32 of io/binary.hpp (table k advances a byte that is
+/// followed by k more).
+inline constexpr std::array<std::array<std::uint32_t, 256>, 8> crc32_slices = [] {
+  std::array<std::array<std::uint32_t, 256>, 8> t{};
+  t[0] = crc32_table;
+  for (std::size_t i = 0; i < 256; ++i)
+    for (std::size_t k = 1; k < 8; ++k) t[k][i] = (t[k - 1][i] >> 8) ^ t[0][t[k - 1][i] & 0xFFU];
+  return t;
+}();
+
+/// The same CRC-32 as io/binary.hpp's crc32(), eight bytes a step (Intel's
+/// slicing-by-8): several times faster, which matters for the tens of megabytes of a
+/// large vocabulary.
+inline std::uint32_t crc32_fast(std::string_view bytes) noexcept {
+  const auto* p = reinterpret_cast<const unsigned char*>(bytes.data());
+  std::size_t n = bytes.size();
+  std::uint32_t c = 0xFFFFFFFFU;
+  const auto& t = crc32_slices;
+  while (n >= 8) {
+    const std::uint32_t lo = c ^ (static_cast<std::uint32_t>(p[0]) | static_cast<std::uint32_t>(p[1]) << 8 |
+                                  static_cast<std::uint32_t>(p[2]) << 16 | static_cast<std::uint32_t>(p[3]) << 24);
+    const std::uint32_t hi = static_cast<std::uint32_t>(p[4]) | static_cast<std::uint32_t>(p[5]) << 8 |
+                             static_cast<std::uint32_t>(p[6]) << 16 | static_cast<std::uint32_t>(p[7]) << 24;
+    c = t[7][lo & 0xFFU] ^ t[6][(lo >> 8) & 0xFFU] ^ t[5][(lo >> 16) & 0xFFU] ^ t[4][lo >> 24] ^ t[3][hi & 0xFFU] ^
+        t[2][(hi >> 8) & 0xFFU] ^ t[1][(hi >> 16) & 0xFFU] ^ t[0][hi >> 24];
+    p += 8;
+    n -= 8;
+  }
+  while (n-- > 0) c = t[0][(c ^ *p++) & 0xFFU] ^ (c >> 8);
+  return c ^ 0xFFFFFFFFU;
+}
+
 /// Header + payload.
 inline std::string wrap_payload(std::string_view magic, std::uint32_t version, const std::string& payload) {
   BinaryWriter h;
   h.bytes(magic);
   h.u32(version);
   h.u64(payload.size());
-  h.u32(crc32(payload));
+  h.u32(crc32_fast(payload));
   h.bytes(payload);
   return std::move(h).take();
 }
@@ -46,7 +79,7 @@ inline BinaryReader open_payload(std::string_view file, std::string_view magic, 
   if (size != r.remaining())
     r.corrupt("truncated or padded (header says " + std::to_string(size) + " payload bytes, file has " +
               std::to_string(r.remaining()) + ")");
-  if (crc32(r.rest()) != crc) r.corrupt("checksum mismatch (the file is corrupt)");
+  if (crc32_fast(r.rest()) != crc) r.corrupt("checksum mismatch (the file is corrupt)");
   return BinaryReader(r.rest(), source, place_header_size);
 }
 
