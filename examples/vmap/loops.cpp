@@ -129,23 +129,29 @@ int run(LoopsArgs& a) {
     labels = detect_all(a, detect_ms);
   }
 
-  const auto features = vmap::examples::extract_features(
-      a.input, c.descriptor, [](std::size_t done, std::size_t n) { progress("features: frame", done, n); });
+  // A vocabulary file is read before any frame, so a bad one fails at once.
   std::shared_ptr<const vmap::AnyVocabulary> vocabulary;
   std::string vocabulary_note;
-  if (vmap::ranks(c.detector.index)) {
+  double vocabulary_s = 0.0;  // loading or learning it
+  if (vmap::ranks(c.detector.index) && !a.vocabulary.file.empty()) {
     const auto t0 = std::chrono::steady_clock::now();
-    if (!a.vocabulary.file.empty()) {
-      vocabulary = std::make_shared<const vmap::AnyVocabulary>(vmap::AnyVocabulary::load(a.vocabulary.file));
-      vocabulary_note = "vocabulary " + a.vocabulary.file.string();
-    } else {
+    vocabulary = std::make_shared<const vmap::AnyVocabulary>(vmap::AnyVocabulary::load(a.vocabulary.file));
+    vocabulary_s = vmap::examples::seconds_since(t0);
+    vocabulary_note = "vocabulary " + a.vocabulary.file.string();
+  }
+  const auto features = vmap::examples::extract_features(
+      a.input, c.descriptor, [](std::size_t done, std::size_t n) { progress("features: frame", done, n); });
+  if (vmap::ranks(c.detector.index)) {
+    if (!vocabulary) {
       std::fprintf(stderr, "no --vocabulary: learning one on the sequence itself (%zu frames, branching %d, depth %d)...\n",
                    features.frames.size(), a.vocabulary.branching(), a.vocabulary.depth);
+      const auto t0 = std::chrono::steady_clock::now();
       vocabulary = std::make_shared<const vmap::AnyVocabulary>(vmap::examples::learn_vocabulary(features.frames, a.vocabulary));
+      vocabulary_s = vmap::examples::seconds_since(t0);
       vocabulary_note = "vocabulary learned on the sequence itself";
     }
     char buf[120];
-    std::snprintf(buf, sizeof buf, " (%zu words, %.2f s)", vocabulary->size(), vmap::examples::seconds_since(t0));
+    std::snprintf(buf, sizeof buf, " (%zu words, %.2f s)", vocabulary->size(), vocabulary_s);
     vocabulary_note += buf;
   }
 
