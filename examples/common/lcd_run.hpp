@@ -1,8 +1,10 @@
 #pragma once
 
-// One loop-closure run over a sequence, shared by `vmap loops` and bench_loops: labels
-// (from a file or a detector) -> label schema from a sample -> LoopDetector over every
-// frame -> per-frame results, timings and the evaluation against ground truth.
+// One loop-closure run over a sequence, shared by `vmap loops` and bench_loops: features
+// of every frame (extracted once, reusable across runs) -> labels (from a file or a
+// detector) -> label schema from a sample -> vocabulary (a file, or learned on the
+// sequence) for the ranked candidate sources -> LoopDetector over every frame (after
+// optional distractor key frames) -> per-frame results, timings and the evaluation.
 
 #include "common/policies.hpp"
 
@@ -15,42 +17,119 @@
 #include <vmap/lcd/label_sources.hpp>
 #include <vmap/lcd/label_vector.hpp>
 #include <vmap/lcd/loop_detector.hpp>
+#include <vmap/lcd/place_ranking.hpp>
 #include <vmap/matching/brute_force.hpp>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cmath>
 #include <cstddef>
+#include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 namespace vmap::examples {
 
+inline double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+/// The features of every frame of a sequence, extracted once.
+struct SequenceFeatures {
+  std::vector<Features> frames;
+  double seconds = 0.0;     ///< reading and extraction of all frames
+  std::size_t skipped = 0;  ///< unreadable frames (each reported on stderr; not in `frames`)
+};
+
+/// Extracts the features of every frame of `input` with the chosen descriptor;
+/// `progress(done, total)` (optional) is called after each frame.
+inline SequenceFeatures extract_features(const std::filesystem::path& input, const DescriptorChoice& choice,
+                                         const std::function<void(std::size_t, std::size_t)>& progress = {}) {
+  SequenceFeatures out;
+  // XFeat runs on colour input; the classic detectors on grey.
+  FrameSourceOptions so;
+  so.grey = choice.name != "xfeat";
+  so.on_skip = [](const SkippedFrame& sk) {
+    std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", sk.index, sk.name.c_str(), sk.reason.c_str());
+  };
+  auto source = FrameSource::open(input, so);
+  const std::size_t total = source.total().value_or(0);
+  const auto t0 = std::chrono::steady_clock::now();
+  with_descriptor(choice, [&](auto descriptor) {
+    while (auto frame = source.next()) {
+      out.frames.push_back(descriptor.extract(frame->image));
+      if (progress) progress(out.frames.size(), total);
+    }
+  });
+  out.seconds = seconds_since(t0);
+  out.skipped = source.skipped().size();
+  return out;
+}
+
+/// The vocabulary tree learned by `vmap loops` / `vmap vocabulary`.
+struct VocabularyChoice {
+  std::filesystem::path file;  ///< a saved vocabulary; empty: learn one
+  /// At most this many words: the branching k is the smallest with k^depth >= words.
+  /// 1000 (k = 10, L = 3): the prototype used 500 flat words on 84 frames; a
+  /// tree leaves small nodes unsplit, so it ends with fewer than k^L words.
+  std::size_t words = 1000;
+  int depth = 3;  ///< L of the tree
+  std::uint64_t seed = 1;
+
+  [[nodiscard]] int branching() const {
+    detail::check(depth >= 1, "--depth must be >= 1, got " + std::to_string(depth));
+    detail::check(words >= 2, "--words must be >= 2, got " + std::to_string(words));
+    int k = 2;
+    while (std::pow(static_cast<double>(k), depth) < static_cast<double>(words)) ++k;
+    return k;
+  }
+};
+
+/// Learns a vocabulary from the descriptors of a set of frames (binary descriptors by
+/// k-majority, float ones by k-means: the Features say which).
+inline AnyVocabulary learn_vocabulary(const std::vector<Features>& frames, const VocabularyChoice& c) {
+  std::vector<cv::Mat> sets;
+  for (const Features& f : frames)
+    if (!f.descriptors.empty()) sets.push_back(f.descriptors);
+  detail::check(!sets.empty(), "learn_vocabulary: the frames have no descriptors");
+  return AnyVocabulary::learn(sets, {.branching = c.branching(), .depth = c.depth, .seed = c.seed});
+}
+
 struct LoopRunConfig {
   std::filesystem::path input;             ///< a FrameSource input (folder, list, video, rgb.txt)
-  LoopDetectorOptions detector{};          ///< window, m, thresholds, index
+  LoopDetectorOptions detector{};          ///< window, m, thresholds, candidate source, top k
   InfluenceOptions influence{};            ///< eq. 5 band
   std::vector<int> label_order;            ///< user's large-to-small order (optional)
   std::size_t sample = 0;                  ///< frames whose labels form the eq. 5 sample; 0: all
   DescriptorChoice descriptor{};           ///< ORB 1000 by default, as the baseline
   FundamentalOptions estimator{.check_degeneracy = false};  ///< MAGSAC, 1 px, 0.99 as the baseline
-  bool colour = false;                     ///< decode frames in colour (detectors need it)
 };
 
 struct LoopRun {
-  std::vector<LoopResult> results;
+  std::vector<LoopResult> results;        ///< one per frame of the sequence (distractors left out)
   LabelSchema schema;
   std::vector<LabelInfluence> influence;  ///< every label of the sample, schema order
-  double seconds = 0.0;                   ///< reading, features, index, verification
-  std::size_t verifications = 0;
-  std::size_t skipped = 0;                ///< unreadable frames (reported on stderr, not in results)
+  double seconds = 0.0;                   ///< extraction of the sequence + the detector over it
+  double detector_seconds = 0.0;          ///< the detector alone (labels, ranking, verification)
+  double rank_seconds = 0.0;              ///< of which bag-of-words description and ranking
+  std::size_t verifications = 0;          ///< over the sequence's frames
+  std::size_t distractors = 0;            ///< key frames added before the sequence
+  std::size_t memory_bytes = 0;           ///< the detector's frames and index after the run
 
-  [[nodiscard]] std::vector<LoopScore> scores() const {
+  /// The evaluation's view: frame indices of the sequence; a loop with a distractor is
+  /// reported as a match with `distractor_frame` (a frame no query has a loop with).
+  [[nodiscard]] std::vector<LoopScore> scores(std::optional<std::size_t> distractor_frame = std::nullopt) const {
     std::vector<LoopScore> out;
-    for (const LoopResult& r : results) out.push_back({r.frame, r.best, static_cast<double>(r.inliers)});
+    for (const LoopResult& r : results) {
+      std::optional<std::size_t> match = r.best;
+      if (match) match = *match >= distractors ? *match - distractors : distractor_frame.value_or(r.frame - distractors);
+      out.push_back({r.frame - distractors, match, static_cast<double>(r.inliers)});
+    }
     return out;
   }
   [[nodiscard]] double ms_per_frame() const {
@@ -72,37 +151,46 @@ inline PrecomputedDetections load_labels(const std::vector<std::filesystem::path
   return merge_detections(sources);
 }
 
-/// Runs LoopDetector over every frame with the given per-frame detections.
-inline LoopRun run_loops(const LoopRunConfig& config, const PrecomputedDetections& labels,
-                         const std::function<void(const LoopResult&)>& on_frame = {}) {
-  FrameSourceOptions so;
-  so.grey = !config.colour;
-  so.on_skip = [](const SkippedFrame& s) {
-    std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", s.index, s.name.c_str(), s.reason.c_str());
-  };
-  auto source = FrameSource::open(config.input, so);
-  const std::size_t frames = source.total().value_or(0);
+/// Runs LoopDetector over the frames' features with their detections; `vocabulary` is
+/// needed by the ranked sources only. `distractors` (optional) are added first, without
+/// labels, as older key frames. `on_frame` sees each sequence frame's result.
+inline LoopRun run_loops(const LoopRunConfig& config, const SequenceFeatures& features,
+                         const PrecomputedDetections& labels, std::shared_ptr<const AnyVocabulary> vocabulary,
+                         const std::function<void(const LoopResult&)>& on_frame = {},
+                         const std::vector<Features>* distractors = nullptr) {
+  const std::size_t frames = features.frames.size();
   if (labels.frames_declared() && labels.frames() != frames)
     detail::fail("the labels cover " + std::to_string(labels.frames()) + " frames but '" + config.input.string() +
                  "' has " + std::to_string(frames));
+  if (ranks(config.detector.index))
+    detail::check(vocabulary != nullptr, "the " + std::string(to_string(config.detector.index)) +
+                                             " candidate source needs a vocabulary");
   LabelStatistics stats(config.detector.labels);
   const std::size_t sample = config.sample == 0 ? frames : std::min(config.sample, frames);
   for (std::size_t k = 0; k < sample; ++k) stats.observe(labels.at(k));
   LoopRun run;
   run.schema = make_label_schema(stats, config.influence, config.label_order, &run.influence);
   with_descriptor(config.descriptor, [&](auto descriptor) {
-    LoopDetector detector(run.schema, labels, std::move(descriptor), BruteForceMatcher{},
-                          FundamentalEstimator(config.estimator), config.detector);
-    detector.detector().seek(0);
+    // The features come pre-extracted (LoopDetector::add); the descriptor is the one
+    // that made them, so a caller could push further images through the detector.
+    LoopDetector detector(run.schema, std::move(descriptor), BruteForceMatcher{}, FundamentalEstimator(config.estimator),
+                          config.detector, PlaceRanker(vocabulary));
+    if (distractors) {
+      for (const Features& f : *distractors) (void)detector.add(f, {});
+      run.distractors = distractors->size();
+    }
+    const std::size_t before = detector.verifications();
     const auto t0 = std::chrono::steady_clock::now();
-    while (auto frame = source.next()) {
-      run.results.push_back(detector.push(frame->image));
+    for (std::size_t k = 0; k < frames; ++k) {
+      run.results.push_back(detector.add(features.frames[k], labels.at(k)));
+      run.rank_seconds += run.results.back().rank_ms / 1e3;
       if (on_frame) on_frame(run.results.back());
     }
-    run.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    run.verifications = detector.verifications();
+    run.detector_seconds = seconds_since(t0);
+    run.verifications = detector.verifications() - before;
+    run.memory_bytes = detector.memory_bytes();
   });
-  run.skipped = source.skipped().size();
+  run.seconds = features.seconds + run.detector_seconds;
   return run;
 }
 
@@ -117,16 +205,27 @@ struct LoopSummary {
   double ms_per_frame = 0.0;
 };
 
+/// The run's figures against `gt` (the sequence's frames; distractor matches are false).
 inline LoopSummary summarize(const LoopRun& run, const LoopGroundTruth& gt, int min_inliers) {
   detail::check(gt.frames() == run.results.size(), "the ground truth covers " + std::to_string(gt.frames()) +
                                                        " frames but the sequence has " +
                                                        std::to_string(run.results.size()));
   LoopSummary s;
-  const auto scores = run.scores();
+  std::vector<LoopScore> scores;
+  LoopGroundTruth with_distractor = gt;
+  if (run.distractors > 0) {
+    // One extra all-zero frame stands for every distractor: a loop with it is false.
+    with_distractor = LoopGroundTruth(gt.frames() + 1);
+    for (std::size_t q = 0; q < gt.frames(); ++q)
+      for (std::size_t j = 0; j < gt.frames(); ++j) with_distractor.set(q, j, gt(q, j));
+    scores = run.scores(gt.frames());
+  } else {
+    scores = run.scores();
+  }
   s.frames = run.results.size();
   s.loops_gt = gt.loop_frames();
-  s.at_decision = evaluate_loops(scores, gt, min_inliers);
-  s.curve = precision_recall_curve(scores, gt);
+  s.at_decision = evaluate_loops(scores, with_distractor, min_inliers);
+  s.curve = precision_recall_curve(scores, with_distractor);
   s.at_full_precision = recall_at_full_precision(s.curve);
   s.verifications = run.verifications;
   s.ms_per_frame = run.ms_per_frame();

@@ -1,14 +1,20 @@
-// `vmap loops`: LFM-LCD loop closure over a sequence, evaluated against ground truth.
+// `vmap loops`: loop closure over a sequence. Prints the loops found (query frame,
+// matched frame, inliers, bag-of-words score); with ground truth, also the evaluation.
 //
+//   vmap loops ../shared/data/rtabmap_loop/images --labels examples/data/rtabmap_loop_yolox.txt
 //   vmap loops ../shared/data/rtabmap_loop/images
 //       --gt ../shared/data/rtabmap_loop/gt_loop_matrix_84x84.txt
 //       --labels examples/data/rtabmap_loop_yolox.txt --out pr
 //
+// Candidates (--rank): tree (LFM-LCD: every frame of the label tree's leaf), tree_ranked
+// (the leaf ranked by bag-of-words score, the top k verified; the default with labels),
+// bow (every older frame ranked, no labels; the default without), all (every frame older
+// than the window: brute force). The ranked modes need a vocabulary: --vocabulary FILE
+// (from `vmap vocabulary`), else one is learned on the sequence itself.
 // Labels come from precomputed-detections files (--labels; several files, e.g. of
 // different COCO detectors, are pooled into one label source) or from a cv::dnn detector
 // run here (--detector yolox --model MODEL.onnx). Ground truth is a 0/1 matrix (--gt) or derived from
-// TUM poses (--gt-poses, with --gt-distance / --gt-angle). `--index all` verifies every
-// frame older than the window instead of asking the tree (the brute-force reference).
+// TUM poses (--gt-poses, with --gt-distance / --gt-angle).
 #include "common/lcd_plot.hpp"
 #include "common/lcd_run.hpp"
 #include "common/cli_support.hpp"
@@ -26,6 +32,7 @@
 #include <chrono>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -44,8 +51,8 @@ struct LoopsArgs {
   std::string model;
   std::string names;
   std::string features_model;
-  std::string camera;
-  std::string index = "tree";
+  std::string rank;  // empty: tree_ranked with labels, bow without
+  vmap::examples::VocabularyChoice vocabulary;
   std::vector<int> label_order;
   bool json = false;
   bool verbose = false;
@@ -70,19 +77,30 @@ vmap::PrecomputedDetections detect_all(const LoopsArgs& a, double& seconds) {
   return vmap::PrecomputedDetections(per_frame);
 }
 
+vmap::CandidateIndex parse_rank(const std::string& rank) {
+  if (rank == "tree") return vmap::CandidateIndex::tree;
+  if (rank == "tree_ranked") return vmap::CandidateIndex::tree_ranked;
+  if (rank == "bow") return vmap::CandidateIndex::bow;
+  if (rank == "all") return vmap::CandidateIndex::brute_force;
+  ex::usage_error("--rank: unknown '" + rank + "' (choose tree, tree_ranked, bow or all)");
+}
+
 int run(LoopsArgs& a, const CLI::App& app) {
   auto& c = a.config;
   c.input = a.input;
   c.label_order = a.label_order;
   ex::current_inputs() = {a.input};
-  if (a.index == "tree")
-    c.detector.index = vmap::CandidateIndex::tree;
-  else if (a.index == "all")
-    c.detector.index = vmap::CandidateIndex::brute_force;
-  else
-    ex::usage_error("--index: unknown '" + a.index + "' (choose tree or all)");
-  if (a.gt.empty() == a.gt_poses.empty()) ex::usage_error("give exactly one of --gt MATRIX and --gt-poses POSES");
+  const bool have_labels = !a.labels.empty() || !a.detector.empty();
+  if (a.rank.empty()) a.rank = have_labels ? "tree_ranked" : "bow";
+  c.detector.index = parse_rank(a.rank);
+  if (!a.gt.empty() && !a.gt_poses.empty()) ex::usage_error("give at most one of --gt MATRIX and --gt-poses POSES");
   if (!a.labels.empty() && !a.detector.empty()) ex::usage_error("give --labels or --detector, not both");
+  const bool uses_tree =
+      c.detector.index == vmap::CandidateIndex::tree || c.detector.index == vmap::CandidateIndex::tree_ranked;
+  if (!have_labels && uses_tree)
+    ex::usage_error("--rank " + a.rank +
+                    " needs labels: give --labels FILE or --detector NAME --model PATH (or --rank bow / all, which "
+                    "need none)");
   if (!a.detector.empty() && a.model.empty()) ex::usage_error("--detector " + a.detector + " needs --model PATH");
   if (a.detector.empty() && !a.model.empty())
     ex::usage_error("--model is the detector's model: give --detector yolox|nanodet|fastestdet (the descriptor's "
@@ -92,7 +110,8 @@ int run(LoopsArgs& a, const CLI::App& app) {
   std::vector<std::filesystem::path> inputs{a.input};
   for (const auto& [file, option] : {std::pair{a.gt, "--gt"}, std::pair{a.gt_poses, "--gt-poses"},
                                      std::pair{a.model, "--model"}, std::pair{a.names, "--names"},
-                                     std::pair{a.features_model, "--features-model"}})
+                                     std::pair{a.features_model, "--features-model"},
+                                     std::pair{a.vocabulary.file.string(), "--vocabulary"}})
     if (!file.empty()) {
       ex::check_input_file(file, option);
       inputs.push_back(file);
@@ -101,24 +120,22 @@ int run(LoopsArgs& a, const CLI::App& app) {
     ex::check_input_file(l, "--labels");
     inputs.push_back(l);
   }
-  const auto camera = ex::load_camera_option(a.camera);
-  if (!a.out.empty()) {
-    ex::prepare_output_dir(a.out, "--out", inputs, {"pr.csv", "pr.png"});
-  }
+  std::optional<ex::OutputFolder> out_dir;
+  if (!a.out.empty()) out_dir.emplace(a.out, "--out", inputs, std::vector<std::string>{"pr.csv", "pr.png"});
   const std::vector<std::string> names = a.names.empty() ? std::vector<std::string>{} : vmap::read_class_names(a.names);
 
   // The ground truth is checked against the sequence before any frame is processed.
   const auto sequence = vmap::FrameSource::open(a.input);
   const std::size_t total = sequence.total().value_or(0);
-  vmap::LoopGroundTruth gt;
-  if (a.gt.empty()) {
+  std::optional<vmap::LoopGroundTruth> gt;
+  if (!a.gt_poses.empty()) {
     // One pose per frame: by order when the counts agree, else the nearest in time
     // (TUM's 100 Hz groundtruth.txt against rgb.txt at 30 Hz). 50 ms rather than
     // associate.py's 20 ms: fr1's ground truth has gaps of up to 49 ms (tum_fr1_rpy).
     const auto poses = vmap::poses_for_frames(vmap::load_tum_poses(a.gt_poses), sequence.timestamps(), a.gt_poses, 0.05);
     gt = vmap::ground_truth_from_poses(
         poses, {.max_distance = a.gt_distance, .max_angle_deg = a.gt_angle, .window = c.detector.window});
-  } else {
+  } else if (!a.gt.empty()) {
     gt = vmap::LoopGroundTruth::load(a.gt, total);
   }
 
@@ -128,32 +145,96 @@ int run(LoopsArgs& a, const CLI::App& app) {
     labels = vmap::examples::load_labels({a.labels.begin(), a.labels.end()});
   } else if (!a.detector.empty()) {
     labels = detect_all(a, detect_seconds);
-  } else if (c.detector.index != vmap::CandidateIndex::brute_force) {
-    ex::usage_error("the tree needs labels: give --labels FILE or --detector NAME --model PATH (or --index all)");
   }
-
-  ex::Progress progress("vmap loops", total);
-  std::size_t done = 0;
-  vmap::examples::LoopRun result = vmap::examples::run_loops(c, labels, [&](const vmap::LoopResult& r) {
-    progress.update(++done);
-    if (!a.verbose) return;
-    std::fprintf(stderr, "frame %3zu  candidates %3zu  best %4s  inliers %4d  %s\n", r.frame, r.candidates,
-                 r.best ? std::to_string(*r.best).c_str() : "-", r.inliers, std::string(vmap::to_string(r.status)).c_str());
-  });
-  const std::size_t frames = result.results.size();
-  progress.done(std::to_string(result.skipped) + " skipped");
-  if (result.skipped > 0)
-    vmap::detail::fail(std::to_string(result.skipped) + " frame(s) of '" + a.input +
-                       "' could not be read (listed above); the ground truth and the labels are per frame, so the "
-                       "evaluation would be shifted");
-  const auto s = vmap::examples::summarize(result, gt, c.detector.min_inliers);
-  const auto agree = result.agreement(gt, c.detector.window);
   auto label_name = [&](int label) {
     return names.empty() ? std::to_string(label) : vmap::class_name(names, label);
   };
 
+  // A vocabulary file is read before any frame, so a bad one fails at once.
+  std::shared_ptr<const vmap::AnyVocabulary> vocabulary;
+  std::string vocabulary_note;
+  double vocabulary_s = 0.0;  // loading or learning it
+  if (vmap::ranks(c.detector.index) && !a.vocabulary.file.empty()) {
+    const auto t0 = std::chrono::steady_clock::now();
+    vocabulary = std::make_shared<const vmap::AnyVocabulary>(vmap::AnyVocabulary::load(a.vocabulary.file));
+    vocabulary_s = vmap::examples::seconds_since(t0);
+    vocabulary_note = "vocabulary " + a.vocabulary.file.string();
+  }
+  std::optional<ex::Progress> extracting;
+  extracting.emplace("vmap loops: features", total);
+  const auto features = vmap::examples::extract_features(
+      a.input, c.descriptor, [&](std::size_t done, std::size_t) { extracting->update(done); });
+  extracting->done(std::to_string(features.skipped) + " skipped");
+  if (features.skipped > 0 && (gt || have_labels))
+    vmap::detail::fail(std::to_string(features.skipped) + " frame(s) of '" + a.input +
+                       "' could not be read (listed above); the ground truth and the labels are per frame, so the "
+                       "evaluation would be shifted");
+  if (vmap::ranks(c.detector.index)) {
+    if (!vocabulary) {
+      std::fprintf(stderr, "no --vocabulary: learning one on the sequence itself (%zu frames, branching %d, depth %d)\n",
+                   features.frames.size(), a.vocabulary.branching(), a.vocabulary.depth);
+      const auto t0 = std::chrono::steady_clock::now();
+      vocabulary = std::make_shared<const vmap::AnyVocabulary>(vmap::examples::learn_vocabulary(features.frames, a.vocabulary));
+      vocabulary_s = vmap::examples::seconds_since(t0);
+      vocabulary_note = "vocabulary learned on the sequence itself";
+    }
+    char buf[120];
+    std::snprintf(buf, sizeof buf, " (%zu words, %.2f s)", vocabulary->size(), vocabulary_s);
+    vocabulary_note += buf;
+  }
+
+  ex::Progress progress("vmap loops", features.frames.size());
+  std::size_t done = 0;
+  vmap::examples::LoopRun result =
+      vmap::examples::run_loops(c, features, labels, vocabulary, [&](const vmap::LoopResult& r) {
+        progress.update(++done);
+        if (!a.verbose) return;
+        std::fprintf(stderr, "frame %3zu  candidates %3zu  verified %3zu  best %4s  inliers %4d  %s\n", r.frame,
+                     r.candidates, r.verifications, r.best ? std::to_string(*r.best).c_str() : "-", r.inliers,
+                     std::string(vmap::to_string(r.status)).c_str());
+      });
+  progress.done();
+  const std::size_t frames = result.results.size();
+  const double fps = result.seconds > 0 ? static_cast<double>(frames) / result.seconds : 0.0;
+
+  nlohmann::json loops = nlohmann::json::array();
+  for (const auto& r : result.results)
+    if (r.loop())
+      loops.push_back({{"query", r.frame}, {"match", *r.best}, {"inliers", r.inliers}, {"bow_score", r.bow_score},
+                       {"similarity", r.similarity}});
+  if (!gt) {
+    if (a.json) {
+      nlohmann::json j = {{"command", "loops"},
+                          {"input", ex::path_string(a.input)},
+                          {"options", ex::options_json(app)},
+                          {"frames", frames},
+                          {"skipped_frames", features.skipped},
+                          {"rank", a.rank},
+                          {"verifications", result.verifications},
+                          {"seconds", result.seconds},
+                          {"fps", fps},
+                          {"min_inliers", c.detector.min_inliers},
+                          {"loops", loops}};
+      ex::print_json(j);
+      return 0;
+    }
+    std::printf("frames %zu (%zu skipped), candidates %s%s%s; %zu verifications (%.1f per frame), %.2f s (%.1f frames/s)\n",
+                frames, features.skipped, a.rank.c_str(), vocabulary_note.empty() ? "" : ", ", vocabulary_note.c_str(),
+                result.verifications,
+                static_cast<double>(result.verifications) / static_cast<double>(std::max<std::size_t>(1, frames)),
+                result.seconds, fps);
+    std::printf("%zu loops (inliers >= %d):\n", loops.size(), c.detector.min_inliers);
+    for (const auto& l : loops)
+      std::printf("  frame %4zu -> frame %4zu  inliers %4d  bow score %.3f\n", l["query"].get<std::size_t>(),
+                  l["match"].get<std::size_t>(), l["inliers"].get<int>(), l["bow_score"].get<double>());
+    return 0;
+  }
+
+  const auto s = vmap::examples::summarize(result, *gt, c.detector.min_inliers);
+  const auto agree = result.agreement(*gt, c.detector.window);
+
   std::vector<std::string> written;
-  if (!a.out.empty()) {
+  if (out_dir) {
     std::string csv = "threshold,true_positives,false_positives,precision,recall\n";
     char buf[160];
     for (const auto& p : s.curve) {
@@ -161,14 +242,15 @@ int run(LoopsArgs& a, const CLI::App& app) {
                     p.precision, p.recall);
       csv += buf;
     }
-    vmap::write_file_atomically(std::filesystem::path(a.out) / "pr.csv", csv);
+    vmap::write_file_atomically(out_dir->operator/("pr.csv"), csv);
     const std::filesystem::path p = std::filesystem::path(a.input).lexically_normal();
     char title[200];
-    std::snprintf(title, sizeof title, "%s, %s index: recall@100%%P %.3f, %zu verifications",
-                  (p.parent_path().filename() / p.filename()).string().c_str(), a.index.c_str(),
+    std::snprintf(title, sizeof title, "%s, %s: recall@100%%P %.3f, %zu verifications",
+                  (p.parent_path().filename() / p.filename()).string().c_str(), a.rank.c_str(),
                   s.at_full_precision.recall, s.verifications);
-    vmap::write_image_atomically(std::filesystem::path(a.out) / "pr.png",
-                                 vmap::examples::draw_pr_curves({{s.curve, "vmap " + a.index}}, title));
+    vmap::write_image_atomically(out_dir->operator/("pr.png"),
+                                 vmap::examples::draw_pr_curves({{s.curve, "vmap " + a.rank}}, title));
+    out_dir->commit();
     written = {"pr.csv", "pr.png"};
   }
 
@@ -188,8 +270,9 @@ int run(LoopsArgs& a, const CLI::App& app) {
                         {"recall_at_100_precision", ex::finite_or_null(s.at_full_precision.recall)},
                         {"verifications", s.verifications},
                         {"seconds", result.seconds},
-                        {"fps", result.seconds > 0 ? static_cast<double>(frames) / result.seconds : 0.0},
-                        {"index", a.index},
+                        {"fps", fps},
+                        {"rank", a.rank},
+                        {"top_k", c.detector.top_k},
                         {"min_inliers", c.detector.min_inliers},
                         {"threshold_at_100_precision", s.at_full_precision.true_positives > 0
                                                            ? nlohmann::json(s.at_full_precision.threshold)
@@ -202,13 +285,13 @@ int run(LoopsArgs& a, const CLI::App& app) {
                         {"loop_queries", agree.loop_queries},
                         {"loop_queries_with_equal_vector", agree.reachable_queries},
                         {"out", a.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(a.out))},
-                        {"files", written}};
+                        {"files", written},
+                        {"loops", loops}};
     ex::print_json(j);
     return 0;
   }
-  if (camera) std::printf("camera %s\n", camera->file.string().c_str());
   std::printf("frames %zu, query frames with a ground-truth loop %zu\n", s.frames, s.loops_gt);
-  if (c.detector.index == vmap::CandidateIndex::tree) {
+  if (uses_tree) {
     std::printf("labels (score >= %.2f, eq. 5 influence in [%.2f, %.2f]), large to small:\n",
                 static_cast<double>(c.detector.labels.min_score), c.influence.min_influence, c.influence.max_influence);
     for (const auto& l : result.influence)
@@ -222,7 +305,8 @@ int run(LoopsArgs& a, const CLI::App& app) {
                 agree.distinct_vectors, agree.leaf_pairs, agree.pairs, agree.max_reduction(), agree.reachable_queries,
                 agree.loop_queries);
   }
-  std::printf("index %s: %zu verifications (%.1f per frame), %.2f s (%.1f frames/s)%s\n", a.index.c_str(),
+  if (!vocabulary_note.empty()) std::printf("%s, top k %zu\n", vocabulary_note.c_str(), c.detector.top_k);
+  std::printf("candidates %s: %zu verifications (%.1f per frame), %.2f s (%.1f frames/s)%s\n", a.rank.c_str(),
               s.verifications,
               static_cast<double>(s.verifications) / static_cast<double>(std::max<std::size_t>(1, frames)),
               result.seconds, result.seconds > 0 ? static_cast<double>(frames) / result.seconds : 0.0,
@@ -258,8 +342,24 @@ std::function<int()> setup(CLI::App& app) {
       ->check(CLI::IsMember({"yolox", "nanodet", "fastestdet"}));
   app.add_option("--model", a->model, "ONNX model file of --detector");
   app.add_option("--names", a->names, "Class names, one a line (e.g. coco80.names): printed instead of label ids");
-  app.add_option("--index", a->index, "Candidates: tree (LFM-LCD) or all (every frame older than the window)")
-      ->check(CLI::IsMember({"tree", "all"}));
+  app.add_option("--rank,--index", a->rank,
+                 "Candidates: tree (LFM-LCD), tree_ranked (the tree's leaf ranked by bag of words, top k verified), "
+                 "bow (every older frame ranked, no labels) or all (every frame older than the window). Default: "
+                 "tree_ranked with labels, bow without")
+      ->check(CLI::IsMember({"tree", "tree_ranked", "bow", "all"}));
+  app.add_option("--top-k", d.top_k, "tree_ranked / bow: verify this many best-ranked candidates")
+      ->check(ex::count_in(1, 1000000));
+  app.add_option("--min-bow-score", d.min_bow_score, "tree_ranked / bow: do not verify candidates scoring below this")
+      ->check(ex::real_in(0.0, 1.0));
+  app.add_option("--temporal", d.temporal_consistency,
+                 "Accept a loop only when this many previous frames matched a nearby place (0: off)")
+      ->check(ex::count_in(0, 1000));
+  app.add_option("--vocabulary", a->vocabulary.file,
+                 "tree_ranked / bow: a vocabulary from `vmap vocabulary` (default: learn one on the sequence)");
+  app.add_option("--words", a->vocabulary.words, "Vocabulary learned here: at most this many words")
+      ->check(ex::count_in(2, 100000000));
+  app.add_option("--depth", a->vocabulary.depth, "Vocabulary learned here: depth L of the tree")
+      ->check(ex::count_in(1, 16));
   app.add_option("--window", d.window, "Frames this recent are never candidates")->check(ex::count_in(0, 1000000));
   app.add_option("--min-candidates", d.min_candidates, "m: backtrack up the tree until this many candidates")
       ->check(ex::count_in(1, 1000000));
@@ -279,7 +379,6 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--nfeatures", a->config.descriptor.features,
                  "Keypoint budget per image (ORB, SIFT; top-k for XFeat), at most " + std::to_string(ex::max_nfeatures))
       ->check(ex::count_in(1, ex::max_nfeatures));
-  app.add_option("--camera", a->camera, "Camera calibration file (YAML)");
   app.add_option("--out", a->out, "Folder for pr.csv (threshold, TP, FP, precision, recall) and pr.png (created if missing)");
   app.add_flag("--json", a->json, "Print the figures as one JSON object on stdout");
   app.add_flag("--verbose", a->verbose, "Print one line per frame to stderr (candidates, best, inliers, status)");
@@ -289,6 +388,6 @@ std::function<int()> setup(CLI::App& app) {
   };
 }
 
-const bool registered = vmap::cli::add_command({"loops", "Loop closure (LFM-LCD) evaluated against ground truth", setup});
+const bool registered = vmap::cli::add_command({"loops", "Loop closure: the loops of a sequence, evaluated with --gt", setup});
 
 }  // namespace

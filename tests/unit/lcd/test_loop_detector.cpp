@@ -14,6 +14,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <algorithm>
 #include <functional>
 #include <limits>
 #include <string>
@@ -21,13 +22,6 @@
 
 using vmap::Detection;
 using vmap::LoopStatus;
-
-// Every member of the shipped stack compiles (an unconstrained member with a broken
-// policy would otherwise compile silently until called).
-template class vmap::LoopDetector<vmap::PrecomputedDetections, vmap::OrbDescriptor, vmap::BruteForceMatcher,
-                                  vmap::FundamentalEstimator>;
-template class vmap::LoopDetector<vmap::FunctionDetector, vmap::OrbDescriptor, vmap::BruteForceMatcher,
-                                  vmap::FundamentalEstimator>;
 
 namespace {
 
@@ -70,12 +64,47 @@ std::vector<Detection> scripted_labels(int frame) {
   return d;
 }
 
-auto make_detector(vmap::CandidateIndex index) {
-  vmap::FunctionDetector scripted([frame = 0](const cv::Mat&) mutable { return scripted_labels(frame++); });
-  return vmap::LoopDetector(vmap::LabelSchema({10, 11, 12, 13}), std::move(scripted),
-                            vmap::OrbDescriptor({.features = 500}), vmap::BruteForceMatcher{},
-                            vmap::FundamentalEstimator({.seed = 7}),
-                            {.window = 3, .min_candidates = 1, .min_inliers = 40, .index = index});
+// A ranker whose bag of words is the frame's index and whose score of a pair is given
+// by the test: the detector's ranking logic, separated from any vocabulary.
+class ScriptedRanker {
+ public:
+  using Bow = std::size_t;
+  ScriptedRanker() = default;
+  explicit ScriptedRanker(std::function<double(std::size_t, std::size_t)> score) : score_(std::move(score)) {}
+  [[nodiscard]] bool ready() const { return static_cast<bool>(score_); }
+  [[nodiscard]] Bow describe(const vmap::Features&) const { return next_++; }
+  void add(std::size_t id, Bow bow) {
+    CHECK(id == bow);  // the detector adds frame j with the bag of words it described for j
+    indexed_.push_back(id);
+  }
+  [[nodiscard]] std::vector<vmap::RankedFrame> rank(Bow query, std::size_t n, const std::vector<std::size_t>* only) const {
+    std::vector<vmap::RankedFrame> out;
+    for (std::size_t id : only ? *only : indexed_) out.push_back({id, score_(query, id)});
+    std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.score > b.score; });
+    if (out.size() > n) out.resize(n);
+    return out;
+  }
+  [[nodiscard]] std::size_t memory_bytes() const { return indexed_.size() * sizeof(std::size_t); }
+  [[nodiscard]] const std::vector<std::size_t>& indexed() const { return indexed_; }
+
+ private:
+  std::function<double(std::size_t, std::size_t)> score_;
+  mutable std::size_t next_ = 0;
+  std::vector<std::size_t> indexed_;
+};
+static_assert(vmap::PlaceRanking<ScriptedRanker>);
+
+// Scores the same place 1 and other places 0.1 (the first lap's frame k - places).
+double place_score(std::size_t a, std::size_t b) { return a % places == b % places ? 1.0 : 0.1; }
+
+using TestDetector =
+    vmap::LoopDetector<vmap::OrbDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator, ScriptedRanker>;
+
+TestDetector make_detector(vmap::CandidateIndex index, ScriptedRanker ranker = {}, std::size_t top_k = 3) {
+  return TestDetector(vmap::LabelSchema({10, 11, 12, 13}), vmap::OrbDescriptor({.features = 500}),
+                      vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}),
+                      {.window = 3, .min_candidates = 1, .min_inliers = 40, .index = index, .top_k = top_k},
+                      std::move(ranker));
 }
 
 }  // namespace
@@ -83,11 +112,12 @@ auto make_detector(vmap::CandidateIndex index) {
 TEST_CASE("loop detector: two laps with a scripted detector find exactly the known loops") {
   auto tree = make_detector(vmap::CandidateIndex::tree);
   auto brute = make_detector(vmap::CandidateIndex::brute_force);
+  vmap::FunctionDetector scripted([frame = 0](const cv::Mat&) mutable { return scripted_labels(frame++); });
   std::size_t brute_verifications = 0;
   for (int k = 0; k < 2 * places; ++k) {
     const cv::Mat img = lap_frame(k);
-    const vmap::LoopResult r = tree.push(img);
-    const vmap::LoopResult b = brute.push(img);
+    const vmap::LoopResult r = tree.push(img, scripted);
+    const vmap::LoopResult b = brute.push(img, scripted_labels(k));
     CAPTURE(k);
     CAPTURE(r.inliers);
     CHECK(r.frame == static_cast<std::size_t>(k));
@@ -122,21 +152,164 @@ TEST_CASE("loop detector: two laps with a scripted detector find exactly the kno
   CHECK(brute.verifications() == brute_verifications);
 }
 
+TEST_CASE("loop detector: tree_ranked and bow verify only the top k, and say where each candidate stopped") {
+  // Two laps; the ranker scores the same place 1 and others 0.1.
+  auto ranked = make_detector(vmap::CandidateIndex::tree_ranked, ScriptedRanker(place_score), 1);
+  auto bow = make_detector(vmap::CandidateIndex::bow, ScriptedRanker(place_score), 2);
+  for (int k = 0; k < 2 * places; ++k) {
+    const cv::Mat img = lap_frame(k);
+    const vmap::LoopResult t = ranked.push(img, scripted_labels(k));
+    const vmap::LoopResult w = bow.push(img, scripted_labels(k));
+    CAPTURE(k);
+    if (k <= 3) {
+      CHECK(t.status == LoopStatus::no_candidates);
+      CHECK(w.status == LoopStatus::no_candidates);
+      CHECK(w.verifications == 0);
+      continue;
+    }
+    // bow: every indexed frame is a candidate, two verified.
+    CHECK(w.candidates == static_cast<std::size_t>(k - 3));
+    CHECK(w.verifications == std::min<std::size_t>(2, w.candidates));
+    CHECK(w.not_in_top_k == w.candidates - w.verifications);
+    CHECK(w.considered.size() == w.verifications);
+    // tree_ranked: the leaf (backtracked to m = 1), one verified.
+    CHECK(t.verifications == 1);
+    CHECK(t.not_in_top_k == t.candidates - 1);
+    if (k >= places) {
+      for (const vmap::LoopResult& r : {t, w}) {
+        CHECK(r.status == LoopStatus::loop_found);
+        REQUIRE(r.best.has_value());
+        CHECK(*r.best == static_cast<std::size_t>(k - places));
+        CHECK(r.bow_score == 1.0);
+        CHECK(r.considered.front().frame == *r.best);  // the best-ranked comes first
+        CHECK(r.considered.front().stage == vmap::CandidateStage::chosen);
+      }
+    } else {
+      CHECK_FALSE(w.loop());
+      CHECK_FALSE(t.loop());
+    }
+  }
+  // The ranker holds exactly the frames older than the window.
+  CHECK(bow.ranker().indexed().size() == 2 * places - 4);
+  CHECK(bow.verifications() < 2 * 2 * places);
+}
+
+TEST_CASE("loop detector: a minimum bag-of-words score stops candidates before verification") {
+  auto d = TestDetector(vmap::LabelSchema{}, vmap::OrbDescriptor({.features = 500}), vmap::BruteForceMatcher{},
+                        vmap::FundamentalEstimator({.seed = 7}),
+                        {.window = 3, .min_inliers = 40, .index = vmap::CandidateIndex::bow, .top_k = 2,
+                         .min_bow_score = 0.5},
+                        ScriptedRanker(place_score));
+  for (int k = 0; k < 2 * places; ++k) {
+    const vmap::LoopResult r = d.push(lap_frame(k), std::vector<Detection>{});
+    CAPTURE(k);
+    if (k <= 3) continue;
+    if (k < places) {
+      // Every older frame is another place (score 0.1): nothing is verified.
+      CHECK(r.status == LoopStatus::below_bow_score);
+      CHECK(r.verifications == 0);
+      CHECK(r.below_bow_score == std::min<std::size_t>(2, r.candidates));
+      for (const auto& c : r.considered) CHECK(c.stage == vmap::CandidateStage::below_bow_score);
+    } else {
+      CHECK(r.loop());
+      CHECK(r.verifications == 1);  // the revisit; the second-ranked is below the floor
+      CHECK(r.below_bow_score == 1);
+    }
+  }
+  CHECK(vmap::to_string(LoopStatus::below_bow_score) == "candidates, all below the bag-of-words score");
+  CHECK(vmap::to_string(vmap::CandidateStage::not_in_top_k) == "not in top k");
+}
+
+TEST_CASE("loop detector: temporal consistency holds a loop until k earlier frames agree on the place") {
+  auto d = TestDetector(vmap::LabelSchema{}, vmap::OrbDescriptor({.features = 500}), vmap::BruteForceMatcher{},
+                        vmap::FundamentalEstimator({.seed = 7}),
+                        {.window = 3, .min_inliers = 40, .index = vmap::CandidateIndex::bow, .top_k = 1,
+                         .temporal_consistency = 2, .temporal_tolerance = 1},
+                        ScriptedRanker(place_score));
+  for (int k = 0; k < 2 * places; ++k) {
+    const vmap::LoopResult r = d.push(lap_frame(k), std::vector<Detection>{});
+    CAPTURE(k);
+    if (k < places) {
+      CHECK_FALSE(r.loop());
+      continue;
+    }
+    REQUIRE(r.best.has_value());
+    CHECK(*r.best == static_cast<std::size_t>(k - places));
+    // Every frame of the revisit extends the island; its first two frames have fewer
+    // than two consistent predecessors.
+    CHECK(r.consistent_queries == static_cast<std::size_t>(k - places));
+    CHECK(r.status == (k - places >= 2 ? LoopStatus::loop_found : LoopStatus::not_consistent));
+  }
+}
+
+TEST_CASE("loop detector: pre-extracted features give the same results as the detector extracting them") {
+  auto pushed = make_detector(vmap::CandidateIndex::tree_ranked, ScriptedRanker(place_score));
+  auto added = make_detector(vmap::CandidateIndex::tree_ranked, ScriptedRanker(place_score));
+  vmap::OrbDescriptor orb({.features = 500});
+  for (int k = 0; k < 2 * places; ++k) {
+    const cv::Mat img = lap_frame(k);
+    const vmap::LoopResult a = pushed.push(img, scripted_labels(k));
+    const vmap::LoopResult b = added.add(orb.extract(img), scripted_labels(k));
+    CAPTURE(k);
+    CHECK(a.status == b.status);
+    CHECK(a.best == b.best);
+    CHECK(a.inliers == b.inliers);
+    CHECK(a.candidates == b.candidates);
+    CHECK(a.verifications == b.verifications);
+    CHECK(a.labels == b.labels);
+  }
+  CHECK(pushed.memory_bytes() == added.memory_bytes());
+  CHECK(added.memory_bytes() > 0);
+}
+
+// A similarity that halves the inlier ratio: the threshold sees the policy's value.
+struct HalfRatio {
+  [[nodiscard]] double operator()(const vmap::Features& a, const vmap::Features& b, const vmap::Verification& v) const {
+    return 0.5 * vmap::InlierRatio{}(a, b, v);
+  }
+  [[nodiscard]] double upper_bound(const vmap::Features& a, const vmap::Features& b, int raw) const {
+    return 0.5 * vmap::InlierRatio{}.upper_bound(a, b, raw);
+  }
+};
+
+TEST_CASE("loop detector: the Similarity policy is the one given") {
+  const vmap::LoopDetectorOptions o{.window = 3, .min_candidates = 1, .min_inliers = 0, .index = vmap::CandidateIndex::tree};
+  vmap::LoopDetector<vmap::OrbDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator, ScriptedRanker> eq5(
+      vmap::LabelSchema({10, 11, 12, 13}), vmap::OrbDescriptor({.features = 500}), vmap::BruteForceMatcher{},
+      vmap::FundamentalEstimator({.seed = 7}), o);
+  vmap::LoopDetector<vmap::OrbDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator, ScriptedRanker,
+                     HalfRatio>
+      half(vmap::LabelSchema({10, 11, 12, 13}), vmap::OrbDescriptor({.features = 500}), vmap::BruteForceMatcher{},
+           vmap::FundamentalEstimator({.seed = 7}), o);
+  for (int k = 0; k < places + 1; ++k) {
+    const vmap::LoopResult a = eq5.push(lap_frame(k), scripted_labels(k));
+    const vmap::LoopResult b = half.push(lap_frame(k), scripted_labels(k));
+    if (k < places) continue;
+    REQUIRE(a.loop());
+    CHECK(a.similarity > 0.05);
+    CHECK(b.similarity == doctest::Approx(0.5 * a.similarity));
+  }
+}
+
 TEST_CASE("loop detector: bad options and inputs are an Error; status strings print") {
-  CHECK_THROWS_AS(vmap::LoopDetector(vmap::LabelSchema({1}), vmap::PrecomputedDetections{}, vmap::OrbDescriptor{},
-                                     vmap::BruteForceMatcher{}, vmap::FundamentalEstimator{}, {.min_inliers = -1}),
-                  vmap::Error);
-  CHECK_THROWS_AS(vmap::LoopDetector(vmap::LabelSchema({1}), vmap::PrecomputedDetections{}, vmap::OrbDescriptor{},
-                                     vmap::BruteForceMatcher{}, vmap::FundamentalEstimator{},
-                                     {.labels = {.min_score = 1.5f}}),
-                  vmap::Error);
-  auto d = vmap::LoopDetector(vmap::LabelSchema({1}), vmap::PrecomputedDetections{}, vmap::OrbDescriptor{},
-                              vmap::BruteForceMatcher{}, vmap::FundamentalEstimator{});
-  CHECK_THROWS_AS((void)d.push(cv::Mat(), {}), vmap::Error);
+  const auto make = [](const vmap::LoopDetectorOptions& o, ScriptedRanker r = {}) {
+    return TestDetector(vmap::LabelSchema({1}), vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                        vmap::FundamentalEstimator{}, o, std::move(r));
+  };
+  CHECK_THROWS_AS(make({.min_inliers = -1, .index = vmap::CandidateIndex::tree}), vmap::Error);
+  CHECK_THROWS_AS(make({.labels = {.min_score = 1.5f}, .index = vmap::CandidateIndex::tree}), vmap::Error);
+  CHECK_THROWS_AS(make({.index = vmap::CandidateIndex::tree, .min_bow_score = -1}), vmap::Error);
+  // A ranked source without a vocabulary, or with top_k 0.
+  CHECK_THROWS_WITH_AS(make({}), doctest::Contains("needs a vocabulary"), vmap::Error);
+  CHECK_THROWS_AS(make({.index = vmap::CandidateIndex::bow}), vmap::Error);
+  CHECK_THROWS_AS(make({.index = vmap::CandidateIndex::bow, .top_k = 0}, ScriptedRanker(place_score)), vmap::Error);
+  auto d = make({.index = vmap::CandidateIndex::tree});
+  CHECK_THROWS_AS((void)d.push(cv::Mat(), std::vector<Detection>{}), vmap::Error);
   CHECK_THROWS_AS((void)d.push(place_image(0), {{1, std::numeric_limits<float>::quiet_NaN(), cv::Rect2f()}}),
                   vmap::Error);
   CHECK(vmap::to_string(LoopStatus::below_threshold) == "candidates, too few inliers");
   CHECK(vmap::to_string(LoopStatus::loop_found) == "loop found");
+  CHECK(vmap::to_string(vmap::CandidateIndex::tree_ranked) == "tree_ranked");
 }
 
 TEST_SUITE("data") {
@@ -146,15 +319,15 @@ TEST_SUITE("data") {
     // and verification stack alone.
     const auto gt = vmap::LoopGroundTruth::load(vmap::test::data_path("rtabmap_loop/gt_loop_matrix_84x84.txt"), 84);
     const std::vector<std::size_t> frames = {0, 1, 2, 3, 20, 41};
-    auto d = vmap::LoopDetector(vmap::LabelSchema{}, vmap::PrecomputedDetections{}, vmap::OrbDescriptor{},
-                                vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 1}),
-                                {.window = 0, .index = vmap::CandidateIndex::brute_force});
+    auto d = TestDetector(vmap::LabelSchema{}, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                          vmap::FundamentalEstimator({.seed = 1}),
+                          {.window = 0, .index = vmap::CandidateIndex::brute_force});
     vmap::LoopResult last;
     for (std::size_t f : frames) {
       const cv::Mat img = cv::imread(vmap::test::data_path("rtabmap_loop/images/" + std::to_string(f + 1) + ".jpg").string(),
                                      cv::IMREAD_GRAYSCALE);
       REQUIRE_FALSE(img.empty());
-      last = d.push(img, {});
+      last = d.push(img, std::vector<Detection>{});
     }
     CHECK(last.verifications == 5);
     CHECK(last.status == LoopStatus::loop_found);
