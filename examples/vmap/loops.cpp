@@ -261,7 +261,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
                         {"input", ex::path_string(a.input)},
                         {"options", ex::options_json(app)},
                         {"frames", s.frames},
-                        {"skipped_frames", result.skipped},
+                        {"skipped_frames", features.skipped},
                         {"loops_gt", s.loops_gt},
                         {"true_positives", s.at_decision.true_positives},
                         {"false_positives", s.at_decision.false_positives},
@@ -382,10 +382,7 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--out", a->out, "Folder for pr.csv (threshold, TP, FP, precision, recall) and pr.png (created if missing)");
   app.add_flag("--json", a->json, "Print the figures as one JSON object on stdout");
   app.add_flag("--verbose", a->verbose, "Print one line per frame to stderr (candidates, best, inliers, status)");
-  return [a, &app] {
-    a->config.colour = !a->detector.empty();
-    return run(*a, app);
-  };
+  return [a, &app] { return run(*a, app); };
 }
 
 const bool registered = vmap::cli::add_command({"loops", "Loop closure: the loops of a sequence, evaluated with --gt", setup});

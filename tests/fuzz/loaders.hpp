@@ -16,9 +16,13 @@
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/lcd/binary_tree.hpp>
 #include <vmap/lcd/evaluation.hpp>
+#include <vmap/memory/visual_memory.hpp>
+#include <vmap/place/database.hpp>
+#include <vmap/place/vocabulary.hpp>
 #include <vmap/som/gcs.hpp>
 
 #include <cstddef>
+#include <cstdint>
 #include <string_view>
 
 #define VMAP_FUZZ_LOADER(name, body) \
@@ -33,4 +37,7 @@ VMAP_FUZZ_LOADER(poses, { (void)vmap::parse_camera_poses(bytes, vmap::guess_came
 VMAP_FUZZ_LOADER(ground_truth, { (void)vmap::LoopGroundTruth::parse(bytes, "fuzz"); })
 VMAP_FUZZ_LOADER(class_names, { (void)vmap::parse_class_names(bytes, "fuzz"); })
 VMAP_FUZZ_LOADER(image_header, { (void)vmap::image_header_size(bytes); })
+VMAP_FUZZ_LOADER(vocabulary, { (void)vmap::BinaryVocabularyTree::deserialize(bytes, "fuzz"); (void)vmap::FloatVocabularyTree::deserialize(bytes, "fuzz"); })
+VMAP_FUZZ_LOADER(place_database, { (void)vmap::PlaceDatabase<std::uint32_t>::deserialize(bytes, "fuzz"); })
+VMAP_FUZZ_LOADER(memory, { (void)vmap::OrbVisualMemory::deserialize(bytes, "fuzz"); })
 // clang-format on
