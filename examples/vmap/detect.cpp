@@ -96,7 +96,8 @@ int run_detect(const DetectArgs& a, const CLI::App& app) {
   if (!a.names.empty()) ex::check_input_file(a.names, "--names");
   inputs.push_back(a.model);
   if (!a.names.empty()) inputs.push_back(a.names);
-  if (!a.out.empty()) ex::prepare_output_dir(a.out, "--out", inputs, {"detections.txt"});
+  std::optional<ex::OutputFolder> out_dir;
+  if (!a.out.empty()) out_dir.emplace(a.out, "--out", inputs, std::vector<std::string>{"detections.txt"});
   const std::vector<std::string> names = a.names.empty() ? std::vector<std::string>{} : vmap::read_class_names(a.names);
   // Detections for detections.txt are stored unfiltered (down to the floor); the printed
   // and drawn ones use --score.
@@ -155,7 +156,7 @@ int run_detect(const DetectArgs& a, const CLI::App& app) {
     std::string drawn;
     if (a.draw) {
       drawn = draw_name(item->name, item->frame, used);
-      vmap::write_image_atomically(std::filesystem::path(a.out) / drawn, draw_detections(item->image, shown, names));
+      vmap::write_image_atomically((*out_dir) / drawn, draw_detections(item->image, shown, names));
       written.push_back(drawn);
     }
     if (a.json) {
@@ -187,7 +188,8 @@ int run_detect(const DetectArgs& a, const CLI::App& app) {
     const std::string header = "# vmap detect --detector " + a.detector + " --model " +
                                std::filesystem::path(a.model).filename().string() + ", scores >= " + floor +
                                "\n# frame label score x y w h\n# frames " + std::to_string(frames) + "\n";
-    vmap::write_file_atomically(std::filesystem::path(a.out) / "detections.txt", header + labels);
+    vmap::write_file_atomically((*out_dir) / "detections.txt", header + labels);
+    out_dir->commit();
     written.insert(written.begin(), "detections.txt");
   }
   if (a.json) {

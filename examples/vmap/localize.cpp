@@ -375,7 +375,8 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--query", s->query, "Query images (with --query-poses for their true poses)");
   app.add_option("--query-poses", s->query_poses, "True poses of the query images");
   app.add_flag("--every-other", s->every_other, "Train on the even frames of --train, localize the odd ones");
-  app.add_option("--neurons", s->neurons, "GCS cells (the paper: 100, 200, 300)")->check(ex::count_in(3, 100000));
+  app.add_option("--neurons", s->neurons, "GCS cells (the paper: 100, 200, 300), at most 5000 (training time grows with the square of the cells)")
+      ->check(ex::count_in(3, 5000));
   app.add_option("--lambda", s->lambda, "Insert a cell every lambda inputs")->check(ex::count_in(1, 1000000));
   app.add_option("--max-epochs", s->max_epochs, "Stop after this many epochs")->check(ex::count_in(1, 1000000));
   app.add_option("--histogram", s->histogram, "bow (bag of binary words) | grid (keypoint grid)")

@@ -58,10 +58,11 @@ std::function<int()> setup(CLI::App& app) {
     if (!a.out.empty()) ex::prepare_output_dir(a.out, "--out", {a.input}, {"sweep.csv"});
     auto src = vmap::FrameSource::open(a.input, ex::source_options(a, true));
     const auto estimator = ex::make_estimator(a.estimator, camera);
-    const vmap::SweepOptions so{
-        .taus = args->thresholds, .rule = ex::parse_rule(a.rule), .pipelined = !args->single_thread};
-    // The sweep runs inside the library without a per-frame callback: one line when it ends.
     ex::Progress progress("vmap sweep", src.total());
+    const vmap::SweepOptions so{.taus = args->thresholds,
+                                .rule = ex::parse_rule(a.rule),
+                                .pipelined = !args->single_thread,
+                                .on_frame = [&progress](std::size_t done) { progress.update(done); }};
     const vmap::SweepResult r = ex::with_descriptor(a.descriptor(), [&](auto descriptor) {
       const auto matcher = ex::matcher_for(descriptor);
       return vmap::sweep_thresholds(src, std::move(descriptor), matcher, estimator,
@@ -69,7 +70,6 @@ std::function<int()> setup(CLI::App& app) {
     });
     const double seconds = progress.seconds();
     const std::size_t skipped = src.skipped().size();
-    progress.update(r.frames);
     progress.done(std::to_string(r.rows.size()) + " thresholds, " + std::to_string(skipped) + " skipped");
     if (r.frames == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
     const double fps = seconds > 0 ? static_cast<double>(r.frames) / seconds : 0.0;

@@ -151,6 +151,7 @@ TEST_CASE("cli: numeric options are refused with the option's name") {
   usage_error({"localize", "--room", "--pan", "nan"}, "--pan: must be a finite number");
   usage_error({"localize", "--room", "--margin", "-1"}, "--margin: must be in (0, 2.99]");
   usage_error({"localize", "--room", "--neurons", "-5"}, "--neurons: must be >= 3");
+  usage_error({"localize", "--room", "--neurons", "100000", "--lambda", "1"}, "--neurons: must be <= 5000");
   usage_error({"build", sample, "--start", "10", "--end", "5"}, "--end: must be > --start");
   usage_error({"build", sample, "--features", "surf"}, "--features: unknown descriptor 'surf'");
   usage_error({"build", sample, "--features", "xfeat"}, "--features xfeat needs --model");

@@ -23,6 +23,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstddef>
+#include <functional>
 #include <cstdint>
 #include <exception>
 #include <string>
@@ -40,6 +41,9 @@ struct SweepOptions {
   bool skip_by_upper_bound = true;  ///< as SelectorOptions; never changes a row
   bool pipelined = true;            ///< decode + extract on a second thread
   bool parallel_pairs = true;       ///< score a frame's distinct pairs on two threads
+  /// Called on the calling thread after each frame with the number of frames done (a
+  /// progress line); empty: nothing is called.
+  std::function<void(std::size_t)> on_frame;
 };
 
 struct SweepRow {
@@ -241,6 +245,7 @@ template <Descriptor D, Matcher M, Estimator E, Similarity S>
     for (auto& s : selectors) s.push(PreparedFrame<std::size_t>{n, p.index, p.name, p.timestamp, {}});
     if (n > 0) cache.forget_before(n - 1);
     ++n;
+    if (options.on_frame) options.on_frame(n);
   };
   auto prepare = [&](const Frame& f) {
     detail::check(!f.image.empty(), "threshold sweep: frame " + std::to_string(f.index) + " is an empty image");
