@@ -43,7 +43,7 @@ struct SweepOptions {
   bool parallel_pairs = true;       ///< score a frame's distinct pairs on two threads
   /// Called on the calling thread after each frame with the number of frames done (a
   /// progress line); empty: nothing is called.
-  std::function<void(std::size_t)> on_frame;
+  std::function<void(std::size_t)> on_frame = {};
 };
 
 struct SweepRow {
