@@ -7,6 +7,7 @@
 #include <vmap/lcd/loop_detector.hpp>
 #include <vmap/matching/brute_force.hpp>
 
+#include "support/two_laps.hpp"
 #include "support/shared_data.hpp"
 
 #include <doctest/doctest.h>
@@ -27,31 +28,8 @@ namespace {
 
 constexpr int places = 8;
 
-// A textured "place": random filled shapes, distinct per seed.
-cv::Mat place_image(int place) {
-  cv::RNG rng(1000 + static_cast<std::uint64_t>(place));
-  cv::Mat img(240, 320, CV_8U, cv::Scalar(rng.uniform(40, 200)));
-  for (int k = 0; k < 70; ++k) {
-    const cv::Point c(rng.uniform(0, 320), rng.uniform(0, 240));
-    const cv::Scalar colour(rng.uniform(0, 256));
-    if (k % 2 == 0)
-      cv::circle(img, c, rng.uniform(4, 25), colour, cv::FILLED);
-    else
-      cv::rectangle(img, cv::Rect(c, cv::Size(rng.uniform(6, 40), rng.uniform(6, 40))), colour, cv::FILLED);
-  }
-  return img;
-}
-
-// Frame k of two laps: place k % places, seen from a slightly different position on the
-// second lap (a shift and a small rotation).
-cv::Mat lap_frame(int k) {
-  const cv::Mat base = place_image(k % places);
-  if (k < places) return base;
-  const cv::Mat warp = cv::getRotationMatrix2D(cv::Point2f(160, 120), 4.0, 1.03);
-  cv::Mat out;
-  cv::warpAffine(base, out, warp, base.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
-  return out;
-}
+cv::Mat place_image(int place) { return vmap::test::place_image(1000 + static_cast<std::uint64_t>(place)); }
+cv::Mat lap_frame(int k) { return vmap::test::lap_frame(k, places, 1000); }
 
 // The scripted detector: place p shows the labels of the bits of p + 1 among {10, 11, 12, 13},
 // so every place has its own label vector.
