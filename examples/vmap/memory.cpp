@@ -3,6 +3,7 @@
 // continues the memory in M after the last frame it saw; `localize M IMAGE...` answers
 // the key image each query matches (verified F-matrix, inliers, pose when known);
 // `info M` lists the key images and loop edges. --json prints the answers as JSON.
+#include "common/cli_support.hpp"
 #include "vmap/cli.hpp"
 
 #include <vmap/memory/visual_memory.hpp>
@@ -20,6 +21,8 @@
 #include <vector>
 
 namespace {
+
+namespace ex = vmap::examples;
 
 struct MemoryArgs {
   std::string input, out, memory, vocabulary;
@@ -147,14 +150,15 @@ std::function<int()> setup(CLI::App& app) {
   app.require_subcommand(1);
   auto* b = app.add_subcommand("build", "Stream a sequence into a memory file (or --resume one)");
   b->add_option("input", a->input, "Video, image folder, image list or TUM rgb.txt")->required();
-  b->add_option("--out", a->out, "Memory file written (read first with --resume)")->required();
-  b->add_flag("--resume", a->resume, "Continue the memory in --out after the last frame it saw (its options are kept)");
-  b->add_option("--tau", a->tau, "Key-image threshold tau (eq. 6)")->check(CLI::Range(0.0, 1.0));
+  b->add_option("--memory", a->out, "Memory file written (read first with --resume)")->required();
+  b->add_flag("--resume", a->resume, "Continue the memory in --memory after the last frame it saw (its options are kept)");
+  b->add_option("--threshold,--tau", a->tau, "Similarity threshold tau: a new key image when S < tau (eq. 6)")
+      ->check(ex::real_in(0.0, 1.0, true));
   b->add_option("--images", a->storage, "Key image pixels saved")->check(CLI::IsMember({"none", "png", "jpeg"}));
   b->add_option("--vocabulary", a->vocabulary, "Vocabulary file (vmap vocabulary); default: learned online");
-  b->add_option("--start", a->start, "First frame index read");
-  b->add_option("--end", a->end, "One past the last frame index read (0: all)");
-  b->add_option("--stride", a->stride, "Read every n-th frame")->check(CLI::PositiveNumber);
+  b->add_option("--start", a->start, "First frame index read")->check(ex::count_in(0, ex::max_frame_index));
+  b->add_option("--end", a->end, "One past the last frame index read (0: all)")->check(ex::count_in(0, ex::max_frame_index));
+  b->add_option("--stride", a->stride, "Read every n-th frame")->check(ex::count_in(1, ex::max_frame_index));
   b->add_flag("--json", a->json, "Print the result as JSON");
   auto* l = app.add_subcommand("localize", "The key image(s) each query image matches");
   l->add_option("memory", a->memory, "Memory file")->required();

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs every `vmap` command shown in README.md and examples/*.md, as written, and fails
 # when one exits non-zero. A command is a line inside a fenced code block that starts
-# with `vmap `, `$ vmap ` or `build/release/examples/vmap ` (continued over lines ending
+# with `vmap `, `$ vmap ` or `build/{release,test}/examples/vmap ` (continued over lines ending
 # in a backslash); synopsis lines (with `[`, `INPUT` or `IMAGE...`) are not commands.
 # The program is replaced by the built one; the commands run in a scratch folder laid
 # out like the repository (examples/ and ../shared reached through links), so their
@@ -30,11 +30,11 @@ extract() {
       mark = ""
       if (line ~ /#[ \t]*by hand/) mark = "HAND:"
       else if (line ~ /#[ \t]*fails/) mark = "FAILS:"
-      if (line !~ /^[ \t]*(vmap|build\/release\/examples\/vmap) (build|sweep|match|detect|loops|localize|vocabulary|memory) /) next
+      if (line !~ /^[ \t]*(vmap|build\/(release|test)\/examples\/vmap) (build|sweep|match|detect|loops|localize|vocabulary|memory) /) next
       if (line ~ /\[|INPUT|IMAGE\.\.\./) next
       sub(/[ \t]+#.*$/, "", line)
       gsub(/[ \t]+/, " ", line)
-      sub(/^[ \t]*(vmap|build\/release\/examples\/vmap) /, "", line)
+      sub(/^[ \t]*(vmap|build\/(release|test)\/examples\/vmap) /, "", line)
       print FILENAME "\t" mark line
     }' "$@"
 }

@@ -22,7 +22,10 @@ namespace vmap::detail {
 inline std::string shape_string(const cv::Mat& m) {
   if (m.empty()) return "empty";
   std::string s;
-  for (int d = 0; d < m.dims; ++d) s += (d ? "x" : "") + std::to_string(m.size[d]);
+  for (int d = 0; d < m.dims; ++d) {  // appended piecewise: GCC 12 -O3 warns falsely on "x" + to_string
+    if (d) s += 'x';
+    s += std::to_string(m.size[d]);
+  }
   return s;
 }
 
