@@ -414,7 +414,7 @@ class VocabularyTree {
     v.centres_.create(static_cast<int>(n), v.cols_, Traits::descriptor_type);
     if constexpr (std::is_same_v<value_type, float>) {
       for (std::size_t i = 0; i < n; ++i) {
-        float* p = v.centres_.ptr<float>(static_cast<int>(i));
+        float* p = v.centres_.template ptr<float>(static_cast<int>(i));
         r.f32s(p, static_cast<std::uint64_t>(v.cols_), "centres");
         for (int c = 0; c < v.cols_; ++c)
           if (!std::isfinite(p[c])) r.corrupt("a centre value is not finite");
