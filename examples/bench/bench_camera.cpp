@@ -30,31 +30,6 @@ double ms_since(clock_type::time_point t) {
   return std::chrono::duration<double, std::milli>(clock_type::now() - t).count();
 }
 
-/// The pose implied by an F of ideal pixels: E = K^T F K, recoverPose on the inliers.
-vmap::RelativePose pose_of_f(const vmap::test::LensScene& s, const vmap::Camera& cam, const vmap::Verification& v,
-                             bool points_are_ideal) {
-  std::vector<cv::Point2f> pa, pb;
-  for (std::size_t k = 0; k < s.matches.size(); ++k)
-    if (v.inlier_mask[k]) {
-      pa.push_back(s.a.keypoints[k].pt);
-      pb.push_back(s.b.keypoints[k].pt);
-    }
-  vmap::Camera pin = cam;
-  if (points_are_ideal) {
-    pin.lens = vmap::LensModel::pinhole;
-    pin.distortion.clear();
-  }
-  const auto na = vmap::normalize_points(pin, pa);
-  const auto nb = vmap::normalize_points(pin, pb);
-  cv::Mat R, t;
-  cv::recoverPose(cv::Mat(cam.K().t() * v.model * cam.K()), na, nb, cv::Mat::eye(3, 3, CV_64F), R, t);
-  vmap::RelativePose p;
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) p.rotation(r, c) = R.at<double>(r, c);
-    p.translation[r] = t.at<double>(r, 0);
-  }
-  return p;
-}
 
 struct Column {
   double inliers = 0, wrong = 0, rot = 0, dir = 0;
@@ -81,11 +56,11 @@ void synthetic(const vmap::Camera& cam, int seeds) {
     const auto ref = vmap::test::make_lens_scene(cam, o, true);
     truth += real.true_inliers;
     const auto vi = f.verify(ref.a, ref.b, ref.matches);
-    const auto pi = pose_of_f(ref, cam, vi, true);
+    const auto pi = vmap::test::pose_from_f(ref, cam, vi, true);
     ideal.add(ref, vi, &pi);
     raw.add(real, f.verify(real.a, real.b, real.matches), nullptr);
     const auto vc = cf.verify(real.a, real.b, real.matches);
-    const auto pc = pose_of_f(real, cam, vc, false);
+    const auto pc = vmap::test::pose_from_f(real, cam, vc, false);
     cal.add(real, vc, &pc);
     const auto ve = ee.verify(real.a, real.b, real.matches);
     ess.add(real, ve, ve.relative_pose ? &*ve.relative_pose : nullptr);

@@ -7,6 +7,7 @@
 // examples/bench/bench_camera.cpp.
 
 #include <vmap/core/features.hpp>
+#include <vmap/core/verification.hpp>
 #include <vmap/geometry/camera.hpp>
 
 #include <opencv2/calib3d.hpp>
@@ -153,6 +154,31 @@ inline double rotation_error_deg(const cv::Matx33d& R_est, const cv::Matx33d& R_
 inline double direction_error_deg(const cv::Vec3d& t_est, const cv::Vec3d& t_true) {
   const double c = std::clamp(t_est.dot(t_true) / (cv::norm(t_est) * cv::norm(t_true)), -1.0, 1.0);
   return std::acos(c) * 180.0 / CV_PI;
+}
+
+/// The pose implied by an F of ideal pixels: E = K^T F K, recoverPose on the inliers.
+inline RelativePose pose_from_f(const LensScene& s, const Camera& cam, const Verification& v, bool points_are_ideal) {
+  std::vector<cv::Point2f> pa, pb;
+  for (std::size_t k = 0; k < s.matches.size(); ++k)
+    if (v.inlier_mask[k]) {
+      pa.push_back(s.a.keypoints[k].pt);
+      pb.push_back(s.b.keypoints[k].pt);
+    }
+  Camera pin = cam;
+  if (points_are_ideal) {
+    pin.lens = LensModel::pinhole;
+    pin.distortion.clear();
+  }
+  const auto na = normalize_points(pin, pa);
+  const auto nb = normalize_points(pin, pb);
+  cv::Mat R, t;
+  cv::recoverPose(cv::Mat(cam.K().t() * v.model * cam.K()), na, nb, cv::Mat::eye(3, 3, CV_64F), R, t);
+  RelativePose p;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) p.rotation(r, c) = R.at<double>(r, c);
+    p.translation[r] = t.at<double>(r, 0);
+  }
+  return p;
 }
 
 }  // namespace vmap::test

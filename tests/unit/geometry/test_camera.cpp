@@ -43,29 +43,6 @@ Tally tally(const LensScene& s, const vmap::Verification& v) {
   return t;
 }
 
-/// The relative pose implied by F on ideal pixels (E = K^T F K), through recoverPose on
-/// the inliers' normalised points.
-vmap::RelativePose pose_from_f(const LensScene& s, const vmap::Camera& cam, const vmap::Verification& v, bool ideal_points) {
-  std::vector<cv::Point2f> pa, pb;
-  for (std::size_t k = 0; k < s.matches.size(); ++k)
-    if (v.inlier_mask[k]) {
-      pa.push_back(s.a.keypoints[k].pt);
-      pb.push_back(s.b.keypoints[k].pt);
-    }
-  vmap::Camera pin = cam;
-  if (ideal_points) pin.distortion.clear(), pin.lens = vmap::LensModel::pinhole;
-  const auto na = vmap::normalize_points(pin, pa);
-  const auto nb = vmap::normalize_points(pin, pb);
-  const cv::Matx33d E = cam.K().t() * v.model * cam.K();
-  cv::Mat R, t;
-  cv::recoverPose(cv::Mat(E), na, nb, cv::Mat::eye(3, 3, CV_64F), R, t);
-  vmap::RelativePose p;
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) p.rotation(r, c) = R.at<double>(r, c);
-    p.translation[r] = t.at<double>(r, 0);
-  }
-  return p;
-}
 
 struct Run {
   int inliers = 0;
@@ -82,7 +59,7 @@ Run run_f(const LensScene& s, const vmap::Camera& cam, bool with_camera, bool id
   r.inliers = v.inliers;
   r.t = tally(s, v);
   if (with_camera || ideal_points) {
-    const auto p = pose_from_f(s, cam, v, ideal_points);
+    const auto p = vmap::test::pose_from_f(s, cam, v, ideal_points);
     r.rot = vmap::test::rotation_error_deg(p.rotation, s.R);
     r.dir = vmap::test::direction_error_deg(p.translation, s.t);
   }
