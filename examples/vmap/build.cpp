@@ -1,9 +1,13 @@
 // `vmap build INPUT`: key images of a video (García-Pintos et al. 2023, Algorithm 1 /
 // eq. 6), the map's quality (eq. 7), and with --out the map file, a contact sheet of the
 // key images and the verified matches of the first and of the weakest key-image pair.
+// With --memory DIR|FILE the frames go into a visual memory (include/vmap/memory: key
+// images, place database, loop edges) saved to FILE or DIR/memory.vmem, at the end and
+// every --save-every frames; --resume continues that memory after its last frame.
 #include "common/cli_support.hpp"
 #include "common/draw.hpp"
 #include "common/keyframe_cli.hpp"
+#include "common/memory_cli.hpp"
 #include "common/policies.hpp"
 #include "vmap/cli.hpp"
 
@@ -23,6 +27,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -35,14 +40,13 @@ struct BuildArgs {
   ex::KeyframeArgs common;
   double threshold = 0.3;
   bool single_thread = false;
+  std::string memory;  // --memory DIR|FILE; empty: no memory
+  bool resume = false;
+  std::size_t save_every = 0;
+  std::string images = "none";
+  std::string vocabulary;
+  std::size_t vocabulary_after = vmap::MemoryOptions{}.vocabulary_after;
 };
-
-std::optional<std::size_t> expected_frames(const vmap::FrameSource& src, const ex::KeyframeArgs& a) {
-  const auto total = src.total();
-  if (!total) return std::nullopt;
-  const std::size_t end = a.end > 0 ? std::min(a.end, *total) : *total;
-  return end > a.start ? (end - a.start + a.stride - 1) / a.stride : 0;
-}
 
 // The human table goes to stdout, or to stderr when --json owns stdout.
 void print_table(std::FILE* out, const vmap::VisualMap& map) {
@@ -74,6 +78,29 @@ void colour_key_images(vmap::VisualMap& map, const vmap::FrameSource& src) {
     cv::Mat colour = cv::imread(paths.at(k.frame_index).string(), cv::IMREAD_COLOR);
     if (!colour.empty()) k.image = colour;
   }
+}
+
+/// The key images' pixels for the pictures of a memory run, whose frames were decoded in
+/// grey and whose pixels are kept only with --images png|jpeg: image files are read
+/// again in colour, a video is decoded again up to its last key image, and a live stream
+/// (which cannot be read again) keeps the memory's own pixels.
+void key_pixels_for_pictures(vmap::VisualMap& map, const vmap::FrameSource& src, const std::string& input) {
+  if (src.kind() == vmap::SourceKind::video && !map.keys.empty()) {
+    std::map<std::size_t, vmap::KeyImage*> wanted;
+    for (auto& k : map.keys) wanted[k.frame_index] = &k;
+    vmap::FrameSourceOptions o;
+    o.end = map.keys.back().frame_index + 1;
+    o.grey = false;
+    auto again = vmap::FrameSource::open(input, o);
+    while (auto f = again.next())
+      if (const auto it = wanted.find(f->index); it != wanted.end()) it->second->image = f->image;
+  } else {
+    colour_key_images(map, src);
+  }
+  for (std::size_t k = 0; k < map.keys.size(); ++k)
+    if (map.keys[k].image.empty())
+      vmap::detail::fail("--out: no pixels of key image " + std::to_string(k + 1) + " (frame " +
+                         std::to_string(map.keys[k].frame_index) + ", " + map.keys[k].name + ") for the pictures");
 }
 
 /// The lowest-S consecutive pair (the map's weakest link), index into map.pairs.
@@ -129,6 +156,167 @@ std::vector<std::string> write_outputs(const ex::OutputFolder& dir, const vmap::
   return written;
 }
 
+/// What a --memory run adds to the report.
+struct MemoryRun {
+  std::filesystem::path file;
+  bool resumed = false;
+  ex::StreamResult stream;
+  std::size_t loops = 0;  ///< loop edges in the whole memory
+  std::optional<std::size_t> last_frame;
+  std::uintmax_t bytes = 0;
+};
+
+/// The key images' outputs (--out), the JSON or the table, for a plain or a memory run.
+/// `frames_read` is what this run read (a resumed memory holds more).
+template <class Selector>
+int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& map, Selector& sel,
+           const vmap::FrameSource& src, std::size_t frames_read, double seconds,
+           std::optional<ex::OutputFolder>& out_dir, const std::optional<ex::CameraOption>& camera,
+           const std::optional<MemoryRun>& memory) {
+  const auto& a = args.common;
+  const std::size_t skipped = src.skipped().size();
+  const auto st = map.stats();
+  const double fps = seconds > 0 ? static_cast<double>(frames_read) / seconds : 0.0;
+  std::vector<std::string> written;
+  if (out_dir) {
+    vmap::VisualMap coloured = map;
+    if (memory)
+      key_pixels_for_pictures(coloured, src, a.input);
+    else
+      colour_key_images(coloured, src);
+    written = write_outputs(*out_dir, coloured, sel);
+    out_dir->commit();
+  }
+  nlohmann::json memory_json = nullptr;
+  if (memory) {
+    nlohmann::json new_loops = nlohmann::json::array();
+    for (const auto& e : memory->stream.loops) new_loops.push_back({{"from", e.from}, {"to", e.link.key}});
+    memory_json = {{"file", ex::path_string(memory->file)},
+                   {"resumed", memory->resumed},
+                   {"pushed", memory->stream.pushed},
+                   {"saves", memory->stream.saves},
+                   {"loops", memory->loops},
+                   {"new_loops", new_loops},
+                   {"last_frame_index", memory->last_frame ? nlohmann::json(*memory->last_frame) : nlohmann::json(nullptr)},
+                   {"bytes", memory->bytes}};
+  }
+  if (a.json) {
+    nlohmann::json j{{"command", "build"},
+                     {"input", ex::path_string(a.input)},
+                     {"options", ex::options_json(app)},
+                     {"frames", st.frames},
+                     {"skipped_frames", skipped},
+                     {"key_images", st.key_images},
+                     {"min_matches", st.min_matches},
+                     {"max_matches", st.max_matches},
+                     {"mean_matches", ex::finite_or_null(st.mean_matches)},
+                     {"quality", ex::finite_or_null(st.quality)},
+                     {"threshold", memory ? sel.options().tau : args.threshold},
+                     {"seconds", seconds},
+                     {"fps", fps},
+                     {"key_frames", map.key_indices()},
+                     {"out", a.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(a.out))},
+                     {"files", written},
+                     {"memory", memory_json}};
+    ex::print_json(j);
+    return 0;
+  }
+  std::FILE* out = stdout;
+  const bool previous_rule = memory ? sel.options().rule == vmap::KeyRule::previous_frame : a.rule == "previous";
+  std::fprintf(out, "vmap build: %s (%s + mutual NN + %s, threshold %.2f, %s rule)%s\n\n", a.input.c_str(),
+               a.features.c_str(), a.estimator.c_str(), memory ? sel.options().tau : args.threshold,
+               previous_rule ? "eq. 6 previous-frame" : "Algorithm 1 current-frame",
+               camera ? (", camera " + camera->file.string()).c_str() : "");
+  print_table(out, map);
+  std::fprintf(out, "\n  frames            %zu\n", st.frames);
+  if (skipped > 0) std::fprintf(out, "  skipped frames    %zu (unreadable, listed above)\n", skipped);
+  std::fprintf(out, "  key images        %zu (%.1f %% of the frames)\n", st.key_images,
+               100.0 * static_cast<double>(st.key_images) / static_cast<double>(st.frames));
+  if (st.key_images >= 2)
+    std::fprintf(out, "  inliers K_i-K_i+1 min %d, max %d, mean %.1f\n", st.min_matches, st.max_matches,
+                 st.mean_matches);
+  if (std::isfinite(st.quality))
+    std::fprintf(out, "  quality (eq. 7)   %.3f\n", st.quality);
+  else
+    std::fprintf(out, "  quality (eq. 7)   not a finite number\n");
+  std::fprintf(out, "  time              %.2f s (%.1f frames/s)\n", seconds, fps);
+  if (memory)
+    std::fprintf(out, "  memory            %s: %s %zu frames, %zu loop edges (%zu new), last frame %zu, %ju bytes\n",
+                 memory->file.c_str(), memory->resumed ? "resumed with" : "pushed", memory->stream.pushed,
+                 memory->loops, memory->stream.loops.size(), memory->last_frame.value_or(0),
+                 static_cast<std::uintmax_t>(memory->bytes));
+  if (out_dir) {
+    std::string list;
+    for (const auto& f : written) list += (list.empty() ? "" : ", ") + f;
+    std::fprintf(out, "\n  wrote %s/{%s}\n", a.out.c_str(), list.c_str());
+  }
+  return 0;
+}
+
+std::optional<std::size_t> expected_frames(const vmap::FrameSource& src, const vmap::FrameSourceOptions& so) {
+  const auto total = src.total();
+  if (!total) return std::nullopt;
+  const std::size_t end = std::min(so.end, *total);
+  return end > so.start ? (end - so.start + so.stride - 1) / so.stride : 0;
+}
+
+/// `vmap build INPUT --memory DIR|FILE [--resume] [--save-every N] [--images none|png|jpeg]`.
+int build_memory(const BuildArgs& args, const CLI::App& app) {
+  namespace fs = std::filesystem;
+  const auto& a = args.common;
+  auto given = [&](const char* name) { return app.get_option(name)->count() > 0; };
+  // The file holds the memory's options, not its policies': every reader uses
+  // ex::CliMemory's stack, so the writer must too.
+  for (const char* o : {"--features", "--model", "--nfeatures", "--estimator", "--camera"})
+    if (given(o))
+      ex::usage_error(std::string("--memory and ") + o +
+                      " conflict (a memory file is built and read with ORB 1000 + mutual NN + MAGSAC++)");
+  if (given("--vocabulary") && given("--vocabulary-after"))
+    ex::usage_error("--vocabulary and --vocabulary-after conflict (the second is for a vocabulary learned online)");
+  const fs::path file = ex::memory_file(args.memory);
+  std::optional<ex::CliMemory> mem;
+  if (args.resume)
+    mem.emplace(
+        ex::memory_to_resume(file, app, {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after"}));
+  ex::prepare_memory_output(file, "--memory", {a.input});
+  std::optional<ex::OutputFolder> out_dir;
+  if (!a.out.empty()) {
+    // The --out folder is replaced as a whole when the run ends: a memory inside it would go.
+    if (ex::cli_detail::inside(ex::cli_detail::resolved(file), ex::cli_detail::resolved(a.out)))
+      ex::usage_error("--memory: '" + file.string() + "' is inside the --out folder '" + a.out +
+                      "', which is replaced as a whole (keep the memory elsewhere)");
+    out_dir.emplace(a.out, "--out", std::vector<fs::path>{a.input, file},
+                    std::vector<std::string>{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"});
+  }
+  auto so = ex::source_options(a, true);
+  if (args.resume)
+    so = ex::resume_range(*mem, so, file.string());
+  else
+    mem.emplace(ex::new_memory({.tau = args.threshold,
+                                .rule = ex::parse_rule(a.rule),
+                                .images = args.images,
+                                .vocabulary = args.vocabulary,
+                                .vocabulary_after = args.vocabulary_after}));
+  auto src = vmap::FrameSource::open(a.input, so);
+  if (out_dir && src.kind() == vmap::SourceKind::live && mem->options().images == vmap::ImageStorage::none)
+    ex::usage_error("--out with --memory on a live source needs the memory's pixels (--images png or jpeg): a live "
+                    "stream cannot be read again");
+  ex::Progress progress("vmap build", expected_frames(src, so));
+  MemoryRun run{file, args.resume, {}, 0, std::nullopt, 0};
+  run.stream = ex::stream_into(*mem, src, file, args.save_every, [&](const ex::CliMemory& m) {
+    progress.update(src.delivered(), std::to_string(m.key_images()) + " key images");
+  });
+  progress.done(std::to_string(mem->key_images()) + " key images, " + std::to_string(src.skipped().size()) + " skipped");
+  if (run.stream.pushed == 0)
+    vmap::detail::fail("'" + a.input + "' gave no frame in the requested range" +
+                       (args.resume ? " after the memory's last frame " + std::to_string(mem->last_frame_index().value_or(0)) : ""));
+  run.loops = mem->loops().size();
+  run.last_frame = mem->last_frame_index();
+  run.bytes = fs::file_size(file);
+  return report(args, app, mem->map(), mem->selector(), src, run.stream.pushed, run.stream.seconds, out_dir,
+                std::nullopt, run);
+}
+
 std::function<int()> setup(CLI::App& app) {
   auto args = std::make_shared<BuildArgs>();
   ex::add_keyframe_options(app, args->common);
@@ -137,10 +325,27 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--out", args->common.out,
                  "Folder for map.vmap, key_images.txt, contact_sheet.png and matches.png (created if missing)");
   app.add_flag("--single-thread", args->single_thread, "Decode and extract on the matching thread");
+  app.add_option("--memory", args->memory,
+                 "Keep a visual memory (key images, place database, loop edges) in FILE, or DIR/memory.vmem when "
+                 "DIR is a folder or ends in '/' (replaced atomically); --out is then optional");
+  app.add_flag("--resume", args->resume,
+               "Continue the --memory file after its last frame (give the same INPUT and --stride)");
+  app.add_option("--save-every", args->save_every, "With --memory: also save it every N frames (0: only at the end)")
+      ->check(ex::count_in(0, ex::max_frame_index));
+  app.add_option("--images", args->images, "With --memory: key image pixels kept in it: none, png or jpeg")
+      ->check(CLI::IsMember({"none", "png", "jpeg"}));
+  app.add_option("--vocabulary", args->vocabulary,
+                 "With --memory: its place vocabulary (vmap vocabulary); default: learned from the first key images");
+  app.add_option("--vocabulary-after", args->vocabulary_after,
+                 "With --memory and no --vocabulary: learn it from the first N key images (loops are searched from then on)")
+      ->check(ex::count_in(1, 1000000));
   return [args, &app]() -> int {
     const auto& a = args->common;
     ex::current_inputs() = {a.input};
     ex::check_range(a);
+    if (!args->memory.empty()) return build_memory(*args, app);
+    for (const char* o : {"--resume", "--save-every", "--images", "--vocabulary", "--vocabulary-after"})
+      if (app.get_option(o)->count() > 0) ex::usage_error(std::string(o) + " needs --memory DIR|FILE");
     const auto camera = ex::load_camera_option(a.camera);
     const bool pictures = !a.out.empty();
     // Everything the command line can get wrong is refused before the first frame.
@@ -149,10 +354,11 @@ std::function<int()> setup(CLI::App& app) {
                                   std::vector<std::string>{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"});
     const vmap::SelectorOptions so{.tau = args->threshold, .rule = ex::parse_rule(a.rule), .keep_images = pictures};
     const auto estimator = ex::make_estimator(a.estimator, camera);
-    auto src = vmap::FrameSource::open(a.input, ex::source_options(a, true));
+    const auto source = ex::source_options(a, true);
+    auto src = vmap::FrameSource::open(a.input, source);
     if (pictures && src.kind() == vmap::SourceKind::video)
       src = vmap::FrameSource::open(a.input, ex::source_options(a, false));
-    const auto expected = expected_frames(src, a);
+    const auto expected = expected_frames(src, source);
     return ex::with_descriptor(a.descriptor(), [&](auto descriptor) -> int {
       const auto matcher = ex::matcher_for(descriptor);
       vmap::KeyframeSelector sel(std::move(descriptor), matcher, estimator, vmap::InlierRatio{}, so);
@@ -161,63 +367,10 @@ std::function<int()> setup(CLI::App& app) {
         progress.update(sel.map().frames, std::to_string(sel.map().keys.size()) + " key images");
       });
       const double seconds = progress.seconds();
-      const vmap::VisualMap& map = sel.map();
-      const std::size_t skipped = src.skipped().size();
-      progress.done(std::to_string(map.keys.size()) + " key images, " + std::to_string(skipped) + " skipped");
-      if (map.frames == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
-      const auto st = map.stats();
-      const double fps = seconds > 0 ? static_cast<double>(map.frames) / seconds : 0.0;
-      std::vector<std::string> written;
-      if (pictures) {
-        vmap::VisualMap coloured = map;
-        colour_key_images(coloured, src);
-        written = write_outputs(*out_dir, coloured, sel);
-        out_dir->commit();
-      }
-      if (a.json) {
-        nlohmann::json j{{"command", "build"},
-                         {"input", ex::path_string(a.input)},
-                         {"options", ex::options_json(app)},
-                         {"frames", st.frames},
-                         {"skipped_frames", skipped},
-                         {"key_images", st.key_images},
-                         {"min_matches", st.min_matches},
-                         {"max_matches", st.max_matches},
-                         {"mean_matches", ex::finite_or_null(st.mean_matches)},
-                         {"quality", ex::finite_or_null(st.quality)},
-                         {"threshold", args->threshold},
-                         {"seconds", seconds},
-                         {"fps", fps},
-                         {"key_frames", map.key_indices()},
-                         {"out", a.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(a.out))},
-                         {"files", written}};
-        ex::print_json(j);
-        return 0;
-      }
-      std::FILE* out = stdout;
-      std::fprintf(out, "vmap build: %s (%s + mutual NN + %s, threshold %.2f, %s rule)%s\n\n", a.input.c_str(),
-                   a.features.c_str(), a.estimator.c_str(), args->threshold,
-                   a.rule == "previous" ? "eq. 6 previous-frame" : "Algorithm 1 current-frame",
-                   camera ? (", camera " + camera->file.string()).c_str() : "");
-      print_table(out, map);
-      std::fprintf(out, "\n  frames            %zu\n", st.frames);
-      if (skipped > 0) std::fprintf(out, "  skipped frames    %zu (unreadable, listed above)\n", skipped);
-      std::fprintf(out, "  key images        %zu (%.1f %% of the frames)\n", st.key_images,
-                   100.0 * static_cast<double>(st.key_images) / static_cast<double>(st.frames));
-      if (st.key_images >= 2)
-        std::fprintf(out, "  inliers K_i-K_i+1 min %d, max %d, mean %.1f\n", st.min_matches, st.max_matches,
-                     st.mean_matches);
-      if (std::isfinite(st.quality))
-        std::fprintf(out, "  quality (eq. 7)   %.3f\n", st.quality);
-      else
-        std::fprintf(out, "  quality (eq. 7)   not a finite number\n");
-      std::fprintf(out, "  time              %.2f s (%.1f frames/s)\n", seconds, fps);
-      if (pictures) {
-        std::string list;
-        for (const auto& f : written) list += (list.empty() ? "" : ", ") + f;
-        std::fprintf(out, "\n  wrote %s/{%s}\n", a.out.c_str(), list.c_str());
-      }
-      return 0;
+      progress.done(std::to_string(sel.map().keys.size()) + " key images, " + std::to_string(src.skipped().size()) +
+                    " skipped");
+      if (sel.map().frames == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
+      return report(*args, app, sel.map(), sel, src, sel.map().frames, seconds, out_dir, camera, std::nullopt);
     });
   };
 }

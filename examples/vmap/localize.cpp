@@ -1,8 +1,11 @@
 // `vmap localize`: learn a GCS map of images with poses and localize query images
 // (Trujillo-Romero 2024, DESIGN.md sec. 1.3). Either the virtual-room experiment
-// (--room) or a real sequence with a pose file (--train ... --poses ...).
+// (--room) or a real sequence with a pose file (--train ... --poses ...). With --memory M
+// IMAGE... it answers instead from a saved visual memory (`vmap build --memory`): the key
+// image(s) each query image matches (common/memory_cli.hpp).
 #include "common/cli_support.hpp"
 #include "common/error_stats.hpp"
+#include "common/memory_cli.hpp"
 #include "vmap/cli.hpp"
 
 #include <vmap/features/akaze.hpp>
@@ -50,6 +53,8 @@ struct Settings {
   double pan_deg = 6.0;
   std::string out;
   bool json = false;
+  std::string memory;               // --memory M: answer from a saved visual memory
+  std::vector<std::string> images;  // its query images
 };
 
 /// One test position: its query images and where it really is.
@@ -351,7 +356,7 @@ void check_settings(const Settings& s, const CLI::App& app) {
     for (const char* o : {"--train", "--poses", "--query", "--query-poses", "--every-other", "--pose-format"})
       if (given(o)) ex::usage_error(std::string("--room and ") + o + " conflict (the room makes its own images)");
   } else {
-    if (s.train.empty()) ex::usage_error("give --room or --train (see vmap localize --help)");
+    if (s.train.empty()) ex::usage_error("give --room, --train or --memory (see vmap localize --help)");
     for (const char* o : {"--posters", "--margin", "--laps", "--images-per-lap", "--tests", "--pan"})
       if (given(o)) ex::usage_error(std::string(o) + " is an option of --room");
     if (s.poses.empty()) ex::usage_error("--train needs --poses");
@@ -395,8 +400,19 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--pan", s->pan_deg, "Room: the second query image is panned by this many degrees")
       ->check(ex::real_in(-180.0, 180.0));
   app.add_option("--out", s->out, "Folder for map.png, a picture of the map and the estimates (created if missing)");
-  app.add_flag("--json", s->json, "Print a JSON summary on stdout instead of the table");
+  app.add_flag("--json", s->json, "Print a JSON summary on stdout instead of the table (with --memory: every answer)");
+  app.add_option("--memory", s->memory,
+                 "Answer from a saved visual memory (vmap build --memory; a folder means DIR/memory.vmem): the key "
+                 "image each IMAGE matches, instead of training a GCS map");
+  app.add_option("image", s->images, "With --memory: the query images");
   return [s, &app] {
+    if (!s->memory.empty()) {
+      ex::refuse_other_options(app, {"--memory", "IMAGE", "--json"}, "--memory");
+      if (s->images.empty()) ex::usage_error("--memory needs query images: vmap localize --memory M IMAGE...");
+      return ex::localize_from_memory(ex::memory_file(s->memory), "--memory", s->images, s->json);
+    }
+    if (!s->images.empty())
+      ex::usage_error("query images on the command line need --memory M (the GCS modes take --query or --every-other)");
     check_settings(*s, app);
     if (s->room && s->posters.empty()) s->posters = default_posters();
     ex::current_inputs() = s->room ? std::vector<std::string>{s->posters}

@@ -15,9 +15,13 @@
 // different COCO detectors, are pooled into one label source) or from a cv::dnn detector
 // run here (--detector yolox --model MODEL.onnx). Ground truth is a 0/1 matrix (--gt) or derived from
 // TUM poses (--gt-poses, with --gt-distance / --gt-angle).
+//
+// With --memory M instead of INPUT it prints the loop edges a saved visual memory holds
+// (`vmap build --memory`), evaluated over its key images with --gt / --gt-poses.
 #include "common/lcd_plot.hpp"
 #include "common/lcd_run.hpp"
 #include "common/cli_support.hpp"
+#include "common/memory_cli.hpp"
 #include "vmap/cli.hpp"
 
 #include <vmap/hooks/class_names.hpp>
@@ -25,6 +29,7 @@
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
+#include <vmap/lcd/evaluation.hpp>
 
 #include <nlohmann/json.hpp>
 
@@ -57,6 +62,7 @@ struct LoopsArgs {
   bool json = false;
   bool verbose = false;
   std::string out;
+  std::string memory;  // --memory M: the loop edges of a saved visual memory
   vmap::examples::LoopRunConfig config;
 };
 
@@ -83,6 +89,96 @@ vmap::CandidateIndex parse_rank(const std::string& rank) {
   if (rank == "bow") return vmap::CandidateIndex::bow;
   if (rank == "all") return vmap::CandidateIndex::brute_force;
   ex::usage_error("--rank: unknown '" + rank + "' (choose tree, tree_ranked, bow or all)");
+}
+
+/// The ground truth over a memory's key images: (i, j) when the frames' ground truth
+/// marks (f_i, f_j) and j + exclude_recent < i (the pairs the memory could find, as
+/// ground_truth_from_poses' window leaves out the near ones).
+vmap::LoopGroundTruth key_ground_truth(const LoopsArgs& a, const ex::CliMemory& mem) {
+  const auto& keys = mem.map().keys;
+  const std::size_t window = mem.options().exclude_recent;
+  if (!a.gt_poses.empty()) {
+    std::vector<double> times;
+    for (const auto& k : keys) times.push_back(k.timestamp);
+    const auto poses = vmap::poses_for_frames(vmap::load_tum_poses(a.gt_poses), times, a.gt_poses, 0.05, false);
+    return vmap::ground_truth_from_poses(poses,
+                                         {.max_distance = a.gt_distance, .max_angle_deg = a.gt_angle, .window = window});
+  }
+  const auto frames = vmap::LoopGroundTruth::load(a.gt);
+  for (const auto& k : keys)
+    if (k.frame_index >= frames.frames())
+      vmap::detail::fail("--gt: '" + a.gt + "' covers " + std::to_string(frames.frames()) + " frames, the memory has frame " +
+                         std::to_string(k.frame_index) + " (" + k.name + ")");
+  vmap::LoopGroundTruth gt(keys.size());
+  for (std::size_t i = 0; i < keys.size(); ++i)
+    for (std::size_t j = 0; j + window < i; ++j) gt.set(i, j, frames(keys[i].frame_index, keys[j].frame_index));
+  return gt;
+}
+
+/// `vmap loops --memory M [--gt MATRIX | --gt-poses POSES] [--json]`.
+int run_memory(const LoopsArgs& a, const CLI::App& app) {
+  ex::refuse_other_options(app, {"--memory", "--gt", "--gt-poses", "--gt-distance", "--gt-angle", "--json"}, "--memory");
+  if (!a.gt.empty() && !a.gt_poses.empty()) ex::usage_error("give at most one of --gt MATRIX and --gt-poses POSES");
+  const auto file = ex::memory_file(a.memory);
+  ex::current_inputs() = {file.string()};
+  for (const auto& [path, option] : {std::pair{a.gt, "--gt"}, std::pair{a.gt_poses, "--gt-poses"}})
+    if (!path.empty()) ex::check_input_file(path, option);
+  const auto mem = ex::load_memory(file, "--memory");
+  const int min_inliers = mem.options().min_loop_inliers;
+  nlohmann::json loops = nlohmann::json::array();
+  for (const auto& e : mem.loops()) loops.push_back(ex::loop_json(mem, e));
+  nlohmann::json j{{"command", "loops"},
+                   {"memory", ex::path_string(file)},
+                   {"frames", mem.frames()},
+                   {"key_images", mem.key_images()},
+                   {"min_inliers", min_inliers},
+                   {"loops", loops}};
+  if (a.gt.empty() && a.gt_poses.empty()) {
+    if (a.json) {
+      ex::print_json(j);
+      return 0;
+    }
+    std::printf("memory %s: %zu frames, %zu key images\n", file.c_str(), mem.frames(), mem.key_images());
+    std::printf("%zu loop edges (inliers >= %d):\n", mem.loops().size(), min_inliers);
+    ex::print_loop_edges(mem);
+    return 0;
+  }
+  // Each key image proposes its edge with the most inliers, as each query frame proposes
+  // its best candidate in the frame-level evaluation (lcd/evaluation.hpp).
+  const auto gt = key_ground_truth(a, mem);
+  std::vector<vmap::LoopScore> scores(mem.key_images());
+  for (std::size_t k = 0; k < scores.size(); ++k) scores[k].query = k;
+  std::size_t true_edges = 0;
+  for (const auto& e : mem.loops()) {
+    auto& s = scores[e.from];
+    if (!s.match || e.link.inliers > s.score) {
+      s.match = e.link.key;
+      s.score = e.link.inliers;
+    }
+    true_edges += gt(e.from, e.link.key) ? 1 : 0;
+  }
+  const auto pr = vmap::evaluate_loops(scores, gt, min_inliers);
+  const auto full = vmap::recall_at_full_precision(vmap::precision_recall_curve(scores, gt));
+  for (auto& l : loops) l["true"] = gt(l["from"].get<std::size_t>(), l["to"].get<std::size_t>());
+  if (a.json) {
+    j["loops"] = loops;
+    j["loops_gt"] = pr.positives;
+    j["true_positives"] = pr.true_positives;
+    j["false_positives"] = pr.false_positives;
+    j["precision"] = ex::finite_or_null(pr.precision);
+    j["recall"] = ex::finite_or_null(pr.recall);
+    j["recall_at_100_precision"] = ex::finite_or_null(full.recall);
+    j["true_edges"] = true_edges;
+    ex::print_json(j);
+    return 0;
+  }
+  std::printf("memory %s: %zu frames, %zu key images, %zu with a ground-truth loop to a key image %zu or more before\n",
+              file.c_str(), mem.frames(), mem.key_images(), pr.positives, mem.options().exclude_recent + 1);
+  std::printf("%zu loop edges (inliers >= %d), %zu true:\n", mem.loops().size(), min_inliers, true_edges);
+  ex::print_loop_edges(mem);
+  std::printf("key images (best edge each): TP %zu, FP %zu, precision %.3f, recall %.3f; recall@100%%P %.3f\n",
+              pr.true_positives, pr.false_positives, pr.precision, pr.recall, full.recall);
+  return 0;
 }
 
 int run(LoopsArgs& a, const CLI::App& app) {
@@ -326,7 +422,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
 std::function<int()> setup(CLI::App& app) {
   auto a = std::make_shared<LoopsArgs>();
   auto& d = a->config.detector;
-  app.add_option("input", a->input, "Frames: image folder, list file, video or TUM rgb.txt")->required();
+  app.add_option("input", a->input, "Frames: image folder, list file, video or TUM rgb.txt (or --memory M)");
   app.add_option("--gt", a->gt, "Ground-truth loop matrix (rows of 0/1, row = query frame)");
   app.add_option("--gt-poses", a->gt_poses, "Derive the ground truth from TUM poses (timestamp tx ty tz qx qy qz qw; one a frame, or associated to rgb.txt times within 50 ms)");
   app.add_option("--gt-distance", a->gt_distance, "With --gt-poses: max. camera-centre distance, metres")
@@ -382,7 +478,14 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--out", a->out, "Folder for pr.csv (threshold, TP, FP, precision, recall) and pr.png (created if missing)");
   app.add_flag("--json", a->json, "Print the figures as one JSON object on stdout");
   app.add_flag("--verbose", a->verbose, "Print one line per frame to stderr (candidates, best, inliers, status)");
-  return [a, &app] { return run(*a, app); };
+  app.add_option("--memory", a->memory,
+                 "Instead of INPUT: the loop edges of a saved visual memory (vmap build --memory; a folder means "
+                 "DIR/memory.vmem), evaluated over its key images with --gt / --gt-poses");
+  return [a, &app] {
+    if (!a->memory.empty()) return run_memory(*a, app);
+    if (a->input.empty()) ex::usage_error("give INPUT (the frames) or --memory M (a saved visual memory)");
+    return run(*a, app);
+  };
 }
 
 const bool registered = vmap::cli::add_command({"loops", "Loop closure: the loops of a sequence, evaluated with --gt", setup});

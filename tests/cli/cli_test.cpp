@@ -319,6 +319,227 @@ TEST_CASE("cli: localize, command line and --config give the same JSON") {
             "laps: 1\nimages_per_lap: 8\ntests: 2\nneurons: 6\nlambda: 4\nwords: 16\njson: 1\n", "localize");
 }
 
+// ---- visual memory: build --memory / --resume, localize --memory, loops --memory ------
+
+namespace {
+
+/// One memory of the 60 sample frames per process (the vocabulary learned from the first
+/// 10 key images, so that loop detection runs on so short a sequence), with the JSON of
+/// the run that built it.
+const std::pair<fs::path, nlohmann::json>& sample_memory() {
+  static const std::pair<fs::path, nlohmann::json> built = [] {
+    const fs::path dir = work_dir() / "memory_one_run";
+    const Run r = run_vmap({"build", sample, "--memory", dir.string() + "/", "--vocabulary-after", "10",
+                            "--json"});
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+    return std::pair{dir / "memory.vmem", nlohmann::json::parse(r.out)};
+  }();
+  return built;
+}
+
+}  // namespace
+
+TEST_CASE("cli: build --memory DIR/ writes DIR/memory.vmem; --resume continues it with the same key images") {
+  const auto& [one_file, one] = sample_memory();
+  CHECK(fs::is_regular_file(one_file));
+  CHECK(one["frames"] == 60);
+  CHECK(one["memory"]["file"] == one_file.string());
+  CHECK(one["memory"]["resumed"] == false);
+  CHECK(one["memory"]["pushed"] == 60);
+  CHECK(one["memory"]["last_frame_index"] == 59);
+  CHECK(one["memory"]["bytes"] == fs::file_size(one_file));
+  CHECK(one["key_frames"].size() == one["key_images"].get<std::size_t>());
+  CHECK(one["key_images"].get<std::size_t>() >= 12);
+  CHECK(one["out"].is_null());
+  // Interrupted after 30 frames (saved every 10), resumed in a second process with --out.
+  const fs::path file = work_dir() / "memory_resumed" / "sample.vmem";
+  const Run first = run_vmap({"build", sample, "--memory", file.string(), "--vocabulary-after", "10", "--end",
+                              "30", "--save-every", "10", "--json"});
+  INFO(first.err);
+  REQUIRE(first.code == 0);
+  const auto j1 = nlohmann::json::parse(first.out);
+  CHECK(j1["memory"]["saves"] == 3);
+  CHECK(j1["memory"]["last_frame_index"] == 29);
+  const fs::path out = work_dir() / "memory_resumed_out";
+  const Run second = run_vmap({"build", sample, "--memory", file.string(), "--resume", "--out", out.string(), "--json"});
+  INFO(second.err);
+  REQUIRE(second.code == 0);
+  const auto j2 = nlohmann::json::parse(second.out);
+  CHECK(j2["memory"]["resumed"] == true);
+  CHECK(j2["memory"]["pushed"] == 30);
+  CHECK(j2["frames"] == 60);
+  CHECK(j2["memory"]["last_frame_index"] == 59);
+  CHECK(j2["key_frames"] == one["key_frames"]);
+  CHECK(j2["memory"]["loops"] == one["memory"]["loops"]);
+  // --out keeps working beside the memory: the pictures of every key image.
+  CHECK(fs::is_regular_file(out / "map.vmap"));
+  CHECK(fs::is_regular_file(out / "contact_sheet.png"));
+  CHECK(j2["files"].size() == 4);
+  // Nothing left to read: a usage error, the memory unchanged.
+  const std::string before = slurp(file);
+  usage_error({"build", sample, "--memory", file.string(), "--resume", "--end", "60"}, "already holds every frame");
+  CHECK(slurp(file) == before);
+}
+
+TEST_CASE("cli: build --memory errors: mixed options, --resume without a memory, a non-memory file") {
+  const fs::path dir = work_dir() / "memory_errors";
+  fs::create_directories(dir);
+  const std::string mem = (dir / "m.vmem").string();
+  usage_error({"build", sample, "--resume"}, "--resume needs --memory DIR|FILE");
+  usage_error({"build", sample, "--save-every", "5"}, "--save-every needs --memory");
+  usage_error({"build", sample, "--images", "png"}, "--images needs --memory");
+  usage_error({"build", sample, "--memory", mem, "--features", "akaze"}, "--memory and --features conflict");
+  usage_error({"build", sample, "--memory", mem, "--resume"}, "--resume: no memory file '" + mem + "' to continue");
+  usage_error({"build", sample, "--memory", mem, "--resume", "--threshold", "0.4"}, "--resume and --threshold conflict");
+  usage_error({"build", sample, "--memory", mem, "--vocabulary", mem, "--vocabulary-after", "3"},
+              "--vocabulary and --vocabulary-after conflict");
+  usage_error({"build", sample, "--memory", sample}, "is also an input");
+  usage_error({"build", sample, "--memory", (dir / "out" / "m.vmem").string(), "--out", (dir / "out").string()},
+              "is inside the --out folder");
+  CHECK(!fs::exists(mem));
+  write(dir / "not_memory.vmem", "VMAPMAP! this is no memory file at all");
+  const Run bad = run_vmap({"build", sample, "--memory", (dir / "not_memory.vmem").string(), "--resume"});
+  CHECK(bad.code == 1);
+  CHECK(bad.err.find("not a vmap memory") != std::string::npos);
+  CHECK(std::count(bad.err.begin(), bad.err.end(), '\n') == 1);
+}
+
+TEST_CASE("cli: localize --memory answers every query with its key image; --json lists every answer") {
+  const auto& [file, built] = sample_memory();
+  const auto keys = built["key_frames"].get<std::vector<std::size_t>>();
+  // Frame 0 is the first key image; frame_b is frame 1, one frame later.
+  const Run r = run_vmap({"localize", "--memory", file.string(), frame_a, frame_b, "--json"});
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto j = nlohmann::json::parse(r.out);
+  CHECK(j["command"] == "localize");
+  CHECK(j["memory"] == file.string());
+  CHECK(j["key_images"] == keys.size());
+  CHECK(j["localized"] == 2);
+  REQUIRE(j["queries"].size() == 2);
+  for (const auto& q : j["queries"]) {
+    CHECK(q["status"] == "localized");
+    REQUIRE(!q["matches"].empty());
+    const auto& best = q["matches"][0];
+    const auto key = best["key"].get<std::size_t>();
+    REQUIRE(key < keys.size());
+    CHECK(best["frame_index"] == keys[key]);
+    CHECK(best["frame_index"].get<std::size_t>() <= 5);  // the queries are frames 0 and 1
+    CHECK(best["inliers"].get<int>() >= 20);
+    CHECK(best["inliers"].get<int>() <= best["matches"].get<int>());
+    CHECK(best["bow_score"].get<double>() > 0.0);
+    CHECK(best["bow_score"].get<double>() <= 1.0);
+    CHECK(best["fundamental"].size() == 9);
+    CHECK(best["pose"].is_null());  // built from images alone: no odometry
+    for (std::size_t m = 1; m < q["matches"].size(); ++m)  // every verified key image, most inliers first
+      CHECK(q["matches"][m]["inliers"].get<int>() <= q["matches"][m - 1]["inliers"].get<int>());
+  }
+  // The query identical to key image 0 (frame 0) answers it.
+  CHECK(j["queries"][0]["matches"][0]["key"] == 0);
+  CHECK(j["queries"][0]["matches"][0]["name"] == "1305031229.528748.jpg");
+  const Run text = run_vmap({"localize", "--memory", file.string(), frame_a});
+  REQUIRE(text.code == 0);
+  CHECK(text.out.find(frame_a + ": key 0 (frame 0, 1305031229.528748.jpg), ") != std::string::npos);
+  // `vmap memory localize` shares the code: the same answers.
+  const Run same = run_vmap({"memory", "localize", file.string(), frame_a, frame_b, "--json"});
+  REQUIRE(same.code == 0);
+  auto a = nlohmann::json::parse(same.out), b = j;
+  for (auto* x : {&a, &b})
+    for (auto& q : (*x)["queries"]) q.erase("ms");
+  CHECK(a == b);
+}
+
+TEST_CASE("cli: localize --memory errors: mixed modes, no image, missing or non-memory file") {
+  const auto& file = sample_memory().first;
+  usage_error({"localize", "--memory", file.string(), frame_a, "--room"}, "--memory and --room conflict");
+  usage_error({"localize", "--memory", file.string(), frame_a, "--train", sample}, "--memory and --train conflict");
+  usage_error({"localize", "--memory", file.string()}, "--memory needs query images");
+  usage_error({"localize", "--room", frame_a}, "query images on the command line need --memory M");
+  const fs::path missing = work_dir() / "no_such.vmem";
+  usage_error({"localize", "--memory", missing.string(), frame_a}, "--memory: '" + missing.string() + "' does not exist");
+  const Run bad = run_vmap({"localize", "--memory", sample, frame_a});
+  CHECK(bad.code == 1);
+  CHECK(bad.err.find("memory file '" + sample + "': header") != std::string::npos);
+  const Run img = run_vmap({"localize", "--memory", file.string(), sample});
+  CHECK(img.code == 1);
+  CHECK(img.err.find("cannot read the query image '" + sample + "'") != std::string::npos);
+}
+
+TEST_CASE("cli: loops --memory prints the memory's loop edges; --gt evaluates them over the key images") {
+  const auto& [file, built] = sample_memory();
+  const auto keys = built["key_frames"].get<std::vector<std::size_t>>();
+  const Run r = run_vmap({"loops", "--memory", file.string(), "--json"});
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto j = nlohmann::json::parse(r.out);
+  CHECK(j["frames"] == 60);
+  CHECK(j["key_images"] == keys.size());
+  CHECK(j["loops"].size() == built["memory"]["loops"].get<std::size_t>());
+  REQUIRE(!j["loops"].empty());
+  for (const auto& l : j["loops"]) {
+    const auto from = l["from"].get<std::size_t>(), to = l["to"].get<std::size_t>();
+    REQUIRE(from < keys.size());
+    CHECK(to + 10 < from);  // the memory's exclude_recent
+    CHECK(l["query"] == keys[from]);
+    CHECK(l["match"] == keys[to]);
+    CHECK(l["inliers"].get<int>() >= j["min_inliers"].get<int>());
+    CHECK(l["bow_score"].get<double>() > 0.0);
+  }
+  // Ground truth over the 60 frames marking the first edge's frames only: one true edge.
+  const auto q = j["loops"][0]["query"].get<std::size_t>(), m = j["loops"][0]["match"].get<std::size_t>();
+  std::string rows;
+  for (std::size_t i = 0; i < 60; ++i) {
+    for (std::size_t k = 0; k < 60; ++k) rows += std::string(k ? " " : "") + (i == q && k == m ? "1" : "0");
+    rows += "\n";
+  }
+  const fs::path gt = work_dir() / "memory_gt.txt";
+  write(gt, rows);
+  const Run e = run_vmap({"loops", "--memory", file.string(), "--gt", gt.string(), "--json"});
+  INFO(e.err);
+  REQUIRE(e.code == 0);
+  const auto ej = nlohmann::json::parse(e.out);
+  CHECK(ej["loops_gt"] == 1);
+  CHECK(ej["true_edges"] == 1);
+  CHECK(ej["loops"][0]["true"] == true);
+  CHECK(ej["true_positives"].get<std::size_t>() <= 1);
+  CHECK(ej["true_positives"].get<std::size_t>() + ej["false_positives"].get<std::size_t>() >= 1);
+  CHECK(ej["recall"] == static_cast<double>(ej["true_positives"].get<std::size_t>()));
+  const Run text = run_vmap({"loops", "--memory", file.string()});
+  REQUIRE(text.code == 0);
+  CHECK(text.out.find(std::to_string(j["loops"].size()) + " loop edges (inliers >= ") != std::string::npos);
+  std::size_t lines = 0;
+  for (auto at = text.out.find(") -> key "); at != std::string::npos; at = text.out.find(") -> key ", at + 1)) ++lines;
+  CHECK(lines == j["loops"].size());
+  // Errors: the sequence mode's input and options, no input at all, a non-memory file.
+  usage_error({"loops", sample, "--memory", file.string()}, "--memory and INPUT conflict");
+  usage_error({"loops", "--memory", file.string(), "--rank", "all"}, "--memory and --rank conflict");
+  usage_error({"loops"}, "give INPUT (the frames) or --memory M");
+  const Run bad = run_vmap({"loops", "--memory", gt.string()});
+  CHECK(bad.code == 1);
+  CHECK(bad.err.find("not a vmap memory") != std::string::npos);
+  // A ground truth smaller than the memory's frames is refused, naming --gt.
+  write(gt, "0 0\n0 0\n");
+  const Run small = run_vmap({"loops", "--memory", file.string(), "--gt", gt.string()});
+  CHECK(small.code == 1);
+  CHECK(small.err.find("--gt: '" + gt.string() + "' covers 2 frames") != std::string::npos);
+}
+
+TEST_CASE("cli: memory build / info share the memory code: a folder means DIR/memory.vmem") {
+  const auto& [file, built] = sample_memory();
+  const Run r = run_vmap({"memory", "info", file.parent_path().string(), "--json"});
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto j = nlohmann::json::parse(r.out);
+  CHECK(j["frames"] == 60);
+  CHECK(j["last_frame_index"] == 59);
+  CHECK(j["key_images"].size() == built["key_frames"].size());
+  CHECK(j["key_images"][0]["frame_index"] == 0);
+  CHECK(j["loops"].size() == built["memory"]["loops"].get<std::size_t>());
+  usage_error({"memory", "build", sample, "--memory", (work_dir() / "none.vmem").string(), "--resume"},
+              "--resume: no memory file");
+}
+
 TEST_SUITE("data") {
   TEST_CASE("cli: detect, command line and --config give the same JSON; --out writes detections.txt") {
     const std::string model = vmap::test::model_path("yolox_nano.onnx").string();

@@ -1,0 +1,310 @@
+#pragma once
+
+// What the subcommands that read or write a visual memory file share (`vmap build
+// --memory`, `vmap localize --memory`, `vmap loops --memory`, `vmap memory ...`): the one
+// policy stack they all use, the --memory path rule, loading with errors that name the
+// option, streaming frames into a memory with periodic saves, and the JSON / text of key
+// images, localization answers and loop edges.
+
+#include "common/cli_support.hpp"
+
+#include <vmap/core/error.hpp>
+#include <vmap/io/frame_source.hpp>
+#include <vmap/memory/visual_memory.hpp>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include <algorithm>
+#include <cctype>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace vmap::examples {
+
+/// Every memory file the command line writes or reads uses this stack (ORB 1000 + mutual
+/// NN + MAGSAC++ + eq. 5): the file holds the memory's options, not its policies', so a
+/// reader must use the writer's.
+using CliMemory = OrbVisualMemory;
+
+/// The file name used when --memory names a folder.
+inline constexpr const char* memory_file_name = "memory.vmem";
+
+/// --memory DIR|FILE: an existing folder, or a path ending in '/', means DIR/memory.vmem;
+/// anything else is the memory file itself.
+inline std::filesystem::path memory_file(const std::string& arg) {
+  std::error_code ec;
+  if (!arg.empty() && (arg.back() == '/' || std::filesystem::is_directory(arg, ec)))
+    return std::filesystem::path(arg) / memory_file_name;
+  return arg;
+}
+
+/// Checks the memory file a command will write (not an input, not a link or folder, its
+/// folder created and writable) before any frame is read.
+inline void prepare_memory_output(const std::filesystem::path& file, const std::string& option,
+                                  const std::vector<std::filesystem::path>& inputs) {
+  const std::filesystem::path dir = file.has_parent_path() ? file.parent_path() : std::filesystem::path(".");
+  prepare_output_dir(dir, option, inputs, {file.filename().string()});
+}
+
+/// Reads a memory file: a missing path, a folder or a device is a usage error naming
+/// `option`; anything that is not a valid memory file is a vmap::Error naming the file
+/// and the section (exit 1).
+inline CliMemory load_memory(const std::filesystem::path& file, const std::string& option) {
+  check_input_file(file, option);
+  return CliMemory::load(file);
+}
+
+/// The memory --resume continues: a missing file is a usage error that says how to start
+/// one; options that would change the memory's own (`options_kept`, given on the command
+/// line) conflict with --resume.
+inline CliMemory memory_to_resume(const std::filesystem::path& file, const CLI::App& app,
+                                  const std::vector<std::string>& options_kept) {
+  for (const auto& o : options_kept)
+    if (app.get_option(o)->count() > 0)
+      usage_error("--resume and " + o + " conflict (a resumed memory keeps the options it was started with)");
+  std::error_code ec;
+  if (!std::filesystem::exists(file, ec))
+    usage_error("--resume: no memory file '" + file.string() + "' to continue (run without --resume to start one)");
+  return load_memory(file, "--memory");
+}
+
+/// What `vmap build --memory` and `vmap memory build` start a memory with.
+struct NewMemory {
+  double tau = 0.3;
+  KeyRule rule = KeyRule::previous_frame;
+  std::string images = "none";  ///< none, png or jpeg
+  std::string vocabulary;       ///< a vocabulary file (vmap vocabulary); empty: learned online
+  std::size_t vocabulary_after = MemoryOptions{}.vocabulary_after;
+};
+
+inline CliMemory new_memory(const NewMemory& n) {
+  MemoryOptions o;
+  o.selector.tau = n.tau;
+  o.selector.rule = n.rule;
+  o.vocabulary_after = n.vocabulary_after;
+  if (n.images == "png")
+    o.images = ImageStorage::png;
+  else if (n.images == "jpeg")
+    o.images = ImageStorage::jpeg;
+  else if (n.images == "none")
+    o.images = ImageStorage::none;
+  else
+    usage_error("--images: unknown storage '" + n.images + "' (choose none, png or jpeg)");
+  AnyVocabulary voc;
+  if (!n.vocabulary.empty()) {
+    check_input_file(n.vocabulary, "--vocabulary");
+    voc = AnyVocabulary::load(n.vocabulary);
+  }
+  return CliMemory(o, std::move(voc));
+}
+
+/// The frame range a resumed memory reads: the frames after the last one it holds, in
+/// the sequence's index space (the same --stride as the first run gives the same frames
+/// an uninterrupted run would have read). Nothing left to read is a usage error.
+inline FrameSourceOptions resume_range(const CliMemory& mem, FrameSourceOptions so, const std::string& file) {
+  if (const auto last = mem.last_frame_index()) so.start = std::max(so.start, *last + so.stride);
+  if (so.start >= so.end)
+    usage_error("--resume: the memory '" + file + "' already holds every frame up to --end (its last frame is " +
+                std::to_string(mem.last_frame_index().value_or(0)) + ")");
+  return so;
+}
+
+/// What stream_into did.
+struct StreamResult {
+  std::size_t pushed = 0;       ///< frames pushed in this run
+  std::size_t saves = 0;        ///< times the file was written (periodic and final)
+  double seconds = 0.0;         ///< pushing (without the saves)
+  std::vector<LoopEdge> loops;  ///< loop edges found in this run
+};
+
+/// Pushes every frame of `src` into `mem`; every `save_every` pushed frames (0: never)
+/// and at the end, writes the memory to `file` atomically, so a run killed half way can
+/// be resumed from the last save. `on_frame(mem)` is called after each push.
+template <class OnFrame>
+StreamResult stream_into(CliMemory& mem, FrameSource& src, const std::filesystem::path& file, std::size_t save_every,
+                         OnFrame&& on_frame) {
+  using clock = std::chrono::steady_clock;
+  StreamResult r;
+  while (auto f = src.next()) {
+    const auto t0 = clock::now();
+    auto step = mem.push(*f);
+    r.seconds += std::chrono::duration<double>(clock::now() - t0).count();
+    ++r.pushed;
+    r.loops.insert(r.loops.end(), step.loops.begin(), step.loops.end());
+    on_frame(mem);
+    if (save_every > 0 && r.pushed % save_every == 0) {
+      mem.save(file);
+      ++r.saves;
+    }
+  }
+  // No frame: nothing to save (a fresh memory stays unwritten, a resumed one unchanged).
+  if (r.pushed > 0 && (save_every == 0 || r.pushed % save_every != 0)) {
+    mem.save(file);
+    ++r.saves;
+  }
+  return r;
+}
+
+// ---------------------------------------------------------------------------------------
+// JSON and text.
+
+/// An odometry pose: {x, y, theta} (SE(2)), {se3: the 12 numbers of [R | t] by rows}, or null.
+inline nlohmann::json pose_json(const OdometryPose& p) {
+  if (const auto* p2 = std::get_if<Pose2>(&p)) return {{"x", p2->x()}, {"y", p2->y()}, {"theta", p2->theta()}};
+  if (const auto* p3 = std::get_if<cv::Affine3d>(&p)) {
+    nlohmann::json m = nlohmann::json::array();
+    for (int i = 0; i < 12; ++i) m.push_back(p3->matrix.val[i]);
+    return {{"se3", m}};
+  }
+  return nullptr;
+}
+
+/// ", pose (x, y, theta)" / ", position (x, y, z)" or "" when the key image has none.
+inline std::string pose_text(const OdometryPose& p) {
+  char buf[160];
+  if (const auto* p2 = std::get_if<Pose2>(&p)) {
+    std::snprintf(buf, sizeof buf, ", pose (%.3f, %.3f, %.3f rad)", p2->x(), p2->y(), p2->theta());
+    return buf;
+  }
+  if (const auto* p3 = std::get_if<cv::Affine3d>(&p)) {
+    const cv::Vec3d t = p3->translation();
+    std::snprintf(buf, sizeof buf, ", position (%.3f, %.3f, %.3f)", t[0], t[1], t[2]);
+    return buf;
+  }
+  return {};
+}
+
+/// A verified key image of a localization answer.
+inline nlohmann::json link_json(const CliMemory& mem, const PlaceLink& l) {
+  const auto& k = mem.map().keys[l.key];
+  nlohmann::json f = nlohmann::json::array();
+  for (double e : l.fundamental.val) f.push_back(e);
+  return {{"key", l.key},
+          {"frame_index", k.frame_index},
+          {"name", k.name},
+          {"inliers", l.inliers},
+          {"matches", l.matches},
+          {"bow_score", l.bow_score},
+          {"similarity", l.similarity},
+          {"fundamental", f},
+          {"pose", pose_json(mem.poses()[l.key])}};
+}
+
+/// A loop edge: key images (from, to) and their frames (query, match), as `vmap loops`
+/// names the frames of a loop.
+inline nlohmann::json loop_json(const CliMemory& mem, const LoopEdge& e) {
+  return {{"from", e.from},
+          {"to", e.link.key},
+          {"query", mem.map().keys[e.from].frame_index},
+          {"match", mem.map().keys[e.link.key].frame_index},
+          {"inliers", e.link.inliers},
+          {"matches", e.link.matches},
+          {"bow_score", e.link.bow_score},
+          {"similarity", e.link.similarity}};
+}
+
+/// One query image's answer.
+struct MemoryQuery {
+  std::string image;
+  MemoryLocalization answer;
+  double ms = 0.0;
+};
+
+/// Localizes each image (read in grey, as the memory's frames were); an unreadable image
+/// is a vmap::Error naming it.
+inline std::vector<MemoryQuery> localize_images(CliMemory& mem, const std::vector<std::string>& images) {
+  std::vector<MemoryQuery> out;
+  for (const auto& path : images) {
+    current_inputs() = {path};
+    const cv::Mat img = cv::imread(path, cv::IMREAD_GRAYSCALE);
+    if (img.empty()) vmap::detail::fail("cannot read the query image '" + path + "'");
+    const auto t0 = std::chrono::steady_clock::now();
+    MemoryQuery q{path, mem.localize(img), 0.0};
+    q.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    out.push_back(std::move(q));
+  }
+  return out;
+}
+
+/// Every answer: per query its status, time and every verified key image (most inliers first).
+inline nlohmann::json localizations_json(const CliMemory& mem, const std::vector<MemoryQuery>& queries) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& q : queries) {
+    nlohmann::json j{{"image", path_string(q.image)},
+                     {"status", std::string(to_string(q.answer.status))},
+                     {"localized", q.answer.ok()},
+                     {"verified_candidates", q.answer.verified_candidates},
+                     {"ms", q.ms},
+                     {"matches", nlohmann::json::array()}};
+    for (const auto& l : q.answer.matches) j["matches"].push_back(link_json(mem, l));
+    out.push_back(std::move(j));
+  }
+  return out;
+}
+
+/// One line per query: the best key image (index, frame, name), inliers, BoW score, pose.
+inline void print_localizations(const CliMemory& mem, const std::vector<MemoryQuery>& queries) {
+  for (const auto& q : queries) {
+    if (const auto* b = q.answer.best()) {
+      const auto& k = mem.map().keys[b->key];
+      std::printf("%s: key %u (frame %zu, %s), %d inliers of %d matches, BoW %.3f%s, %.1f ms\n", q.image.c_str(), b->key,
+                  k.frame_index, k.name.c_str(), b->inliers, b->matches, b->bow_score,
+                  pose_text(mem.poses()[b->key]).c_str(), q.ms);
+    } else {
+      std::printf("%s: not localized (%s), %.1f ms\n", q.image.c_str(), std::string(to_string(q.answer.status)).c_str(),
+                  q.ms);
+    }
+  }
+}
+
+/// `vmap localize --memory M IMAGE...` and `vmap memory localize M IMAGE...`: the answers
+/// as lines, or with `json` one object whose `queries` list every answer.
+inline int localize_from_memory(const std::filesystem::path& file, const std::string& option,
+                                const std::vector<std::string>& images, bool json) {
+  current_inputs() = {file.string()};
+  CliMemory mem = load_memory(file, option);
+  const auto queries = localize_images(mem, images);
+  if (!json) {
+    print_localizations(mem, queries);
+    return 0;
+  }
+  std::size_t localized = 0;
+  for (const auto& q : queries) localized += q.answer.ok() ? 1 : 0;
+  print_json({{"command", "localize"},
+              {"memory", path_string(file)},
+              {"frames", mem.frames()},
+              {"key_images", mem.key_images()},
+              {"queries", localizations_json(mem, queries)},
+              {"localized", localized}});
+  return 0;
+}
+
+/// One line per loop edge, in the style of `vmap loops`.
+inline void print_loop_edges(const CliMemory& mem) {
+  for (const auto& e : mem.loops())
+    std::printf("  key %4u (frame %4zu) -> key %4u (frame %4zu)  inliers %4d  bow score %.3f\n", e.from,
+                mem.map().keys[e.from].frame_index, e.link.key, mem.map().keys[e.link.key].frame_index,
+                e.link.inliers, e.link.bow_score);
+}
+
+/// Refuses every option of `app` given on the command line (or in --config) that is not
+/// in `allowed`: the options of another mode of the subcommand.
+inline void refuse_other_options(const CLI::App& app, const std::vector<std::string>& allowed, const std::string& mode) {
+  for (const CLI::Option* opt : app.get_options()) {
+    if (opt->count() == 0) continue;
+    std::string name = opt->get_lnames().empty() ? opt->get_name() : "--" + opt->get_lnames().front();
+    if (opt->get_lnames().empty())  // a positional argument, named as the usage line names it
+      std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return static_cast<char>(std::toupper(c)); });
+    if (name == "--help" || name == "--config") continue;
+    if (std::find(allowed.begin(), allowed.end(), name) == allowed.end())
+      usage_error(mode + " and " + name + " conflict");
+  }
+}
+
+}  // namespace vmap::examples
