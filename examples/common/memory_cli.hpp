@@ -10,9 +10,11 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/frame_source.hpp>
+#include <vmap/io/poses.hpp>
 #include <vmap/memory/visual_memory.hpp>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/core/affine.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include <algorithm>
@@ -123,17 +125,49 @@ struct StreamResult {
   std::vector<LoopEdge> loops;  ///< loop edges found in this run
 };
 
-/// Pushes every frame of `src` into `mem`; every `save_every` pushed frames (0: never)
-/// and at the end, writes the memory to `file` atomically, so a run killed half way can
-/// be resumed from the last save. `on_frame(mem)` is called after each push.
+/// The odometry pose of each frame from a camera pose file (TUM or KITTI, as
+/// load_camera_poses reads it): by order when the file has one pose per frame of the
+/// sequence, else the pose nearest in time within 50 ms (TUM fr1's ground truth has gaps
+/// of up to 49 ms). A frame without one is an Error naming the file and the frame.
+class FramePoses {
+ public:
+  FramePoses(const std::filesystem::path& file, const FrameSource& src)
+      : name_(file.string()), poses_(load_camera_poses(file)) {
+    const auto times = src.timestamps();  // empty for a video
+    by_order_ = poses_.size() == (times.empty() ? src.total().value_or(0) : times.size());
+  }
+
+  [[nodiscard]] OdometryPose operator()(const Frame& f) const {
+    std::optional<std::size_t> k;
+    if (by_order_)
+      k = f.index;
+    else
+      k = associate_by_timestamp(poses_, std::vector<double>{f.timestamp}, 0.05).front();
+    if (!k || *k >= poses_.size())
+      vmap::detail::fail(name_ + ": no pose for frame " + std::to_string(f.index) + " (" + f.name + ", time " +
+                         std::to_string(f.timestamp) + ")");
+    return cv::Affine3d(poses_[*k].rotation, poses_[*k].position);
+  }
+
+ private:
+  std::string name_;
+  std::vector<CameraPose> poses_;
+  bool by_order_ = false;
+};
+
+/// Pushes every frame of `src` into `mem`, with its pose when `poses` is given; every
+/// `save_every` pushed frames (0: never) and at the end, writes the memory to `file`
+/// atomically, so a run killed half way can be resumed from the last save.
+/// `on_frame(mem)` is called after each push.
 template <class OnFrame>
 StreamResult stream_into(CliMemory& mem, FrameSource& src, const std::filesystem::path& file, std::size_t save_every,
-                         OnFrame&& on_frame) {
+                         const std::optional<FramePoses>& poses, OnFrame&& on_frame) {
   using clock = std::chrono::steady_clock;
   StreamResult r;
   while (auto f = src.next()) {
+    const OdometryPose pose = poses ? (*poses)(*f) : OdometryPose{};
     const auto t0 = clock::now();
-    auto step = mem.push(*f);
+    auto step = mem.push(*f, pose);
     r.seconds += std::chrono::duration<double>(clock::now() - t0).count();
     ++r.pushed;
     r.loops.insert(r.loops.end(), step.loops.begin(), step.loops.end());

@@ -45,6 +45,7 @@ struct BuildArgs {
   std::size_t save_every = 0;
   std::string images = "none";
   std::string vocabulary;
+  std::string poses;  // --poses FILE: odometry kept with the memory's key images
   std::size_t vocabulary_after = vmap::MemoryOptions{}.vocabulary_after;
 };
 
@@ -278,14 +279,20 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   if (args.resume)
     mem.emplace(
         ex::memory_to_resume(file, app, {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after"}));
-  ex::prepare_memory_output(file, "--memory", {a.input});
+  std::vector<fs::path> inputs{a.input};
+  if (!args.poses.empty()) {
+    ex::check_input_file(args.poses, "--poses");
+    inputs.emplace_back(args.poses);
+  }
+  ex::prepare_memory_output(file, "--memory", inputs);
+  inputs.push_back(file);
   std::optional<ex::OutputFolder> out_dir;
   if (!a.out.empty()) {
     // The --out folder is replaced as a whole when the run ends: a memory inside it would go.
     if (ex::cli_detail::inside(ex::cli_detail::resolved(file), ex::cli_detail::resolved(a.out)))
       ex::usage_error("--memory: '" + file.string() + "' is inside the --out folder '" + a.out +
                       "', which is replaced as a whole (keep the memory elsewhere)");
-    out_dir.emplace(a.out, "--out", std::vector<fs::path>{a.input, file},
+    out_dir.emplace(a.out, "--out", inputs,
                     std::vector<std::string>{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"});
   }
   auto so = ex::source_options(a, true);
@@ -301,9 +308,11 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   if (out_dir && src.kind() == vmap::SourceKind::live && mem->options().images == vmap::ImageStorage::none)
     ex::usage_error("--out with --memory on a live source needs the memory's pixels (--images png or jpeg): a live "
                     "stream cannot be read again");
+  std::optional<ex::FramePoses> poses;
+  if (!args.poses.empty()) poses.emplace(args.poses, src);
   ex::Progress progress("vmap build", expected_frames(src, so));
   MemoryRun run{file, args.resume, {}, 0, std::nullopt, 0};
-  run.stream = ex::stream_into(*mem, src, file, args.save_every, [&](const ex::CliMemory& m) {
+  run.stream = ex::stream_into(*mem, src, file, args.save_every, poses, [&](const ex::CliMemory& m) {
     progress.update(src.delivered(), std::to_string(m.key_images()) + " key images");
   });
   progress.done(std::to_string(mem->key_images()) + " key images, " + std::to_string(src.skipped().size()) + " skipped");
@@ -339,12 +348,15 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--vocabulary-after", args->vocabulary_after,
                  "With --memory and no --vocabulary: learn it from the first N key images (loops are searched from then on)")
       ->check(ex::count_in(1, 1000000));
+  app.add_option("--poses", args->poses,
+                 "With --memory: each frame's odometry pose (TUM or KITTI camera poses; by order when there is one "
+                 "per frame, else the nearest in time within 50 ms), kept with its key image");
   return [args, &app]() -> int {
     const auto& a = args->common;
     ex::current_inputs() = {a.input};
     ex::check_range(a);
     if (!args->memory.empty()) return build_memory(*args, app);
-    for (const char* o : {"--resume", "--save-every", "--images", "--vocabulary", "--vocabulary-after"})
+    for (const char* o : {"--resume", "--save-every", "--images", "--vocabulary", "--vocabulary-after", "--poses"})
       if (app.get_option(o)->count() > 0) ex::usage_error(std::string(o) + " needs --memory DIR|FILE");
     const auto camera = ex::load_camera_option(a.camera);
     const bool pictures = !a.out.empty();

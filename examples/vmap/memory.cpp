@@ -49,7 +49,7 @@ int build(const MemoryArgs& a, const CLI::App& app) {
     mem.emplace(ex::new_memory({.tau = a.tau, .images = a.storage, .vocabulary = a.vocabulary}));
   }
   auto src = vmap::FrameSource::open(a.input, so);
-  const auto r = ex::stream_into(*mem, src, file, a.save_every, [](const ex::CliMemory&) {});
+  const auto r = ex::stream_into(*mem, src, file, a.save_every, std::nullopt, [](const ex::CliMemory&) {});
   if (r.pushed == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
   const double ms = r.pushed ? 1000.0 * r.seconds / static_cast<double>(r.pushed) : 0.0;
   if (a.json) {

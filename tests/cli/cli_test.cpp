@@ -166,7 +166,7 @@ TEST_CASE("cli: conflicting options are usage errors") {
   usage_error({"localize", "--train", "x", "--poses", "y", "--every-other", "--query", "/nonexistent"},
               "--every-other and --query/--query-poses conflict");
   usage_error({"localize", "--room", "--train", "/nonexistent"}, "--room and --train conflict");
-  usage_error({"localize"}, "give --room or --train");
+  usage_error({"localize"}, "give --room, --train or --memory");
   usage_error({"loops", sample, "--gt", "a", "--gt-poses", "b"}, "give at most one of --gt MATRIX and --gt-poses");
   usage_error({"loops", sample, "--gt", "a", "--labels", "x", "--detector", "yolox", "--model", "m"},
               "give --labels or --detector, not both");
@@ -541,6 +541,33 @@ TEST_CASE("cli: memory build / info share the memory code: a folder means DIR/me
 }
 
 TEST_SUITE("data") {
+  TEST_CASE("cli: build --memory --poses keeps each key image's pose; localize --memory answers it") {
+    const std::string gt = vmap::test::data_path("tum_fr1_rpy/groundtruth.txt").string();
+    const fs::path file = work_dir() / "memory_poses.vmem";
+    const Run b = run_vmap({"build", sample, "--memory", file.string(), "--poses", gt, "--end", "12", "--json"});
+    INFO(b.err);
+    REQUIRE(b.code == 0);
+    const Run r = run_vmap({"localize", "--memory", file.string(), frame_a, "--json"});
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+    const auto best = nlohmann::json::parse(r.out)["queries"][0]["matches"][0];
+    REQUIRE(best["key"] == 0);
+    // Frame 0 (time 1305031229.528748) takes the ground-truth pose nearest in time:
+    // line 360 of groundtruth.txt, 1305031229.5332 1.2989 0.6880 1.5734 (qx qy qz qw).
+    const auto se3 = best["pose"]["se3"].get<std::vector<double>>();
+    REQUIRE(se3.size() == 12);
+    CHECK(se3[3] == doctest::Approx(1.2989).epsilon(1e-9));
+    CHECK(se3[7] == doctest::Approx(0.6880).epsilon(1e-9));
+    CHECK(se3[11] == doctest::Approx(1.5734).epsilon(1e-9));
+    // The rotation is orthonormal (the file's quaternion, normalised).
+    for (int i = 0; i < 3; ++i)
+      CHECK(se3[4 * i] * se3[4 * i] + se3[4 * i + 1] * se3[4 * i + 1] + se3[4 * i + 2] * se3[4 * i + 2] ==
+            doctest::Approx(1.0).epsilon(1e-9));
+    const Run text = run_vmap({"localize", "--memory", file.string(), frame_a});
+    CHECK(text.out.find(", position (1.299, 0.688, 1.573), ") != std::string::npos);
+    usage_error({"build", sample, "--poses", gt}, "--poses needs --memory");
+  }
+
   TEST_CASE("cli: detect, command line and --config give the same JSON; --out writes detections.txt") {
     const std::string model = vmap::test::model_path("yolox_nano.onnx").string();
     const std::string names = vmap::test::model_path("coco80.names").string();
