@@ -22,8 +22,10 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <variant>
 #include <vector>
 
@@ -47,11 +49,21 @@ inline std::filesystem::path memory_file(const std::string& arg) {
 }
 
 /// Checks the memory file a command will write (not an input, not a link or folder, its
-/// folder created and writable) before any frame is read.
+/// folder created and writable) before any frame is read. An existing file is replaced
+/// only when it is a memory (its first bytes "VMAPMEMO"): a mistyped path never
+/// overwrites another file.
 inline void prepare_memory_output(const std::filesystem::path& file, const std::string& option,
                                   const std::vector<std::filesystem::path>& inputs) {
   const std::filesystem::path dir = file.has_parent_path() ? file.parent_path() : std::filesystem::path(".");
   prepare_output_dir(dir, option, inputs, {file.filename().string()});
+  std::error_code ec;
+  if (std::filesystem::exists(file, ec)) {
+    std::ifstream f(file, std::ios::binary);
+    char magic[8] = {};
+    f.read(magic, sizeof magic);
+    if (f.gcount() != 8 || std::string_view(magic, 8) != std::string_view(vmap::detail::memory_magic, 8))
+      usage_error(option + ": '" + file.string() + "' exists and is not a vmap memory; refusing to replace it");
+  }
 }
 
 /// Reads a memory file: a missing path, a folder or a device is a usage error naming

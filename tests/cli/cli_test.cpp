@@ -398,6 +398,9 @@ TEST_CASE("cli: build --memory errors: mixed options, --resume without a memory,
   usage_error({"build", sample, "--memory", (dir / "out" / "m.vmem").string(), "--out", (dir / "out").string()},
               "is inside the --out folder");
   CHECK(!fs::exists(mem));
+  write(dir / "notes.txt", "keep\n");  // an existing file that is no memory is not replaced
+  usage_error({"build", sample, "--memory", (dir / "notes.txt").string()}, "exists and is not a vmap memory");
+  CHECK(slurp(dir / "notes.txt") == "keep\n");
   write(dir / "not_memory.vmem", "VMAPMAP! this is no memory file at all");
   const Run bad = run_vmap({"build", sample, "--memory", (dir / "not_memory.vmem").string(), "--resume"});
   CHECK(bad.code == 1);
