@@ -57,7 +57,11 @@ struct XFeatDenseOptions {
 
 /// Every cell of XFeat's 1/8 grid as a keypoint (its best pixel) with the cell's 64-d
 /// descriptor (NORM_L2, unit length). Keypoints are in row-major cell order; response
-/// is the softmax probability of the chosen pixel. One object per thread.
+/// is the softmax probability of the chosen pixel.
+/// Deep copy: a copy parses the model again (from the bytes kept in memory, not the
+/// file) into its own cv::dnn::Net with its own buffers, so per-thread copies run in
+/// parallel with results equal to one object's; a copy costs a model parse (tens of
+/// ms), so copy once per thread, not per image. One object serves one thread at a time.
 class XFeatDenseDescriptor {
  public:
   explicit XFeatDenseDescriptor(XFeatDenseOptions options)
@@ -179,8 +183,11 @@ static_assert(Matcher<DenseMutualMatcher>);
 
 /// The dense front end as a PairMatcher: grids of both images (each image through the
 /// network once while it is among the last three seen), mutual NN, and
-/// Correspondences::cells = the larger grid (eq. 5's denominator). One object per
-/// thread.
+/// Correspondences::cells = the larger grid (eq. 5's denominator).
+/// Deep copy: the copy has its own network (as XFeatDenseDescriptor) and starts with
+/// the original's cache of the last three images (entries are immutable once made, so
+/// sharing them is safe; a copy answers exactly as the original would), and continues
+/// the original's network_runs count. One object serves one thread at a time.
 class XFeatDenseMatcher {
  public:
   explicit XFeatDenseMatcher(XFeatDenseOptions options) : descriptor_(std::move(options)) {}
