@@ -166,6 +166,20 @@ TEST_CASE("copies: an ORB copy owns its detector; assignment takes the other's o
   CHECK(same(c.extract(img), before));
 }
 
+TEST_CASE("copies: a descriptor's buffer never writes over an earlier input image") {
+  // An 8-bit grey image is used without a copy, so the buffer still holds the caller's
+  // pixels when the next image, a colour one of the same size, is converted into it.
+  const cv::Mat grey = vmap::test::textured_image(3, {320, 240});
+  const cv::Mat kept = grey.clone();
+  cv::Mat colour;
+  cv::cvtColor(vmap::test::textured_image(4, {320, 240}), colour, cv::COLOR_GRAY2BGR);
+  vmap::OrbDescriptor orb({.features = 100});
+  const vmap::Features first = orb.extract(grey);
+  (void)orb.extract(colour);
+  CHECK(cv::norm(grey, kept, cv::NORM_INF) == 0.0);
+  CHECK(same(orb.extract(grey), first));
+}
+
 // ---- networks (ONNX models from ../shared/models) -----------------------------------
 
 TEST_SUITE("data") {

@@ -5,6 +5,7 @@
 // describing tensor shapes in error messages.
 
 #include <vmap/core/error.hpp>
+#include <vmap/features/detail/grey.hpp>
 
 #include <opencv2/core.hpp>
 #include <opencv2/dnn.hpp>
@@ -160,10 +161,12 @@ inline void to_bgr8(const cv::Mat& image, cv::Mat& bgr, std::string_view who) {
          cv::typeToString(image.type()) + "); expected 1 (grey), 3 (BGR) or 4 (BGRA)");
   cv::Mat eight = image;
   if (depth == CV_16U) image.convertTo(eight, CV_MAKETYPE(CV_8U, channels), 1.0 / 257.0);
-  if (channels == 3)
+  if (channels == 3) {
     bgr = eight;
-  else
+  } else {
+    release_if_shared(bgr);  // bgr may still be the caller's previous BGR image
     cv::cvtColor(eight, bgr, channels == 1 ? cv::COLOR_GRAY2BGR : cv::COLOR_BGRA2BGR);
+  }
 }
 
 }  // namespace vmap::detail
