@@ -369,8 +369,9 @@ inline void normalise_cells(const XFeatMaps& m, std::vector<cv::Mat>& cells, std
 /// XFeat keypoints and 64-float descriptors (NORM_L2).
 /// Deep copy: a copy parses the model again (from the bytes kept in memory, not the
 /// file) into its own cv::dnn::Net with its own buffers, so per-thread copies run in
-/// parallel with results equal to one object's; a copy costs a model parse (tens of
-/// ms), so copy once per thread, not per image. One object serves one thread at a time.
+/// parallel with results equal to one object's; a copy costs a model parse and the two
+/// probe runs of construction (see detail::XFeatNet), so copy once per thread, not per
+/// image. One object serves one thread at a time.
 class XFeatDescriptor {
  public:
   explicit XFeatDescriptor(XFeatOptions options) : options_(std::move(options)) {

@@ -60,8 +60,9 @@ struct XFeatDenseOptions {
 /// is the softmax probability of the chosen pixel.
 /// Deep copy: a copy parses the model again (from the bytes kept in memory, not the
 /// file) into its own cv::dnn::Net with its own buffers, so per-thread copies run in
-/// parallel with results equal to one object's; a copy costs a model parse (tens of
-/// ms), so copy once per thread, not per image. One object serves one thread at a time.
+/// parallel with results equal to one object's; a copy costs a model parse and the two
+/// probe runs of construction (see detail::XFeatNet), so copy once per thread, not per
+/// image. One object serves one thread at a time.
 class XFeatDenseDescriptor {
  public:
   explicit XFeatDenseDescriptor(XFeatDenseOptions options)

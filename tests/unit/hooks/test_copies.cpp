@@ -17,9 +17,12 @@
 #include <doctest/doctest.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include <cstdint>
 #include <cstring>
 #include <exception>
 #include <filesystem>
+#include <fstream>
+#include <initializer_list>
 #include <string>
 #include <thread>
 #include <type_traits>
@@ -130,6 +133,62 @@ std::vector<cv::Mat> office_frames() {
   return out;
 }
 
+// A tiny LoFTR-shaped ONNX model for DnnPairMatcher, written here as protobuf bytes (no
+// LoFTR export runs in OpenCV 4.6, see ../shared/models/README.md): inputs image0 and
+// image1 1x1x16x16; each is average-pooled over 8x8 cells (2x2 = 4 cells), and the
+// confidence matrix is the outer product of the two cell means, a 4x4 matrix in [0, 1].
+std::string varint(std::uint64_t v) {
+  std::string s;
+  do {
+    auto byte = static_cast<char>(v & 0x7Fu);
+    v >>= 7;
+    if (v) byte = static_cast<char>(byte | 0x80);
+    s += byte;
+  } while (v);
+  return s;
+}
+std::string field_varint(std::uint32_t f, std::uint64_t v) { return varint(f << 3) + varint(v); }
+std::string field_bytes(std::uint32_t f, const std::string& b) { return varint((f << 3) | 2u) + varint(b.size()) + b; }
+
+std::string node(const std::string& op, const std::vector<std::string>& in, const std::string& out,
+                 const std::string& attributes = {}) {
+  std::string n;
+  for (const auto& i : in) n += field_bytes(1, i);
+  return n + field_bytes(2, out) + field_bytes(3, out) + field_bytes(4, op) + attributes;
+}
+std::string ints_attribute(const std::string& name, std::initializer_list<std::uint64_t> values) {
+  std::string a = field_bytes(1, name) + field_varint(20, 7);  // type INTS
+  for (const auto v : values) a += field_varint(8, v);
+  return field_bytes(5, a);
+}
+std::string int64_tensor(const std::string& name, const std::vector<std::int64_t>& values) {
+  std::string raw;
+  for (const std::int64_t v : values)
+    for (int b = 0; b < 8; ++b) raw += static_cast<char>((static_cast<std::uint64_t>(v) >> (8 * b)) & 0xFFu);
+  return field_varint(1, values.size()) + field_varint(2, 7) + field_bytes(8, name) + field_bytes(9, raw);
+}
+std::string float_value(const std::string& name, const std::vector<std::uint64_t>& dims) {
+  std::string shape;
+  for (const auto d : dims) shape += field_bytes(1, field_varint(1, d));
+  return field_bytes(1, name) + field_bytes(2, field_bytes(1, field_varint(1, 1) + field_bytes(2, shape)));
+}
+
+std::filesystem::path tiny_pair_model() {
+  const std::string pool = ints_attribute("kernel_shape", {8, 8}) + ints_attribute("strides", {8, 8});
+  std::string graph = field_bytes(1, node("AveragePool", {"image0"}, "pool0", pool)) +
+                      field_bytes(1, node("AveragePool", {"image1"}, "pool1", pool)) +
+                      field_bytes(1, node("Reshape", {"pool0", "column"}, "a")) +
+                      field_bytes(1, node("Reshape", {"pool1", "row"}, "b")) +
+                      field_bytes(1, node("MatMul", {"a", "b"}, "confidence")) + field_bytes(2, "tiny_pair");
+  graph += field_bytes(5, int64_tensor("column", {4, 1})) + field_bytes(5, int64_tensor("row", {1, 4}));
+  graph += field_bytes(11, float_value("image0", {1, 1, 16, 16})) + field_bytes(11, float_value("image1", {1, 1, 16, 16}));
+  graph += field_bytes(12, float_value("confidence", {4, 4}));
+  const std::string model = field_varint(1, 7) + field_bytes(8, field_varint(2, 11)) + field_bytes(7, graph);
+  const auto file = vmap::test::scratch_dir("hooks_copies_pair") / "tiny_pair.onnx";
+  std::ofstream(file, std::ios::binary) << model;
+  return file;
+}
+
 }  // namespace
 
 // ---- OpenCV feature detectors (self-contained) -------------------------------------
@@ -178,6 +237,19 @@ TEST_CASE("copies: a descriptor's buffer never writes over an earlier input imag
   (void)orb.extract(colour);
   CHECK(cv::norm(grey, kept, cv::NORM_INF) == 0.0);
   CHECK(same(orb.extract(grey), first));
+}
+
+TEST_CASE("copies: DnnPairMatcher copies on two threads equal one matcher used serially") {
+  vmap::DnnPairMatcher matcher({.model = tiny_pair_model(), .input_size = {16, 16}, .threshold = 0.0f});
+  std::vector<cv::Mat> images;
+  for (const std::uint64_t seed : {3, 4, 5}) images.push_back(vmap::test::textured_image(seed, {64, 64}));
+  for (const auto& c : check_copies_agree(matcher, images, match_next)) {
+    CHECK(c.cells == 4);
+    CHECK(c.size() == 1);  // an outer product has one mutual maximum: brightest cell to brightest cell
+  }
+  vmap::DnnPairMatcher other = matcher;
+  other = matcher;  // copy assignment parses the model again as well
+  CHECK(same(other.match_pair(images[0], images[1]), matcher.match_pair(images[0], images[1])));
 }
 
 // ---- networks (ONNX models from ../shared/models) -----------------------------------
