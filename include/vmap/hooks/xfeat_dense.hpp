@@ -185,13 +185,30 @@ static_assert(Matcher<DenseMutualMatcher>);
 /// The dense front end as a PairMatcher: grids of both images (each image through the
 /// network once while it is among the last three seen), mutual NN, and
 /// Correspondences::cells = the larger grid (eq. 5's denominator).
-/// Deep copy: the copy has its own network (as XFeatDenseDescriptor) and starts with
-/// the original's cache of the last three images (entries are immutable once made, so
-/// sharing them is safe; a copy answers exactly as the original would), and continues
-/// the original's network_runs count. One object serves one thread at a time.
+/// Deep copy: the copy has its own network (as XFeatDenseDescriptor) and its own copy
+/// of the cache of the last three images (pixels and features cloned, nothing shared
+/// with the original), so it answers exactly as the original would and continues its
+/// network_runs count. One object serves one thread at a time.
 class XFeatDenseMatcher {
  public:
   explicit XFeatDenseMatcher(XFeatDenseOptions options) : descriptor_(std::move(options)) {}
+
+  XFeatDenseMatcher(const XFeatDenseMatcher& other)
+      : descriptor_(other.descriptor_), matcher_(other.matcher_), born_(other.born_), runs_(other.runs_) {
+    cache_.reserve(capacity);
+    for (const Entry& e : other.cache_) {
+      Features f = *e.features;
+      f.descriptors = f.descriptors.clone();
+      cache_.push_back({e.image.clone(), std::make_shared<const Features>(std::move(f)), e.born});
+    }
+  }
+  XFeatDenseMatcher& operator=(const XFeatDenseMatcher& other) {
+    if (this != &other) *this = XFeatDenseMatcher(other);
+    return *this;
+  }
+  XFeatDenseMatcher(XFeatDenseMatcher&&) noexcept = default;
+  XFeatDenseMatcher& operator=(XFeatDenseMatcher&&) noexcept = default;
+  ~XFeatDenseMatcher() = default;
 
   [[nodiscard]] Correspondences match_pair(const cv::Mat& a, const cv::Mat& b) {
     // Both lookups before any insertion, so neither image evicts the other; the

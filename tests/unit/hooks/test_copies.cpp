@@ -355,10 +355,14 @@ TEST_SUITE("data") {
     for (const auto& f : check_copies_agree(dense, {small[0], small[3]}, extract)) CHECK(f.size() == 40u * 28u);
     vmap::XFeatDenseMatcher matcher({.model = vmap::test::model_path("xfeat_320x224.onnx")});
     for (const auto& c : check_copies_agree(matcher, small, match_next)) CHECK(c.size() > 20);
-    // A copy starts from the original's cache (the last images are cached): no network run.
+    // A copy starts with its own copy of the original's cache (the last images): no
+    // network run, and the cached features are not the original's objects.
     vmap::XFeatDenseMatcher copy = matcher;
     const std::size_t runs = copy.network_runs();
     CHECK(same(copy.match_pair(small[2], small[3]), matcher.match_pair(small[2], small[3])));
     CHECK(copy.network_runs() == runs);
+    CHECK(&copy.features(small[3]) != &matcher.features(small[3]));
+    CHECK(copy.features(small[3]).descriptors.data != matcher.features(small[3]).descriptors.data);
+    CHECK(same(copy.features(small[3]), matcher.features(small[3])));
   }
 }
