@@ -20,6 +20,8 @@ struct AkazeOptions {
 
 /// A-KAZE keypoints + 486-bit M-LDB descriptors, compared by Hamming distance; the
 /// feature of the GCS localization paper (Trujillo-Romero 2024).
+/// Deep copy: a copy owns its own cv::AKAZE, re-created from the options, and its own
+/// buffers, so per-thread copies run in parallel. One object serves one thread at a time.
 class AkazeDescriptor {
  public:
   explicit AkazeDescriptor(const AkazeOptions& options = {}) : options_(options) {
@@ -32,6 +34,17 @@ class AkazeDescriptor {
     akaze_ = cv::AKAZE::create(cv::AKAZE::DESCRIPTOR_MLDB, 0, 3, o.threshold, o.octaves,
                                o.octave_layers, cv::KAZE::DIFF_PM_G2);
   }
+
+  /// A copy creates its own OpenCV detector from the options (a cv::Ptr copy would
+  /// share one detector, so per-thread copies would race on it) and its own buffers.
+  AkazeDescriptor(const AkazeDescriptor& other) : AkazeDescriptor(other.options_) {}
+  AkazeDescriptor& operator=(const AkazeDescriptor& other) {
+    if (this != &other) *this = AkazeDescriptor(other);
+    return *this;
+  }
+  AkazeDescriptor(AkazeDescriptor&&) noexcept = default;
+  AkazeDescriptor& operator=(AkazeDescriptor&&) noexcept = default;
+  ~AkazeDescriptor() = default;
 
   [[nodiscard]] Features extract(const cv::Mat& image) {
     return detail::detect_and_compute(*akaze_, image, grey_, cv::NORM_HAMMING, "A-KAZE extract");

@@ -23,7 +23,9 @@ struct OrbOptions {
 };
 
 /// ORB keypoints + 256-bit binary descriptors, compared by Hamming distance.
-/// One object per thread: cv::ORB keeps scratch buffers between calls.
+/// Deep copy: a copy owns its own cv::ORB, re-created from the options (cheap), and
+/// its own buffers, so per-thread copies (e.g. a std::vector of them) run in parallel.
+/// One object serves one thread at a time.
 class OrbDescriptor {
  public:
   explicit OrbDescriptor(const OrbOptions& options = {}) : options_(options) {
@@ -37,6 +39,17 @@ class OrbDescriptor {
     orb_ = cv::ORB::create(o.features, o.scale_factor, o.levels, o.edge_threshold, 0, 2,
                            cv::ORB::HARRIS_SCORE, o.edge_threshold, o.fast_threshold);
   }
+
+  /// A copy creates its own OpenCV detector from the options (a cv::Ptr copy would
+  /// share one detector, so per-thread copies would race on it) and its own buffers.
+  OrbDescriptor(const OrbDescriptor& other) : OrbDescriptor(other.options_) {}
+  OrbDescriptor& operator=(const OrbDescriptor& other) {
+    if (this != &other) *this = OrbDescriptor(other);
+    return *this;
+  }
+  OrbDescriptor(OrbDescriptor&&) noexcept = default;
+  OrbDescriptor& operator=(OrbDescriptor&&) noexcept = default;
+  ~OrbDescriptor() = default;
 
   [[nodiscard]] Features extract(const cv::Mat& image) {
     return detail::detect_and_compute(*orb_, image, grey_, cv::NORM_HAMMING, "ORB extract");

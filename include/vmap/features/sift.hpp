@@ -22,6 +22,8 @@ struct SiftOptions {
 };
 
 /// SIFT keypoints + 128-float descriptors, compared by L2 distance.
+/// Deep copy: a copy owns its own cv::SIFT, re-created from the options, and its own
+/// buffers, so per-thread copies run in parallel. One object serves one thread at a time.
 class SiftDescriptor {
  public:
   explicit SiftDescriptor(const SiftOptions& options = {}) : options_(options) {
@@ -36,6 +38,17 @@ class SiftDescriptor {
     sift_ = cv::SIFT::create(o.features, o.octave_layers, o.contrast_threshold, o.edge_threshold,
                              o.sigma);
   }
+
+  /// A copy creates its own OpenCV detector from the options (a cv::Ptr copy would
+  /// share one detector, so per-thread copies would race on it) and its own buffers.
+  SiftDescriptor(const SiftDescriptor& other) : SiftDescriptor(other.options_) {}
+  SiftDescriptor& operator=(const SiftDescriptor& other) {
+    if (this != &other) *this = SiftDescriptor(other);
+    return *this;
+  }
+  SiftDescriptor(SiftDescriptor&&) noexcept = default;
+  SiftDescriptor& operator=(SiftDescriptor&&) noexcept = default;
+  ~SiftDescriptor() = default;
 
   [[nodiscard]] Features extract(const cv::Mat& image) {
     return detail::detect_and_compute(*sift_, image, grey_, cv::NORM_L2, "SIFT extract");

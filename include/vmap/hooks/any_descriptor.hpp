@@ -18,9 +18,11 @@
 
 namespace vmap {
 
-/// Holds any Descriptor by value. Move-only; a moved-from AnyDescriptor is empty and
-/// `extract` on it is an Error. One object serves one thread at a time, like the
-/// policies it holds.
+/// Holds any Descriptor by value. Move-only: a Descriptor need only be movable
+/// (concepts.hpp), so a copy cannot be promised for every policy it may hold. For one
+/// descriptor per thread, copy the concrete policy (OrbDescriptor, XFeatDescriptor ...
+/// deep-copy) before erasing it. A moved-from AnyDescriptor is empty and `extract` on
+/// it is an Error. One object serves one thread at a time, like the policies it holds.
 class AnyDescriptor {
  public:
   template <Descriptor D>

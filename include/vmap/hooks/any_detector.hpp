@@ -17,9 +17,12 @@
 
 namespace vmap {
 
-/// Holds any ObjectDetector by value. Move-only (network runtimes are rarely
-/// copyable); a moved-from AnyDetector is empty and `detect` on it is an Error.
-/// Thread-safety is that of the held detector: one object serves one thread at a time.
+/// Holds any ObjectDetector by value. Move-only: it may hold a detector that cannot be
+/// copied (a CallbackDetector around a move-only runtime session), so it promises no
+/// copy. For one detector per thread, copy the concrete adapter (the cv::dnn ones
+/// deep-copy) before erasing it, or call make_dnn_detector once per thread. A moved-from
+/// AnyDetector is empty and `detect` on it is an Error. One object serves one thread at
+/// a time.
 class AnyDetector {
  public:
   template <ObjectDetector D>

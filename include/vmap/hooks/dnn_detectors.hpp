@@ -147,7 +147,10 @@ inline float safe_exp(float x) noexcept { return std::exp(std::min(x, 20.0f)); }
 
 /// YOLOX (e.g. yolox_nano.onnx): input 1x3x416x416, BGR 0..255 without normalisation,
 /// letterboxed at the top-left with grey 114 as in YOLOX's own preprocessing.
-/// One object per thread (cv::dnn::Net keeps buffers).
+/// Deep copy: a copy parses the model again (from the bytes kept in memory, not the
+/// file) into its own cv::dnn::Net with its own buffers, so per-thread copies run in
+/// parallel with results equal to one object's; a copy costs a model parse (tens of
+/// ms), so copy once per thread, not per image. One object serves one thread at a time.
 class YoloxDetector {
  public:
   static constexpr int input_side = 416;
@@ -166,11 +169,11 @@ class YoloxDetector {
   }
 
   [[nodiscard]] std::vector<Detection> detect(const cv::Mat& image) {
-    detail::to_bgr8(image, bgr_, "YOLOX detect");
-    const float scale = detail::letterbox(bgr_, input_side, cv::Scalar::all(114), canvas_, resized_);
-    run(canvas_);
+    detail::to_bgr8(image, buf_->bgr, "YOLOX detect");
+    const float scale = detail::letterbox(buf_->bgr, input_side, cv::Scalar::all(114), buf_->canvas, buf_->resized);
+    run(buf_->canvas);
     return detail::finish_detections(decode_yolox(net_.outputs.front(), input_side, options_.score_threshold),
-                                     scale, scale, bgr_.size(), options_.nms);
+                                     scale, scale, buf_->bgr.size(), options_.nms);
   }
 
   [[nodiscard]] int classes() const noexcept { return classes_; }
@@ -178,14 +181,17 @@ class YoloxDetector {
 
  private:
   void run(const cv::Mat& canvas) {
-    cv::dnn::blobFromImage(canvas, blob_, 1.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
-    net_.forward(blob_, "YOLOX", "YOLOX takes 1x3x416x416 BGR");
+    cv::dnn::blobFromImage(canvas, buf_->blob, 1.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
+    net_.forward(buf_->blob, "YOLOX", "YOLOX takes 1x3x416x416 BGR");
   }
 
   DnnDetectorOptions options_;
   detail::DnnNet net_;
   int classes_ = 0;
-  cv::Mat bgr_, canvas_, resized_, blob_;  // reused between images
+  struct Buffers {
+    cv::Mat bgr, canvas, resized, blob;
+  };
+  detail::Scratch<Buffers> buf_;  // reused between images; a copy gets its own
 };
 
 static_assert(ObjectDetector<YoloxDetector>);
@@ -248,7 +254,11 @@ static_assert(ObjectDetector<YoloxDetector>);
 /// NanoDet-m (e.g. nanodet_m_320.onnx): input 1x3x320x320, BGR normalised by
 /// (x - [103.53, 116.28, 123.675]) / [57.375, 57.12, 58.395], letterboxed at the
 /// top-left (padding = the mean colour, i.e. 0 after normalisation). Outputs
-/// cls_pred_stride_{8,16,32} and dis_pred_stride_{8,16,32}. One object per thread.
+/// cls_pred_stride_{8,16,32} and dis_pred_stride_{8,16,32}.
+/// Deep copy: a copy parses the model again (from the bytes kept in memory, not the
+/// file) into its own cv::dnn::Net with its own buffers, so per-thread copies run in
+/// parallel with results equal to one object's; a copy costs a model parse (tens of
+/// ms), so copy once per thread, not per image. One object serves one thread at a time.
 class NanoDetDetector {
  public:
   static constexpr int input_side = 320;
@@ -275,12 +285,12 @@ class NanoDetDetector {
   }
 
   [[nodiscard]] std::vector<Detection> detect(const cv::Mat& image) {
-    detail::to_bgr8(image, bgr_, "NanoDet detect");
-    const float scale = detail::letterbox(bgr_, input_side, mean(), canvas_, resized_);
-    run(canvas_);
+    detail::to_bgr8(image, buf_->bgr, "NanoDet detect");
+    const float scale = detail::letterbox(buf_->bgr, input_side, mean(), buf_->canvas, buf_->resized);
+    run(buf_->canvas);
     return detail::finish_detections(
         decode_nanodet(outputs(cls_index_), outputs(dis_index_), input_side, options_.score_threshold), scale, scale,
-        bgr_.size(), options_.nms);
+        buf_->bgr.size(), options_.nms);
   }
 
   [[nodiscard]] int classes() const noexcept { return classes_; }
@@ -290,11 +300,11 @@ class NanoDetDetector {
   static cv::Scalar mean() noexcept { return {103.53, 116.28, 123.675}; }
 
   void run(const cv::Mat& canvas) {
-    canvas.convertTo(normalised_, CV_32FC3);
-    cv::subtract(normalised_, mean(), normalised_);
-    cv::multiply(normalised_, cv::Scalar(1.0 / 57.375, 1.0 / 57.12, 1.0 / 58.395), normalised_);
-    cv::dnn::blobFromImage(normalised_, blob_, 1.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
-    net_.forward(blob_, "NanoDet", "NanoDet-m takes 1x3x320x320 normalised BGR");
+    canvas.convertTo(buf_->normalised, CV_32FC3);
+    cv::subtract(buf_->normalised, mean(), buf_->normalised);
+    cv::multiply(buf_->normalised, cv::Scalar(1.0 / 57.375, 1.0 / 57.12, 1.0 / 58.395), buf_->normalised);
+    cv::dnn::blobFromImage(buf_->normalised, buf_->blob, 1.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
+    net_.forward(buf_->blob, "NanoDet", "NanoDet-m takes 1x3x320x320 normalised BGR");
   }
 
   [[nodiscard]] std::array<cv::Mat, 3> outputs(const std::array<int, 3>& index) const {
@@ -306,7 +316,10 @@ class NanoDetDetector {
   detail::DnnNet net_;
   std::array<int, 3> cls_index_{}, dis_index_{};
   int classes_ = 0;
-  cv::Mat bgr_, canvas_, resized_, normalised_, blob_;  // reused between images
+  struct Buffers {
+    cv::Mat bgr, canvas, resized, normalised, blob;
+  };
+  detail::Scratch<Buffers> buf_;  // reused between images; a copy gets its own
 };
 
 static_assert(ObjectDetector<NanoDetDetector>);
@@ -348,7 +361,11 @@ static_assert(ObjectDetector<NanoDetDetector>);
 
 /// FastestDet (FastestDet.onnx): input 1x3x352x352, BGR / 255, the whole image resized
 /// to 352x352 without keeping the aspect ratio (as FastestDet was trained); output
-/// 1x85x22x22. One object per thread.
+/// 1x85x22x22.
+/// Deep copy: a copy parses the model again (from the bytes kept in memory, not the
+/// file) into its own cv::dnn::Net with its own buffers, so per-thread copies run in
+/// parallel with results equal to one object's; a copy costs a model parse (tens of
+/// ms), so copy once per thread, not per image. One object serves one thread at a time.
 class FastestDetDetector {
  public:
   static constexpr int input_side = 352;
@@ -366,11 +383,12 @@ class FastestDetDetector {
   }
 
   [[nodiscard]] std::vector<Detection> detect(const cv::Mat& image) {
-    detail::to_bgr8(image, bgr_, "FastestDet detect");
-    cv::resize(bgr_, resized_, cv::Size(input_side, input_side), 0, 0, cv::INTER_LINEAR);
-    run(resized_);
-    return detail::finish_detections(decode_fastestdet(net_.outputs.front(), bgr_.size(), options_.score_threshold),
-                                     1.0f, 1.0f, bgr_.size(), options_.nms);
+    detail::to_bgr8(image, buf_->bgr, "FastestDet detect");
+    cv::resize(buf_->bgr, buf_->resized, cv::Size(input_side, input_side), 0, 0, cv::INTER_LINEAR);
+    run(buf_->resized);
+    const cv::Size size = buf_->bgr.size();
+    return detail::finish_detections(decode_fastestdet(net_.outputs.front(), size, options_.score_threshold), 1.0f,
+                                     1.0f, size, options_.nms);
   }
 
   [[nodiscard]] int classes() const noexcept { return classes_; }
@@ -378,14 +396,17 @@ class FastestDetDetector {
 
  private:
   void run(const cv::Mat& input) {
-    cv::dnn::blobFromImage(input, blob_, 1.0 / 255.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
-    net_.forward(blob_, "FastestDet", "FastestDet takes 1x3x352x352 BGR/255");
+    cv::dnn::blobFromImage(input, buf_->blob, 1.0 / 255.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
+    net_.forward(buf_->blob, "FastestDet", "FastestDet takes 1x3x352x352 BGR/255");
   }
 
   DnnDetectorOptions options_;
   detail::DnnNet net_;
   int classes_ = 0;
-  cv::Mat bgr_, resized_, blob_;  // reused between images
+  struct Buffers {
+    cv::Mat bgr, resized, blob;
+  };
+  detail::Scratch<Buffers> buf_;  // reused between images; a copy gets its own
 };
 
 static_assert(ObjectDetector<FastestDetDetector>);

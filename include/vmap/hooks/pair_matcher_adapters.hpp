@@ -136,7 +136,11 @@ struct DnnPairMatcherOptions {
 /// Runs a LoFTR-style ONNX export: two inputs 1x1xHxW (grey / 255), one output, the
 /// coarse confidence matrix 1 x N x N with N = (H/s)(W/s). The model is run once at
 /// construction to check that: a model of another shape is a vmap::Error naming the
-/// file and what was wrong. One object per thread.
+/// file and what was wrong.
+/// Deep copy: a copy parses the model again (from the bytes kept in memory, not the
+/// file) into its own cv::dnn::Net with its own buffers, so per-thread copies run in
+/// parallel with results equal to one object's; a copy costs a model parse (tens of
+/// ms), so copy once per thread, not per image. One object serves one thread at a time.
 class DnnPairMatcher {
  public:
   explicit DnnPairMatcher(DnnPairMatcherOptions options) : options_(std::move(options)) {
@@ -163,13 +167,13 @@ class DnnPairMatcher {
   }
 
   [[nodiscard]] Correspondences match_pair(const cv::Mat& a, const cv::Mat& b) {
-    detail::to_bgr8(a, bgr_a_, "DnnPairMatcher image a");
-    detail::to_bgr8(b, bgr_b_, "DnnPairMatcher image b");
-    cv::cvtColor(bgr_a_, grey_a_, cv::COLOR_BGR2GRAY);
-    cv::cvtColor(bgr_b_, grey_b_, cv::COLOR_BGR2GRAY);
-    cv::resize(grey_a_, small_a_, options_.input_size, 0, 0, cv::INTER_AREA);
-    cv::resize(grey_b_, small_b_, options_.input_size, 0, 0, cv::INTER_AREA);
-    run(small_a_, small_b_);
+    detail::to_bgr8(a, buf_->bgr_a, "DnnPairMatcher image a");
+    detail::to_bgr8(b, buf_->bgr_b, "DnnPairMatcher image b");
+    cv::cvtColor(buf_->bgr_a, buf_->grey_a, cv::COLOR_BGR2GRAY);
+    cv::cvtColor(buf_->bgr_b, buf_->grey_b, cv::COLOR_BGR2GRAY);
+    cv::resize(buf_->grey_a, buf_->small_a, options_.input_size, 0, 0, cv::INTER_AREA);
+    cv::resize(buf_->grey_b, buf_->small_b, options_.input_size, 0, 0, cv::INTER_AREA);
+    run(buf_->small_a, buf_->small_b);
     return decode_coarse_matches(net_.outputs.front(), {grid_cells(), a.size()}, {grid_cells(), b.size()},
                                  options_.threshold);
   }
@@ -182,11 +186,11 @@ class DnnPairMatcher {
   }
 
   void run(const cv::Mat& grey_a, const cv::Mat& grey_b) {
-    cv::dnn::blobFromImage(grey_a, blob_a_, 1.0 / 255.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
-    cv::dnn::blobFromImage(grey_b, blob_b_, 1.0 / 255.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
+    cv::dnn::blobFromImage(grey_a, buf_->blob_a, 1.0 / 255.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
+    cv::dnn::blobFromImage(grey_b, buf_->blob_b, 1.0 / 255.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
     try {
-      net_.net.setInput(blob_a_, options_.input_names[0]);
-      net_.net.setInput(blob_b_, options_.input_names[1]);
+      net_.net.setInput(buf_->blob_a, options_.input_names[0]);
+      net_.net.setInput(buf_->blob_b, options_.input_names[1]);
       net_.net.forward(net_.outputs, net_.output_names);
     } catch (const cv::Exception& e) {
       detail::fail("DnnPairMatcher: model '" + options_.model.string() + "' does not run on two 1x1x" +
@@ -198,7 +202,10 @@ class DnnPairMatcher {
 
   DnnPairMatcherOptions options_;
   detail::DnnNet net_;
-  cv::Mat bgr_a_, bgr_b_, grey_a_, grey_b_, small_a_, small_b_, blob_a_, blob_b_;  // reused between pairs
+  struct Buffers {
+    cv::Mat bgr_a, bgr_b, grey_a, grey_b, small_a, small_b, blob_a, blob_b;
+  };
+  detail::Scratch<Buffers> buf_;  // reused between pairs; a copy gets its own
 };
 
 static_assert(PairMatcher<DnnPairMatcher>);

@@ -132,8 +132,9 @@ struct XFeatMaps {
 };
 
 /// An XFeat ONNX model in cv::dnn: finds its kind (fixed-size or any-size), picks the
-/// network size for each image, runs it and tells the three outputs apart. One object
-/// per thread (cv::dnn::Net and the scratch images are reused between images).
+/// network size for each image, runs it and tells the three outputs apart. Deep copy
+/// (a copy has its own cv::dnn::Net, see DnnNet, and its own scratch images); one
+/// object serves one thread at a time.
 class XFeatNet {
  public:
   XFeatNet() = default;
@@ -150,27 +151,12 @@ class XFeatNet {
            " input, not a multiple of 8: not an XFeat export");
     // Run at the declared size (or a small multiple of 32 when it declares none): the
     // model must give XFeat's maps there; then a second size tells the kinds apart.
-    const cv::Size first = declared_.width > 0 ? declared_ : cv::Size(64, 64);
-    if (!try_size(first, true))
+    const cv::Size first = first_size();
+    if (!probe())
       fail(std::string(who) + ": model '" + model.string() + "' is neither a fixed-size nor an any-size XFeat export: on a " +
            blob_shape(first) + " input it gives " + net_.describe_outputs() +
            "; an XFeat model gives 1x64xH/8xW/8 descriptors, 1x65xH/8xW/8 keypoint logits and a 1x1xH/8xW/8 "
            "reliability map");
-    const cv::Size probe = first == cv::Size(64, 64) ? cv::Size(96, 96) : cv::Size(64, 64);
-    {
-      // A fixed-size model fails this run by design; cv::dnn would log that failure
-      // as an error on stderr, so its log is silenced for the probe (process-wide, for
-      // the few milliseconds of a 64x64 run).
-      const auto level = cv::utils::logging::getLogLevel();
-      cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
-      try {
-        kind_ = try_size(probe, false) ? XFeatModelKind::any_size : XFeatModelKind::fixed_size;
-      } catch (...) {
-        cv::utils::logging::setLogLevel(level);
-        throw;
-      }
-      cv::utils::logging::setLogLevel(level);
-    }
     if (kind_ == XFeatModelKind::fixed_size && declared_.width == 0)
       fail(std::string(who) + ": model '" + model.string() +
            "' declares no input size and does not run at every multiple of 32; export it with a fixed size");
@@ -185,6 +171,31 @@ class XFeatNet {
              "' must have sides that are multiples of 32");
     }
   }
+
+  /// Deep copy: a network of its own (DnnNet parses the kept model bytes again) that
+  /// replays the construction's two probe runs. cv::dnn computes slightly differently
+  /// (about 1e-4 in the maps) once a net has been planned for a second input size, and
+  /// every constructed XFeatNet has been (the probe); without the replay a copy would not
+  /// give the original's keypoints exactly. A copy costs a parse and the two runs.
+  XFeatNet(const XFeatNet& other)
+      : who_(other.who_),
+        user_size_(other.user_size_),
+        declared_(other.declared_),
+        kind_(other.kind_),
+        net_(other.net_),
+        descriptor_index_(other.descriptor_index_),
+        keypoint_index_(other.keypoint_index_),
+        reliability_index_(other.reliability_index_) {
+    if (!net_.net.empty() && !probe())
+      fail(who_ + ": the copy of model '" + net_.file.string() + "' no longer gives XFeat's maps");
+  }
+  XFeatNet& operator=(const XFeatNet& other) {
+    if (this != &other) *this = XFeatNet(other);
+    return *this;
+  }
+  XFeatNet(XFeatNet&&) noexcept = default;
+  XFeatNet& operator=(XFeatNet&&) noexcept = default;
+  ~XFeatNet() = default;
 
   [[nodiscard]] XFeatModelKind kind() const noexcept { return kind_; }
   /// The size the file declares ((0, 0) if symbolic).
@@ -205,27 +216,27 @@ class XFeatNet {
   /// Runs the network on an image (8/16-bit, grey/BGR/BGRA); the maps stay valid until
   /// the next call.
   const XFeatMaps& run(const cv::Mat& image) {
-    to_bgr8(image, bgr_, who_ + " extract");
-    const cv::Size in = network_size(bgr_.size());
-    XFeatMaps& m = maps_;
+    to_bgr8(image, buf_->bgr, who_ + " extract");
+    const cv::Size in = network_size(buf_->bgr.size());
+    XFeatMaps& m = buf_->maps;
     m.scale = {1.0f, 1.0f};
     m.offset = {0.0f, 0.0f};
-    cv::Mat input = bgr_;
+    cv::Mat input = buf_->bgr;
     if (user_size_.width == 0 && kind_ == XFeatModelKind::any_size) {
       // Centred crop to whole multiples of 32: network pixels are image pixels.
-      const int ox = (bgr_.cols - in.width) / 2, oy = (bgr_.rows - in.height) / 2;
-      input = bgr_(cv::Rect(ox, oy, in.width, in.height));
+      const int ox = (buf_->bgr.cols - in.width) / 2, oy = (buf_->bgr.rows - in.height) / 2;
+      input = buf_->bgr(cv::Rect(ox, oy, in.width, in.height));
       m.offset = {static_cast<float>(ox), static_cast<float>(oy)};
-    } else if (bgr_.size() != in) {
-      cv::resize(bgr_, resized_, in, 0, 0, cv::INTER_AREA);
-      input = resized_;
-      m.scale = {static_cast<float>(bgr_.cols) / static_cast<float>(in.width),
-                 static_cast<float>(bgr_.rows) / static_cast<float>(in.height)};
+    } else if (buf_->bgr.size() != in) {
+      cv::resize(buf_->bgr, buf_->resized, in, 0, 0, cv::INTER_AREA);
+      input = buf_->resized;
+      m.scale = {static_cast<float>(buf_->bgr.cols) / static_cast<float>(in.width),
+                 static_cast<float>(buf_->bgr.rows) / static_cast<float>(in.height)};
     }
     forward(input);
     // A new size re-plans the network (cv::dnn does it in forward); the outputs are
     // told apart again at that size.
-    if (in != planned_ && !identify_outputs(in))
+    if (in != buf_->planned && !identify_outputs(in))
       fail(who_ + ": model '" + net_.file.string() + "' gives " + net_.describe_outputs() + " on a " +
            blob_shape(in) + " input, not XFeat's three maps");
     m.input = in;
@@ -238,10 +249,33 @@ class XFeatNet {
   }
 
  private:
+  [[nodiscard]] cv::Size first_size() const noexcept { return declared_.width > 0 ? declared_ : cv::Size(64, 64); }
+
+  /// Runs the model at first_size() (false when it does not give XFeat's maps there),
+  /// then at a second multiple-of-32 size, which finds the kind.
+  bool probe() {
+    const cv::Size first = first_size();
+    if (!try_size(first, true)) return false;
+    const cv::Size second = first == cv::Size(64, 64) ? cv::Size(96, 96) : cv::Size(64, 64);
+    // A fixed-size model fails this run by design; cv::dnn would log that failure as an
+    // error on stderr, so its log is silenced for the probe (process-wide, for the few
+    // milliseconds of a 64x64 run).
+    const auto level = cv::utils::logging::getLogLevel();
+    cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
+    try {
+      kind_ = try_size(second, false) ? XFeatModelKind::any_size : XFeatModelKind::fixed_size;
+    } catch (...) {
+      cv::utils::logging::setLogLevel(level);
+      throw;
+    }
+    cv::utils::logging::setLogLevel(level);
+    return true;
+  }
+
   void forward(const cv::Mat& input) {
     // Grey conversion and instance normalisation are inside the exported graph.
-    cv::dnn::blobFromImage(input, blob_, 1.0 / 255.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
-    net_.forward(blob_, who_,
+    cv::dnn::blobFromImage(input, buf_->blob, 1.0 / 255.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
+    net_.forward(buf_->blob, who_,
                  kind_ == XFeatModelKind::fixed_size ? "a fixed-size XFeat export runs only at the size it declares"
                                                      : "an any-size XFeat export needs sides that are multiples of 32");
   }
@@ -252,7 +286,7 @@ class XFeatNet {
   /// at that size or gives other outputs; with `rethrow`, a model that does not run is
   /// an Error (naming the file) instead.
   bool try_size(cv::Size size, bool rethrow) {
-    planned_ = {};
+    buf_->planned = {};
     try {
       forward(cv::Mat(size, CV_8UC3, cv::Scalar::all(128)));
     } catch (const Error&) {
@@ -265,7 +299,7 @@ class XFeatNet {
   /// After a forward pass at `size`: the indices of the three outputs; false when the
   /// outputs are not XFeat's.
   bool identify_outputs(cv::Size size) {
-    planned_ = {};
+    buf_->planned = {};
     const int h8 = size.height / 8, w8 = size.width / 8;
     descriptor_index_ = keypoint_index_ = reliability_index_ = -1;
     for (std::size_t i = 0; i < net_.outputs.size(); ++i) {
@@ -277,17 +311,25 @@ class XFeatNet {
     }
     if (net_.outputs.size() != 3 || descriptor_index_ < 0 || keypoint_index_ < 0 || reliability_index_ < 0)
       return false;
-    planned_ = size;
+    buf_->planned = size;
     return true;
   }
 
+  // What a copy needs to run the same network on its own (DnnNet copies deeply).
   std::string who_ = "XFeat";
-  cv::Size user_size_, declared_, planned_;
+  cv::Size user_size_, declared_;
   XFeatModelKind kind_ = XFeatModelKind::fixed_size;
   DnnNet net_;
   int descriptor_index_ = -1, keypoint_index_ = -1, reliability_index_ = -1;
-  XFeatMaps maps_;
-  cv::Mat bgr_, resized_, blob_;  // scratch reused between images
+  // Per-object state of the last run. A copy starts without it: its own net has not
+  // been planned at any size yet (so it checks the outputs again on its first image),
+  // and the maps point into the original's outputs.
+  struct Buffers {
+    cv::Size planned;  // the size the outputs were last told apart at
+    XFeatMaps maps;
+    cv::Mat bgr, resized, blob;
+  };
+  Scratch<Buffers> buf_;
 };
 
 /// Softmax over the 65 logits of cell (cx, cy); writes the 64 position probabilities
@@ -324,8 +366,12 @@ inline void normalise_cells(const XFeatMaps& m, std::vector<cv::Mat>& cells, std
 
 }  // namespace detail
 
-/// XFeat keypoints and 64-float descriptors (NORM_L2). One object per thread
-/// (cv::dnn::Net and the scratch maps are reused between images).
+/// XFeat keypoints and 64-float descriptors (NORM_L2).
+/// Deep copy: a copy parses the model again (from the bytes kept in memory, not the
+/// file) into its own cv::dnn::Net with its own buffers, so per-thread copies run in
+/// parallel with results equal to one object's; a copy costs a model parse and the two
+/// probe runs of construction (see detail::XFeatNet), so copy once per thread, not per
+/// image. One object serves one thread at a time.
 class XFeatDescriptor {
  public:
   explicit XFeatDescriptor(XFeatOptions options) : options_(std::move(options)) {
@@ -346,15 +392,15 @@ class XFeatDescriptor {
     Features f;
     f.norm = cv::NORM_L2;
     f.image_size = image.size();
-    const int n = static_cast<int>(candidates_.size());
-    f.keypoints.reserve(candidates_.size());
+    const int n = static_cast<int>(buf_->candidates.size());
+    f.keypoints.reserve(buf_->candidates.size());
     f.descriptors.create(n, 64, CV_32F);
-    detail::normalise_cells(m, cells_, norms_);
+    detail::normalise_cells(m, buf_->cells, buf_->norms);
     const float kx = static_cast<float>(m.w8) / static_cast<float>(m.input.width - 1);
     const float ky = static_cast<float>(m.h8) / static_cast<float>(m.input.height - 1);
     const float size = 8.0f * std::max(m.scale.x, m.scale.y);
     for (int i = 0; i < n; ++i) {
-      const Candidate& c = candidates_[static_cast<std::size_t>(i)];
+      const Candidate& c = buf_->candidates[static_cast<std::size_t>(i)];
       f.keypoints.emplace_back(m.to_image(static_cast<float>(c.x), static_cast<float>(c.y)), size, -1.0f, c.score);
       // XFeat samples with grid_sample(align_corners=False) after mapping pixel x to
       // [-1, 1] by 2x/(W-1) - 1: on the 1/8 map that is x * w8/(W-1) - 0.5.
@@ -362,7 +408,7 @@ class XFeatDescriptor {
       float* d = f.descriptors.ptr<float>(i);
       float norm = 0.0f;
       for (int ch = 0; ch < 64; ++ch) {
-        d[ch] = detail::bilinear(cells_[static_cast<std::size_t>(ch)], u, v);
+        d[ch] = detail::bilinear(buf_->cells[static_cast<std::size_t>(ch)], u, v);
         norm += d[ch] * d[ch];
       }
       const float inv = norm > 0.0f ? 1.0f / std::sqrt(norm) : 0.0f;
@@ -387,12 +433,13 @@ class XFeatDescriptor {
 
   /// Step 1: the 64 position probabilities of every cell, unfolded to full resolution.
   void heatmap(const detail::XFeatMaps& m) {
-    heat_.create(m.h8 * 8, m.w8 * 8, CV_32F);
+    cv::Mat& heat = buf_->heat;
+    heat.create(m.h8 * 8, m.w8 * 8, CV_32F);
     float prob[64];
     for (int cy = 0; cy < m.h8; ++cy)
       for (int cx = 0; cx < m.w8; ++cx) {
         detail::cell_softmax(m, cx, cy, prob);
-        for (int k = 0; k < 64; ++k) heat_.at<float>(cy * 8 + k / 8, cx * 8 + k % 8) = prob[k];
+        for (int k = 0; k < 64; ++k) heat.at<float>(cy * 8 + k / 8, cx * 8 + k % 8) = prob[k];
       }
   }
 
@@ -400,20 +447,22 @@ class XFeatDescriptor {
   /// top-k by score (ties by position, so the result is deterministic).
   void select_keypoints(const detail::XFeatMaps& m) {
     const int r = options_.nms_radius;
-    cv::dilate(heat_, local_max_, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * r + 1, 2 * r + 1)));
-    candidates_.clear();
+    const cv::Mat& heat = buf_->heat;
+    cv::dilate(heat, buf_->local_max, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * r + 1, 2 * r + 1)));
+    std::vector<Candidate>& candidates = buf_->candidates;
+    candidates.clear();
     const cv::Mat reliability(m.h8, m.w8, CV_32F, const_cast<float*>(m.reliability));
     // Same pixel -> 1/8-map mapping as the descriptors (see extract).
-    const float rx = static_cast<float>(m.w8) / static_cast<float>(heat_.cols - 1);
-    const float ry = static_cast<float>(m.h8) / static_cast<float>(heat_.rows - 1);
-    for (int y = 0; y < heat_.rows; ++y) {
-      const float* h = heat_.ptr<float>(y);
-      const float* lm = local_max_.ptr<float>(y);
-      for (int x = 0; x < heat_.cols; ++x)
+    const float rx = static_cast<float>(m.w8) / static_cast<float>(heat.cols - 1);
+    const float ry = static_cast<float>(m.h8) / static_cast<float>(heat.rows - 1);
+    for (int y = 0; y < heat.rows; ++y) {
+      const float* h = heat.ptr<float>(y);
+      const float* lm = buf_->local_max.ptr<float>(y);
+      for (int x = 0; x < heat.cols; ++x)
         if (h[x] > options_.detection_threshold && h[x] >= lm[x]) {
           const float rel =
               detail::bilinear(reliability, static_cast<float>(x) * rx - 0.5f, static_cast<float>(y) * ry - 0.5f);
-          candidates_.push_back({x, y, h[x] * rel});
+          candidates.push_back({x, y, h[x] * rel});
         }
     }
     const auto better = [](const Candidate& a, const Candidate& b) {
@@ -421,20 +470,23 @@ class XFeatDescriptor {
       return a.y != b.y ? a.y < b.y : a.x < b.x;
     };
     // Top-k, at most one keypoint per cell on average (the semi-dense budget).
-    const auto k = std::min({candidates_.size(), static_cast<std::size_t>(options_.top_k),
+    const auto k = std::min({candidates.size(), static_cast<std::size_t>(options_.top_k),
                              static_cast<std::size_t>(m.cells())});
-    std::partial_sort(candidates_.begin(), candidates_.begin() + static_cast<std::ptrdiff_t>(k), candidates_.end(),
+    std::partial_sort(candidates.begin(), candidates.begin() + static_cast<std::ptrdiff_t>(k), candidates.end(),
                       better);
-    candidates_.resize(k);
+    candidates.resize(k);
   }
 
   XFeatOptions options_;
   detail::XFeatNet net_;
-  // Scratch reused between images.
-  cv::Mat heat_, local_max_;
-  std::vector<Candidate> candidates_;
-  std::vector<cv::Mat> cells_;
-  std::vector<float> norms_;
+  // Scratch reused between images; a copy gets its own.
+  struct Buffers {
+    cv::Mat heat, local_max;
+    std::vector<Candidate> candidates;
+    std::vector<cv::Mat> cells;
+    std::vector<float> norms;
+  };
+  detail::Scratch<Buffers> buf_;
 };
 
 static_assert(Descriptor<XFeatDescriptor>);

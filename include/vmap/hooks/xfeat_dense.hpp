@@ -57,7 +57,12 @@ struct XFeatDenseOptions {
 
 /// Every cell of XFeat's 1/8 grid as a keypoint (its best pixel) with the cell's 64-d
 /// descriptor (NORM_L2, unit length). Keypoints are in row-major cell order; response
-/// is the softmax probability of the chosen pixel. One object per thread.
+/// is the softmax probability of the chosen pixel.
+/// Deep copy: a copy parses the model again (from the bytes kept in memory, not the
+/// file) into its own cv::dnn::Net with its own buffers, so per-thread copies run in
+/// parallel with results equal to one object's; a copy costs a model parse and the two
+/// probe runs of construction (see detail::XFeatNet), so copy once per thread, not per
+/// image. One object serves one thread at a time.
 class XFeatDenseDescriptor {
  public:
   explicit XFeatDenseDescriptor(XFeatDenseOptions options)
@@ -179,11 +184,31 @@ static_assert(Matcher<DenseMutualMatcher>);
 
 /// The dense front end as a PairMatcher: grids of both images (each image through the
 /// network once while it is among the last three seen), mutual NN, and
-/// Correspondences::cells = the larger grid (eq. 5's denominator). One object per
-/// thread.
+/// Correspondences::cells = the larger grid (eq. 5's denominator).
+/// Deep copy: the copy has its own network (as XFeatDenseDescriptor) and its own copy
+/// of the cache of the last three images (pixels and features cloned, nothing shared
+/// with the original), so it answers exactly as the original would and continues its
+/// network_runs count. One object serves one thread at a time.
 class XFeatDenseMatcher {
  public:
   explicit XFeatDenseMatcher(XFeatDenseOptions options) : descriptor_(std::move(options)) {}
+
+  XFeatDenseMatcher(const XFeatDenseMatcher& other)
+      : descriptor_(other.descriptor_), matcher_(other.matcher_), born_(other.born_), runs_(other.runs_) {
+    cache_.reserve(capacity);
+    for (const Entry& e : other.cache_) {
+      Features f = *e.features;
+      f.descriptors = f.descriptors.clone();
+      cache_.push_back({e.image.clone(), std::make_shared<const Features>(std::move(f)), e.born});
+    }
+  }
+  XFeatDenseMatcher& operator=(const XFeatDenseMatcher& other) {
+    if (this != &other) *this = XFeatDenseMatcher(other);
+    return *this;
+  }
+  XFeatDenseMatcher(XFeatDenseMatcher&&) noexcept = default;
+  XFeatDenseMatcher& operator=(XFeatDenseMatcher&&) noexcept = default;
+  ~XFeatDenseMatcher() = default;
 
   [[nodiscard]] Correspondences match_pair(const cv::Mat& a, const cv::Mat& b) {
     // Both lookups before any insertion, so neither image evicts the other; the

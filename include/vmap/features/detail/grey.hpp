@@ -15,6 +15,13 @@ namespace vmap::detail {
 /// Human-readable cv::Mat type ("CV_8UC2") for error messages.
 inline std::string type_name(int type) { return cv::typeToString(type); }
 
+/// Drops `buffer` unless this object alone owns its memory. A policy's scratch buffer
+/// may still be an earlier input image (an 8-bit grey image is used as is, without a
+/// copy); converting the next image into it would write over the caller's pixels.
+inline void release_if_shared(cv::Mat& buffer) noexcept {
+  if (buffer.u == nullptr || buffer.u->refcount > 1) buffer.release();
+}
+
 /// Converts any supported image to the 8-bit single-channel image the detectors want.
 /// Supported: 8-bit or 16-bit, 1 (grey), 3 (BGR) or 4 (BGRA) channels. 16-bit is scaled
 /// by 1/257 so 65535 maps to 255. `who` names the caller for the error message.
@@ -34,10 +41,12 @@ inline void to_grey8(const cv::Mat& image, cv::Mat& grey, std::string_view who) 
     image.convertTo(eight, CV_MAKETYPE(CV_8U, channels), 1.0 / 257.0);
   else
     eight = image;
-  if (channels == 1)
+  if (channels == 1) {
     grey = eight;
-  else
+  } else {
+    release_if_shared(grey);
     cv::cvtColor(eight, grey, channels == 3 ? cv::COLOR_BGR2GRAY : cv::COLOR_BGRA2GRAY);
+  }
 }
 
 /// Smallest image side the descriptors accept (an image below it is an Error).

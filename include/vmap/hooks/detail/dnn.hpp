@@ -5,12 +5,16 @@
 // describing tensor shapes in error messages.
 
 #include <vmap/core/error.hpp>
+#include <vmap/features/detail/grey.hpp>
 
 #include <opencv2/core.hpp>
 #include <opencv2/dnn.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <memory>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -35,12 +39,45 @@ inline std::string first_line(const cv::Exception& e) {
   return w.substr(0, w.find('\n'));
 }
 
+/// Per-object working memory (images, blobs, candidate lists, last outputs) that a
+/// policy reuses between calls. A copy starts empty instead of sharing it: a cv::Mat
+/// copy shares its pixels, so a defaulted copy of a policy would have two objects, and
+/// so two threads, writing one buffer. Moves keep it.
+template <class T>
+struct Scratch {
+  T value{};
+
+  Scratch() = default;
+  Scratch(const Scratch&) {}
+  Scratch& operator=(const Scratch&) {
+    value = T{};
+    return *this;
+  }
+  Scratch(Scratch&&) noexcept = default;
+  Scratch& operator=(Scratch&&) noexcept = default;
+  ~Scratch() = default;
+
+  T* operator->() noexcept { return &value; }
+  const T* operator->() const noexcept { return &value; }
+  T& operator*() noexcept { return value; }
+  const T& operator*() const noexcept { return value; }
+};
+
 /// A network loaded from an ONNX file. `who` names the adapter in error messages.
+///
+/// Deep copy: cv::dnn::Net is a shared handle (its copies run one network with one set
+/// of buffers, so two threads using two copies race) and has no clone, so a copy parses
+/// the model again into its own Net. The file's bytes are kept in memory (shared,
+/// immutable, about the size of the file: 1-4 MB for the models in ../shared/models) so
+/// that a copy neither re-reads a file that may have changed or gone nor can fail on
+/// it: every copy runs exactly the network the original loaded. Moves are cheap and
+/// leave the moved-from object fit only for assignment or destruction.
 struct DnnNet {
   cv::dnn::Net net;
   std::filesystem::path file;
-  std::vector<std::string> output_names;  ///< all unconnected outputs, in the graph's order
-  std::vector<cv::Mat> outputs;           ///< the last forward pass, same order
+  std::shared_ptr<const std::string> bytes;  ///< the model file's contents, shared by copies
+  std::vector<std::string> output_names;     ///< all unconnected outputs, in the graph's order
+  std::vector<cv::Mat> outputs;              ///< the last forward pass, same order (not copied)
 
   DnnNet() = default;
   DnnNet(const std::filesystem::path& model, std::string_view who) : file(model) {
@@ -48,16 +85,25 @@ struct DnnNet {
     if (model.empty()) fail(std::string(who) + ": no model file given (set the options' model path)");
     if (!std::filesystem::is_regular_file(model, ec))
       fail(std::string(who) + ": model file '" + model.string() + "' does not exist or is not a file");
-    try {
-      net = cv::dnn::readNetFromONNX(model.string());
-    } catch (const cv::Exception& e) {
-      fail(std::string(who) + ": cannot read '" + model.string() + "' as an ONNX model: " + first_line(e));
-    }
-    if (net.empty()) fail(std::string(who) + ": '" + model.string() + "' holds no network");
-    net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
-    net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
+    std::ifstream in(model, std::ios::binary);
+    std::string contents((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (!in.good() && !in.eof()) fail(std::string(who) + ": cannot read the model file '" + model.string() + "'");
+    bytes = std::make_shared<const std::string>(std::move(contents));
+    net = parse(who);
     output_names = net.getUnconnectedOutLayersNames();
   }
+
+  DnnNet(const DnnNet& other)
+      : file(other.file), bytes(other.bytes), output_names(other.output_names) {
+    if (bytes) net = parse("copy of a network");
+  }
+  DnnNet& operator=(const DnnNet& other) {
+    if (this != &other) *this = DnnNet(other);
+    return *this;
+  }
+  DnnNet(DnnNet&&) noexcept = default;
+  DnnNet& operator=(DnnNet&&) noexcept = default;
+  ~DnnNet() = default;
 
   /// Runs the network on one input blob; a model that does not accept it is an Error
   /// naming the file and the input shape (`expects` says what the format wants).
@@ -69,6 +115,20 @@ struct DnnNet {
       fail(std::string(who) + ": model '" + file.string() + "' does not run on a " + shape_string(blob) +
            " input (" + std::string(expects) + "): " + first_line(e));
     }
+  }
+
+  /// A new cv::dnn::Net from `bytes`, on OpenCV's own CPU backend.
+  [[nodiscard]] cv::dnn::Net parse(std::string_view who) const {
+    cv::dnn::Net n;
+    try {
+      n = cv::dnn::readNetFromONNX(bytes->data(), bytes->size());
+    } catch (const cv::Exception& e) {
+      fail(std::string(who) + ": cannot read '" + file.string() + "' as an ONNX model: " + first_line(e));
+    }
+    if (n.empty()) fail(std::string(who) + ": '" + file.string() + "' holds no network");
+    n.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
+    n.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
+    return n;
   }
 
   /// Index of the output called `name`, or -1.
@@ -101,10 +161,12 @@ inline void to_bgr8(const cv::Mat& image, cv::Mat& bgr, std::string_view who) {
          cv::typeToString(image.type()) + "); expected 1 (grey), 3 (BGR) or 4 (BGRA)");
   cv::Mat eight = image;
   if (depth == CV_16U) image.convertTo(eight, CV_MAKETYPE(CV_8U, channels), 1.0 / 257.0);
-  if (channels == 3)
+  if (channels == 3) {
     bgr = eight;
-  else
+  } else {
+    release_if_shared(bgr);  // bgr may still be the caller's previous BGR image
     cv::cvtColor(eight, bgr, channels == 1 ? cv::COLOR_GRAY2BGR : cv::COLOR_BGRA2BGR);
+  }
 }
 
 }  // namespace vmap::detail
