@@ -243,49 +243,44 @@ int main(int argc, char** argv) {
   }
   const std::size_t n = frames.size();
   constexpr bool deferring = DefersDegeneracy<vmap::FundamentalEstimator>;
-  std::printf("bench_allocations: %zu frames of %s, OrbMagsacSelector (default options); pushes %zu..%zu are warm\n",
-              n, list.c_str(), warm, n - 1);
+  std::printf("bench_allocations: %zu frames of %s, OrbMagsacSelector (default options), %zu warm-up pushes\n", n,
+              list.c_str(), warm);
   std::printf("this build: %s\n", deferring ? "buffers reused, degeneracy check deferred (after)"
                                             : "allocating per call, degeneracy check eager (before)");
 
-  // ---- 1. allocations per warm push ------------------------------------------------
+  // ---- 1. allocations per push, two passes ------------------------------------------
+  // Pass 1: a fresh selector; its first `warm` pushes are not counted. Pass 2: the same
+  // selector after reset() (map and key gone, buffers kept), every push but the first
+  // counted: the steady state of a long run, whose buffers have seen these sizes.
   vmap::OrbMagsacSelector selector;
-  std::vector<Count> per_push(n);
-  std::vector<vmap::FrameResult> results(n);
-  std::vector<Pair> pairs;
-  pairs.reserve(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::size_t key = selector.map().keys.empty() ? 0 : selector.map().keys.back().frame_index;
-    vmap::FrameResult r;
-    per_push[i] = count_allocations([&] { r = selector.push(frames[i]); });
-    results[i] = r;
-    if (i > 0) pairs.push_back({key, i, r.exact});
-  }
-  Count warm_all, warm_kept, warm_key;
-  std::size_t n_kept = 0, n_key = 0;
-  std::uint64_t kept_min = UINT64_MAX, kept_max = 0;
-  for (std::size_t i = warm; i < n; ++i) {
-    warm_all += per_push[i];
-    if (results[i].key_taken) {
-      warm_key += per_push[i];
-      ++n_key;
-    } else {
-      warm_kept += per_push[i];
-      ++n_kept;
-      kept_min = std::min(kept_min, per_push[i].calls());
-      kept_max = std::max(kept_max, per_push[i].calls());
+  struct Pass {
+    std::vector<Count> per_push;
+    std::vector<vmap::FrameResult> results;
+    std::vector<std::size_t> key_of;  // the key image frame i was scored against
+  };
+  auto run_pass = [&](Pass& pass) {
+    pass.per_push.assign(n, Count{});
+    pass.results.assign(n, vmap::FrameResult{});
+    pass.key_of.assign(n, 0);
+    for (std::size_t i = 0; i < n; ++i) {
+      pass.key_of[i] = selector.map().keys.empty() ? 0 : selector.map().keys.back().frame_index;
+      vmap::FrameResult r;
+      pass.per_push[i] = count_allocations([&] { r = selector.push(frames[i]); });
+      pass.results[i] = r;
     }
+  };
+  Pass pass1, pass2;
+  run_pass(pass1);
+  const auto keys = selector.map().key_indices();
+  selector.reset();
+  run_pass(pass2);
+  if (selector.map().key_indices() != keys) {
+    std::fprintf(stderr, "bench_allocations: the second pass gave other key images\n");
+    return 1;
   }
   std::printf("\nkey images:");
-  for (const auto& k : selector.map().keys) std::printf(" %zu", k.frame_index);
-  std::printf("\n\n1. allocations per warm push(Frame) (vmap + OpenCV)\n");
-  print_count("every warm push", warm_all, static_cast<double>(n - warm));
-  if (n_kept > 0) {
-    print_count("pushes without a key change", warm_kept, static_cast<double>(n_kept));
-    std::printf("  %-44s min %llu, max %llu allocations\n", "", static_cast<unsigned long long>(kept_min),
-                static_cast<unsigned long long>(kept_max));
-  }
-  if (n_key > 0) print_count("pushes that add a key image", warm_key, static_cast<double>(n_key));
+  for (const auto k : keys) std::printf(" %zu", k);
+  std::printf(" (%zu of %zu frames)\n", keys.size(), n);
 
   // ---- 2. OpenCV's own calls on the same frames and pairs ---------------------------
   std::vector<vmap::Features> features(n);
@@ -295,7 +290,8 @@ int main(int argc, char** argv) {
   }
   // Per push i: what OpenCV's calls allocate on that push's frame and pair.
   std::vector<Count> orb_at(n), f_at(n), h_at(n);
-  Count orb_count;
+  Count orb_count, f_count, h_count;
+  std::size_t f_calls = 0, h_calls = 0;
   {
     const vmap::OrbOptions o;
     auto orb = cv::ORB::create(o.features, o.scale_factor, o.levels, o.edge_threshold, 0, 2, cv::ORB::HARRIS_SCORE,
@@ -305,7 +301,7 @@ int main(int argc, char** argv) {
       cv::Mat d;
       orb->detectAndCompute(frames[i].image, cv::noArray(), kp, d);
     }
-    for (std::size_t i = warm; i < n; ++i) {
+    for (std::size_t i = 0; i < n; ++i) {
       std::vector<cv::KeyPoint> kp;
       cv::Mat d;
       orb_at[i] = count_allocations([&] { orb->detectAndCompute(frames[i].image, cv::noArray(), kp, d); });
@@ -314,24 +310,23 @@ int main(int argc, char** argv) {
   }
   const vmap::BruteForceMatcher matcher;
   const vmap::FundamentalOptions fo;
-  Count f_count, h_count;
-  std::size_t f_calls = 0, h_calls = 0;
   {
     cv::Mat mask, hmask;  // output buffers kept across calls: only OpenCV's internals count
-    for (const Pair& p : pairs) {
-      if (!p.verified_run || p.frame < warm) continue;
-      const vmap::Matches m = matcher.match(features[p.key], features[p.frame]);
+    for (std::size_t i = 1; i < n; ++i) {
+      if (!pass1.results[i].exact) continue;  // the bound skipped the estimator
+      const vmap::Features& key = features[pass1.key_of[i]];
+      const vmap::Matches m = matcher.match(key, features[i]);
       std::vector<cv::Point2f> pa, pb;
       for (const auto& d : m) {
-        pa.push_back(features[p.key].keypoints[static_cast<std::size_t>(d.queryIdx)].pt);
-        pb.push_back(features[p.frame].keypoints[static_cast<std::size_t>(d.trainIdx)].pt);
+        pa.push_back(key.keypoints[static_cast<std::size_t>(d.queryIdx)].pt);
+        pb.push_back(features[i].keypoints[static_cast<std::size_t>(d.trainIdx)].pt);
       }
       if (pa.size() < 8) continue;
       cv::Mat F;
-      f_at[p.frame] = count_allocations([&] {
+      f_at[i] = count_allocations([&] {
         F = cv::findFundamentalMat(pa, pb, cv::USAC_MAGSAC, fo.threshold_px, fo.confidence, fo.max_iterations, mask);
       });
-      f_count += f_at[p.frame];
+      f_count += f_at[i];
       ++f_calls;
       if (F.rows != 3 || cv::countNonZero(mask) < fo.min_inliers) continue;
       std::vector<cv::Point2f> ia, ib;
@@ -340,48 +335,58 @@ int main(int argc, char** argv) {
           ia.push_back(pa[k]);
           ib.push_back(pb[k]);
         }
-      h_at[p.frame] = count_allocations([&] {
+      h_at[i] = count_allocations([&] {
         (void)cv::findHomography(ia, ib, cv::RANSAC, 2.0 * fo.threshold_px, hmask, 2000, fo.confidence);
       });
-      h_count += h_at[p.frame];
+      h_count += h_at[i];
       ++h_calls;
     }
   }
-  const double warm_pushes = static_cast<double>(n - warm);
-  std::printf("\n2. OpenCV's calls alone on the same frames and pairs (per call)\n");
-  print_count("ORB detectAndCompute (with its output)", orb_count, warm_pushes);
+  std::printf("\nOpenCV's calls alone on the same frames and pairs (per call, output buffers kept):\n");
+  print_count("ORB detectAndCompute (with its output)", orb_count, static_cast<double>(n));
   if (f_calls > 0) print_count("findFundamentalMat USAC_MAGSAC", f_count, static_cast<double>(f_calls));
   if (h_calls > 0) print_count("findHomography RANSAC (degeneracy check)", h_count, static_cast<double>(h_calls));
-  Count theirs = orb_count;
-  theirs += f_count;
-  if (!deferring) theirs += h_count;  // the eager check runs it on every verified pair
-  const double ours_calls = static_cast<double>(warm_all.calls()) - static_cast<double>(theirs.calls());
-  const double ours_bytes = static_cast<double>(warm_all.bytes()) - static_cast<double>(theirs.bytes());
-  std::printf("  per warm push: OpenCV %.1f allocations (%.0f bytes), vmap (the rest) %.1f allocations (%.0f bytes)\n",
-              static_cast<double>(theirs.calls()) / warm_pushes, static_cast<double>(theirs.bytes()) / warm_pushes,
-              ours_calls / warm_pushes, ours_bytes / warm_pushes);
-  // Push by push for the pushes without a key change (their only OpenCV calls are the
-  // three above; a key change also scores an extra pair and copies the key's features).
-  {
-    double sum_calls = 0, sum_bytes = 0, lo = 1e18, hi = -1e18;
-    std::size_t k = 0;
-    for (std::size_t i = warm; i < n; ++i) {
-      if (results[i].key_taken) continue;
-      Count t = orb_at[i];
-      t += f_at[i];
-      if (!deferring) t += h_at[i];
-      const double c = static_cast<double>(per_push[i].calls()) - static_cast<double>(t.calls());
-      sum_calls += c;
-      sum_bytes += static_cast<double>(per_push[i].bytes()) - static_cast<double>(t.bytes());
+
+  auto report = [&](const char* title, const Pass& pass, std::size_t first) {
+    Count all, kept, key;
+    std::size_t n_kept = 0, n_key = 0;
+    double ours_calls = 0, ours_bytes = 0, lo = 1e18, hi = -1e18;
+    for (std::size_t i = first; i < n; ++i) {
+      all += pass.per_push[i];
+      if (pass.results[i].key_taken) {
+        key += pass.per_push[i];
+        ++n_key;
+        continue;
+      }
+      kept += pass.per_push[i];
+      ++n_kept;
+      // A push without a key change makes exactly these OpenCV calls (a key change also
+      // scores an extra pair and copies the key's features into the map).
+      Count theirs = orb_at[i];
+      theirs += f_at[i];
+      if (!deferring) theirs += h_at[i];  // the eager check fits a homography on every verified pair
+      const double c = static_cast<double>(pass.per_push[i].calls()) - static_cast<double>(theirs.calls());
+      ours_calls += c;
+      ours_bytes += static_cast<double>(pass.per_push[i].bytes()) - static_cast<double>(theirs.bytes());
       lo = std::min(lo, c);
       hi = std::max(hi, c);
-      ++k;
     }
-    if (k > 0)
-      std::printf("  vmap's own per push without a key change (push minus its OpenCV calls): %.2f allocations "
-                  "(%.0f bytes), min %.0f, max %.0f over %zu pushes\n",
-                  sum_calls / static_cast<double>(k), sum_bytes / static_cast<double>(k), lo, hi, k);
-  }
+    std::printf("\n%s\n", title);
+    print_count("every counted push", all, static_cast<double>(n - first));
+    if (n_key > 0) print_count("pushes that add a key image", key, static_cast<double>(n_key));
+    if (n_kept > 0) {
+      print_count("pushes without a key change", kept, static_cast<double>(n_kept));
+      std::printf("  %-44s %9.2f allocations %11.0f bytes   (min %.0f, max %.0f over %zu pushes)\n",
+                  "  of which vmap's own (push - its OpenCV calls)", ours_calls / static_cast<double>(n_kept),
+                  ours_bytes / static_cast<double>(n_kept), lo, hi, n_kept);
+    }
+  };
+  report("1a. allocations per push(Frame), first pass, pushes after the warm-up (vmap + OpenCV)", pass1, warm);
+  report("1b. allocations per push(Frame), second pass after reset() (steady state)", pass2, 1);
+
+  // Pairs the selector verified, for the speed section.
+  std::vector<Pair> pairs;
+  for (std::size_t i = 1; i < n; ++i) pairs.push_back({pass1.key_of[i], i, pass1.results[i].exact});
 
   // ---- 3. speed --------------------------------------------------------------------
   std::printf("\n3. speed (5 repetitions, median)\n");
@@ -398,7 +403,7 @@ int main(int argc, char** argv) {
       const auto t = clock_type::now();
       for (auto& p : prepared) verifications += s.push(std::move(p)).exact ? 1 : 0;
       t_push.push_back(seconds_since(t));
-      if (s.map().key_indices() != selector.map().key_indices()) {
+      if (s.map().key_indices() != keys) {
         std::fprintf(stderr, "bench_allocations: prepared pushes gave other key images\n");
         return 1;
       }

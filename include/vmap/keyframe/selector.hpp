@@ -205,7 +205,7 @@ class BasicKeyframeSelector {
       // compared with the current key. Comparison resumes with I_{j+1} against the new
       // key (as in the reference implementation); I_j is scored against it only if it
       // has to become the next key image itself.
-      if (!prev_scored_) prev_score_ = full_score(prev_->item);
+      if (!prev_scored_) full_score_into(prev_->item, prev_score_);
       r.key_frame = prev_->index;
       add_key(std::move(*prev_), &prev_score_);  // a link keeps no degeneracy: none is computed
       prev_ = std::move(frame);
@@ -213,7 +213,7 @@ class BasicKeyframeSelector {
       prev_degeneracy_pending_ = false;
     } else {
       // Algorithm 1's rule, or eq. 6 when I_{j-1} already is the key image: take I_j.
-      if (!s.verified_run) s = full_score(frame.item);
+      if (!s.verified_run) full_score_into(frame.item, s);
       r.key_frame = frame.index;
       add_key(std::move(frame), &s);
       set_previous(std::nullopt);
@@ -293,7 +293,13 @@ class BasicKeyframeSelector {
     g.complete_degeneracy(a, b, out);
   };
 
-  PairScore full_score(const Item& item) { return front_.score(key_->item, item, 0.0); }
+  /// S(key, item) with the estimator run whatever the bound, into `out`'s buffers.
+  void full_score_into(const Item& item, PairScore& out) {
+    if constexpr (ScoresInto<F>)
+      (void)front_.score_into(key_->item, item, 0.0, out, true);  // a link keeps no degeneracy
+    else
+      out = front_.score(key_->item, item, 0.0);
+  }
 
   void check_frame(const Frame& frame) const {
     detail::check(!frame.image.empty(), [&] {
@@ -332,6 +338,7 @@ class BasicKeyframeSelector {
       map_.pairs.push_back(pair);
     }
     map_.keys.push_back(std::move(k));
+    if (key_) spare_name_ = std::move(key_->name);
     key_ = std::move(p);
   }
 
