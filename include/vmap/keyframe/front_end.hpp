@@ -110,7 +110,6 @@ using VerifyScratch = typename ScratchOf<E, VerifiesInto<E>>::type;
 
 }  // namespace detail
 
-
 /// The paper's front end: features extracted once per frame (the key image's are kept by
 /// the selector, never recomputed), matched, and verified by the estimator; S per the
 /// Similarity policy. `prepare` uses only the Descriptor and `score` only the other
@@ -186,10 +185,10 @@ class FeatureFrontEnd {
 
   /// Completes a score whose degeneracy check `score_into` deferred: the same matches
   /// are found again (matching is deterministic) and the estimator runs the check.
-  void complete_degeneracy(const Features& key, const Features& frame, PairScore& s) const
-    requires detail::VerifiesInto<E>
-  {
-    estimator_.complete_degeneracy(key, frame, matcher_.match(key, frame), s.verification);
+  /// Nothing to do for an estimator that never defers.
+  void complete_degeneracy(const Features& key, const Features& frame, PairScore& s) const {
+    if constexpr (detail::VerifiesInto<E>)
+      estimator_.complete_degeneracy(key, frame, matcher_.match(key, frame), s.verification);
   }
 
   [[nodiscard]] const Features& features_of(const Features& item) const noexcept { return item; }
@@ -209,6 +208,20 @@ class FeatureFrontEnd {
   [[no_unique_address]] detail::MatchScratch<M> match_scratch_;
   [[no_unique_address]] detail::VerifyScratch<E> verify_scratch_;
 };
+
+namespace detail {
+
+/// A front end that scores into the caller's PairScore with reusable buffers and can
+/// complete a deferred degeneracy check (FeatureFrontEnd); the selector uses it when
+/// present and `score` otherwise.
+template <class F>
+concept ScoresIntoBuffers = requires(F& f, const F& cf, const typename F::Item& a, const typename F::Item& b,
+                                     PairScore& out) {
+  { f.score_into(a, b, 0.0, out, true) } -> std::same_as<bool>;
+  cf.complete_degeneracy(a, b, out);
+};
+
+}  // namespace detail
 
 // ---- detector-free pair matcher -----------------------------------------------------
 

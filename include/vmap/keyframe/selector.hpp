@@ -174,7 +174,7 @@ class BasicKeyframeSelector {
     PairScore& s = scratch_score_;
     bool deferred = false;
     const double skip_below = options_.skip_by_upper_bound ? options_.tau : 0.0;
-    if constexpr (ScoresInto<F>)
+    if constexpr (detail::ScoresIntoBuffers<F>)
       deferred = front_.score_into(key_->item, frame.item, skip_below, s, true);
     else
       s = front_.score(key_->item, frame.item, skip_below);
@@ -286,16 +286,9 @@ class BasicKeyframeSelector {
   [[nodiscard]] const F& front_end() const noexcept { return front_; }
 
  private:
-  /// Front ends that score into reusable buffers (FeatureFrontEnd).
-  template <class G>
-  static constexpr bool ScoresInto = requires(G& g, const Item& a, const Item& b, PairScore& out) {
-    { g.score_into(a, b, 0.0, out, true) } -> std::same_as<bool>;
-    g.complete_degeneracy(a, b, out);
-  };
-
   /// S(key, item) with the estimator run whatever the bound, into `out`'s buffers.
   void full_score_into(const Item& item, PairScore& out) {
-    if constexpr (ScoresInto<F>)
+    if constexpr (detail::ScoresIntoBuffers<F>)
       (void)front_.score_into(key_->item, item, 0.0, out, true);  // a link keeps no degeneracy
     else
       out = front_.score(key_->item, item, 0.0);
@@ -316,7 +309,7 @@ class BasicKeyframeSelector {
   /// The degeneracy of S(key, I_{j-1}), deferred by push() (only state() reads it): the
   /// same value the estimator's verify() gives, computed on the same pair.
   void complete_previous_score(PairScore& score) const {
-    if constexpr (ScoresInto<F>) front_.complete_degeneracy(key_->item, prev_->item, score);
+    if constexpr (detail::ScoresIntoBuffers<F>) front_.complete_degeneracy(key_->item, prev_->item, score);
   }
 
   void add_key(Prepared&& p, const PairScore* link) {
