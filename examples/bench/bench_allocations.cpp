@@ -33,6 +33,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <functional>
 #include <new>
@@ -176,6 +177,14 @@ namespace {
 using clock_type = std::chrono::steady_clock;
 double seconds_since(clock_type::time_point t) {
   return std::chrono::duration<double>(clock_type::now() - t).count();
+}
+
+/// CPU time of the calling thread: what a timed loop cost, whatever else the shared
+/// machine runs (the loops below are single-threaded: matching and MAGSAC++).
+double thread_cpu_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
 double median(std::vector<double> v) {
@@ -391,7 +400,7 @@ int main(int argc, char** argv) {
   // ---- 3. speed --------------------------------------------------------------------
   std::printf("\n3. speed (5 repetitions, median)\n");
   {
-    std::vector<double> t_push;
+    std::vector<double> t_push, cpu_push;
     std::size_t verifications = 0;
     for (int rep = 0; rep < 5; ++rep) {
       vmap::OrbMagsacSelector s;
@@ -401,7 +410,9 @@ int main(int argc, char** argv) {
         prepared.push_back({features[i], frames[i].index, frames[i].name, frames[i].timestamp, {}});
       verifications = 0;
       const auto t = clock_type::now();
+      const double c = thread_cpu_seconds();
       for (auto& p : prepared) verifications += s.push(std::move(p)).exact ? 1 : 0;
+      cpu_push.push_back(thread_cpu_seconds() - c);
       t_push.push_back(seconds_since(t));
       if (s.map().key_indices() != keys) {
         std::fprintf(stderr, "bench_allocations: prepared pushes gave other key images\n");
@@ -409,9 +420,11 @@ int main(int argc, char** argv) {
       }
     }
     verifications -= 1;  // the first frame is not scored
-    const double t = median(t_push);
-    std::printf("  selector push(prepared): %zu pushes, %zu verified, %.2f ms per push, %.1f verifications/s\n", n,
-                verifications, 1000.0 * t / static_cast<double>(n), static_cast<double>(verifications) / t);
+    const double t = median(t_push), c = median(cpu_push);
+    std::printf("  selector push(prepared): %zu pushes, %zu verified; wall %.2f ms per push, %.1f verifications/s; "
+                "thread CPU %.2f ms per push, %.1f verifications per CPU-second\n",
+                n, verifications, 1000.0 * t / static_cast<double>(n), static_cast<double>(verifications) / t,
+                1000.0 * c / static_cast<double>(n), static_cast<double>(verifications) / c);
   }
   {
     const vmap::FundamentalEstimator with_check;
@@ -423,21 +436,23 @@ int main(int argc, char** argv) {
         matches.push_back(matcher.match(features[p.key], features[p.frame]));
         verified.push_back(&p);
       }
-    std::vector<double> t_on, t_off;
+    std::vector<double> t_on, t_off, c_on, c_off;
     for (int rep = 0; rep < 5; ++rep) {
       for (int variant = 0; variant < 2; ++variant) {
         const auto& est = variant == 0 ? with_check : without_check;
         const auto t = clock_type::now();
+        const double c = thread_cpu_seconds();
         for (std::size_t k = 0; k < verified.size(); ++k)
           (void)est.verify(features[verified[k]->key], features[verified[k]->frame], matches[k]);
+        (variant == 0 ? c_on : c_off).push_back(thread_cpu_seconds() - c);
         (variant == 0 ? t_on : t_off).push_back(seconds_since(t));
       }
     }
-    const double on = median(t_on), off = median(t_off);
+    const double on = median(t_on), off = median(t_off), con = median(c_on), coff = median(c_off);
     const double count = static_cast<double>(verified.size());
     std::printf("  FundamentalEstimator::verify on the selector's %zu verified pairs: with the homography check "
-                "%.1f/s, without %.1f/s (ratio %.2f)\n",
-                verified.size(), count / on, count / off, on / off);
+                "%.1f/s, without %.1f/s (ratio %.2f); per CPU-second %.1f and %.1f (ratio %.2f)\n",
+                verified.size(), count / on, count / off, on / off, count / con, count / coff, con / coff);
   }
 
   // ---- 4. PR curve -------------------------------------------------------------------
@@ -458,20 +473,25 @@ int main(int argc, char** argv) {
       if (q >= 100 && gt.has_loop(q) && revisit(rng)) s.match = q - 60;  // some correct, some not
       scores.push_back(s);
     }
+    // Thread CPU time (the library's curve takes about a millisecond: wall time would
+    // mostly measure the shared machine); median of 21 and of 3 runs.
     std::vector<double> t_new, t_old;
     bool same = true;
+    std::vector<vmap::PrecisionRecall> fast;
+    for (int rep = 0; rep < 21; ++rep) {
+      const double c = thread_cpu_seconds();
+      fast = vmap::precision_recall_curve(scores, gt);
+      t_new.push_back(thread_cpu_seconds() - c);
+    }
     for (int rep = 0; rep < 3; ++rep) {
-      auto t = clock_type::now();
-      const auto fast = vmap::precision_recall_curve(scores, gt);
-      t_new.push_back(seconds_since(t));
-      t = clock_type::now();
+      const double c = thread_cpu_seconds();
       const auto slow = rescanning_curve(scores, gt);
-      t_old.push_back(seconds_since(t));
+      t_old.push_back(thread_cpu_seconds() - c);
       same = same && same_curve(fast, slow);
     }
     const double a = median(t_new), b = median(t_old);
-    std::printf("\n4. precision_recall_curve on %zu synthetic frames (%zu loop frames, %zu curve points)\n", pr_frames,
-                gt.loop_frames(), vmap::precision_recall_curve(scores, gt).size());
+    std::printf("\n4. precision_recall_curve on %zu synthetic frames (%zu loop frames, %zu curve points), thread CPU\n",
+                pr_frames, gt.loop_frames(), fast.size());
     std::printf("  library %.3f ms, per-threshold rescan %.3f ms, ratio %.1f, identical points: %s\n", 1000 * a,
                 1000 * b, b / a, same ? "yes" : "NO");
     if (!same) return 1;
