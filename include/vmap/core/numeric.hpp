@@ -51,14 +51,16 @@ namespace vmap {
 
 /// Fails unless `value` is finite; `option` names it ("--pan").
 inline void check_finite(double value, const std::string& option) {
-  detail::check(std::isfinite(value), option + " must be a finite number, got " + std::to_string(value));
+  detail::check(std::isfinite(value),
+                [&] { return option + " must be a finite number, got " + std::to_string(value); });
 }
 
 /// Fails unless lo <= value <= hi (and finite); `option` names it.
 inline void check_in_range(double value, double lo, double hi, const std::string& option) {
-  detail::check(std::isfinite(value) && value >= lo && value <= hi,
-                option + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
-                    std::to_string(value));
+  detail::check(std::isfinite(value) && value >= lo && value <= hi, [&] {
+    return option + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
+           std::to_string(value);
+  });
 }
 
 /// `value` printed with `decimals` decimals ("%.*f"), or a phrase saying it is not a

@@ -66,21 +66,29 @@ struct Camera {
   /// Throws vmap::Error naming `source` (a file, an option) when a value is unusable.
   void validate(const std::string& source = "camera") const {
     const std::string where = source + ": ";
-    detail::check(std::isfinite(fx) && fx > 0, where + "fx must be a finite number > 0, got " + std::to_string(fx));
-    detail::check(std::isfinite(fy) && fy > 0, where + "fy must be a finite number > 0, got " + std::to_string(fy));
-    detail::check(std::isfinite(cx) && std::isfinite(cy), where + "the principal point (cx, cy) must be finite");
+    detail::check(std::isfinite(fx) && fx > 0,
+                  [&] { return where + "fx must be a finite number > 0, got " + std::to_string(fx); });
+    detail::check(std::isfinite(fy) && fy > 0,
+                  [&] { return where + "fy must be a finite number > 0, got " + std::to_string(fy); });
+    detail::check(std::isfinite(cx) && std::isfinite(cy),
+                  [&] { return where + "the principal point (cx, cy) must be finite"; });
     for (std::size_t k = 0; k < distortion.size(); ++k)
-      detail::check(std::isfinite(distortion[k]), where + "distortion coefficient " + std::to_string(k) + " is not finite");
+      detail::check(std::isfinite(distortion[k]),
+                    [&] { return where + "distortion coefficient " + std::to_string(k) + " is not finite"; });
     const std::size_t n = distortion.size();
     if (lens == LensModel::fisheye)
-      detail::check(n == 4, where + "a fisheye (Kannala-Brandt) camera has 4 distortion coefficients k1..k4, got " +
-                                std::to_string(n));
+      detail::check(n == 4, [&] {
+        return where + "a fisheye (Kannala-Brandt) camera has 4 distortion coefficients k1..k4, got " +
+               std::to_string(n);
+      });
     else
-      detail::check(n == 0 || n == 4 || n == 5 || n == 8,
-                    where + "a pinhole camera has 0, 4, 5 or 8 distortion coefficients (k1 k2 p1 p2 [k3 [k4 k5 k6]]), got " +
-                        std::to_string(n));
-    detail::check(image_size.width >= 0 && image_size.height >= 0 && (image_size.width == 0) == (image_size.height == 0),
-                  where + "the image size must be positive or unknown (0 x 0)");
+      detail::check(n == 0 || n == 4 || n == 5 || n == 8, [&] {
+        return where + "a pinhole camera has 0, 4, 5 or 8 distortion coefficients (k1 k2 p1 p2 [k3 [k4 k5 k6]]), got " +
+               std::to_string(n);
+      });
+    detail::check(
+        image_size.width >= 0 && image_size.height >= 0 && (image_size.width == 0) == (image_size.height == 0),
+        [&] { return where + "the image size must be positive or unknown (0 x 0)"; });
   }
 };
 

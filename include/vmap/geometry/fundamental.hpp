@@ -47,33 +47,69 @@ class FundamentalEstimator {
   explicit FundamentalEstimator(const FundamentalOptions& options = {}) : options_(options) {
     detail::check_threshold_options(options_.threshold_px, options_.confidence, options_.max_iterations,
                                     options_.min_inliers, "FundamentalOptions");
-    detail::check(std::isfinite(options_.degeneracy_ratio) && options_.degeneracy_ratio > 0 &&
-                      options_.degeneracy_ratio <= 1,
-                  "FundamentalOptions.degeneracy_ratio must be in (0, 1], got " +
-                      std::to_string(options_.degeneracy_ratio));
+    detail::check(
+        std::isfinite(options_.degeneracy_ratio) && options_.degeneracy_ratio > 0 && options_.degeneracy_ratio <= 1,
+        [&] {
+          return "FundamentalOptions.degeneracy_ratio must be in (0, 1], got " +
+                 std::to_string(options_.degeneracy_ratio);
+        });
   }
+
+  /// Buffers `verify_into` reuses between calls, so that verifying a stream of pairs
+  /// does not allocate in vmap's own code once warm (OpenCV's estimators still
+  /// allocate internally). One per thread.
+  struct Scratch {
+    std::vector<cv::Point2f> pa, pb, ia, ib;
+    std::vector<int> order;
+    cv::Mat mask, hmask;
+  };
 
   [[nodiscard]] Verification verify(const Features& a, const Features& b, const Matches& matches) const {
     Verification v;
+    Scratch scratch;
+    verify_into(a, b, matches, v, scratch, false);
+    return v;
+  }
+
+  /// `verify` into `v` (its inlier mask's capacity is kept), with the caller's buffers.
+  /// With `defer_degeneracy`, the homography check of a verified pair is left out
+  /// (v.degeneracy none, v.homography_inliers 0) and true is returned: the caller runs
+  /// `complete_degeneracy` on the same inputs when it reads those two fields, and gets
+  /// what `verify` would have reported. The key-image selector scores every frame but
+  /// reads the degeneracy only when its state is saved.
+  bool verify_into(const Features& a, const Features& b, const Matches& matches, Verification& v,
+                   Scratch& scratch, bool defer_degeneracy) const {
+    reset(v);
     v.matches = static_cast<int>(matches.size());
-    if (v.matches < minimal_matches) return v;  // status: too_few_matches
-    std::vector<cv::Point2f> pa, pb;
-    std::vector<int> order;
-    detail::gather_points(a, b, matches, options_.seed, pa, pb, order);
-    cv::Mat mask;
+    if (v.matches < minimal_matches) return false;  // status: too_few_matches
+    detail::gather_points(a, b, matches, options_.seed, scratch.pa, scratch.pb, scratch.order);
     cv::Mat F;
     try {
-      F = cv::findFundamentalMat(pa, pb, opencv_method(), options_.threshold_px, options_.confidence,
-                                 options_.max_iterations, mask);
+      F = cv::findFundamentalMat(scratch.pa, scratch.pb, opencv_method(), options_.threshold_px,
+                                 options_.confidence, options_.max_iterations, scratch.mask);
     } catch (const cv::Exception&) {
       // OpenCV throws on inputs it cannot fit at all (e.g. every point identical):
       // an expected outcome for a verifier, reported as "no model".
       v.status = VerificationStatus::no_model;
-      return v;
+      return false;
     }
-    detail::fill_from_estimate(F, mask, order, options_.min_inliers, v);
-    if (v.ok() && options_.check_degeneracy) check_degeneracy(pa, pb, order, v);
-    return v;
+    detail::fill_from_estimate(F, scratch.mask, scratch.order, options_.min_inliers, v);
+    if (!v.ok() || !options_.check_degeneracy) return false;
+    if (defer_degeneracy) return true;
+    check_degeneracy(scratch, v);
+    return false;
+  }
+
+  /// The homography check `verify_into(..., defer_degeneracy = true)` left out, on the
+  /// same (a, b, matches) and its result `v`: sets v.degeneracy and v.homography_inliers
+  /// exactly as `verify` does (same points in the same order, same seeded RANSAC).
+  void complete_degeneracy(const Features& a, const Features& b, const Matches& matches, Verification& v) const {
+    v.degeneracy = Degeneracy::none;
+    v.homography_inliers = 0;
+    if (!v.ok() || !options_.check_degeneracy) return;
+    Scratch scratch;
+    detail::gather_points(a, b, matches, options_.seed, scratch.pa, scratch.pb, scratch.order);
+    check_degeneracy(scratch, v);
   }
 
   [[nodiscard]] const FundamentalOptions& options() const noexcept { return options_; }
@@ -89,9 +125,26 @@ class FundamentalEstimator {
     return cv::USAC_MAGSAC;
   }
 
-  void check_degeneracy(const std::vector<cv::Point2f>& pa, const std::vector<cv::Point2f>& pb,
-                        const std::vector<int>& order, Verification& v) const {
-    std::vector<cv::Point2f> ia, ib;
+  static void reset(Verification& v) {
+    v.status = VerificationStatus::too_few_matches;
+    v.model = cv::Matx33d::zeros();
+    v.inlier_mask.clear();
+    v.inliers = 0;
+    v.matches = 0;
+    v.degeneracy = Degeneracy::none;
+    v.homography_inliers = 0;
+    v.relative_pose.reset();
+  }
+
+  /// Fits a homography to the model's inliers (scratch.pa/pb in scratch.order).
+  void check_degeneracy(Scratch& scratch, Verification& v) const {
+    const std::vector<cv::Point2f>& pa = scratch.pa;
+    const std::vector<cv::Point2f>& pb = scratch.pb;
+    const std::vector<int>& order = scratch.order;
+    std::vector<cv::Point2f>& ia = scratch.ia;
+    std::vector<cv::Point2f>& ib = scratch.ib;
+    ia.clear();
+    ib.clear();
     ia.reserve(static_cast<std::size_t>(v.inliers));
     ib.reserve(static_cast<std::size_t>(v.inliers));
     for (std::size_t k = 0; k < order.size(); ++k)
@@ -100,7 +153,7 @@ class FundamentalEstimator {
         ib.push_back(pb[k]);
       }
     if (ia.size() < 4) return;
-    cv::Mat hmask;
+    cv::Mat& hmask = scratch.hmask;
     cv::Mat H;
     try {
       // The homography's error is a 2-D transfer distance where F's is a 1-D distance to

@@ -20,8 +20,10 @@
 #include <algorithm>
 #include <concepts>
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace vmap {
 
@@ -74,6 +76,40 @@ concept FrameFrontEnd = KeyframeFrontEnd<F>  // scores pairs
 
 // ---- descriptor + matcher + estimator + similarity ---------------------------------
 
+namespace detail {
+
+/// A matcher that can match into the caller's Matches with reusable buffers
+/// (BruteForceMatcher::match_into).
+template <class M>
+concept MatchesInto = requires(const M& m, const Features& a, const Features& b, Matches& out,
+                               typename M::Scratch& scratch) { m.match_into(a, b, out, scratch); };
+
+/// An estimator that can verify into the caller's Verification with reusable buffers and
+/// defer its degeneracy check (FundamentalEstimator::verify_into / complete_degeneracy).
+template <class E>
+concept VerifiesInto = requires(const E& e, const Features& a, const Features& b, const Matches& m,
+                                Verification& v, typename E::Scratch& scratch) {
+  { e.verify_into(a, b, m, v, scratch, true) } -> std::same_as<bool>;
+  e.complete_degeneracy(a, b, m, v);
+};
+
+/// The policy's Scratch when it has a buffer-reusing form, else an empty stand-in.
+struct NoScratch {};
+template <class P, bool has_scratch>
+struct ScratchOf {
+  using type = NoScratch;
+};
+template <class P>
+struct ScratchOf<P, true> {
+  using type = typename P::Scratch;
+};
+template <class M>
+using MatchScratch = typename ScratchOf<M, MatchesInto<M>>::type;
+template <class E>
+using VerifyScratch = typename ScratchOf<E, VerifiesInto<E>>::type;
+
+}  // namespace detail
+
 /// The paper's front end: features extracted once per frame (the key image's are kept by
 /// the selector, never recomputed), matched, and verified by the estimator; S per the
 /// Similarity policy. `prepare` uses only the Descriptor and `score` only the other
@@ -113,6 +149,48 @@ class FeatureFrontEnd {
     s.similarity = s.verification.ok() ? static_cast<double>(similarity_(key, frame, s.verification)) : 0.0;
   }
 
+  /// `score` into `out` with the front end's reusable buffers (no allocation of ours
+  /// once warm when the matcher and estimator offer buffer-reusing forms, as
+  /// BruteForceMatcher and FundamentalEstimator do). With `defer_degeneracy` an
+  /// estimator that supports it leaves the homography degeneracy check out and true is
+  /// returned: `complete_degeneracy` on the same pair fills it in when it is read.
+  /// Touches the scoring buffers: one thread at a time (like the selector's push).
+  bool score_into(const Features& key, const Features& frame, double skip_below, PairScore& out,
+                  bool defer_degeneracy) {
+    if constexpr (detail::MatchesInto<M>)
+      matcher_.match_into(key, frame, matches_, match_scratch_);
+    else
+      matches_ = matcher_.match(key, frame);
+    out.raw_matches = static_cast<int>(matches_.size());
+    out.upper_bound = similarity_.upper_bound(key, frame, out.raw_matches);
+    out.verified_run = false;
+    out.similarity = 0.0;
+    if (out.upper_bound < skip_below) {
+      // As `score` leaves it (not computed), keeping the inlier mask's capacity.
+      std::vector<std::uint8_t> mask = std::move(out.verification.inlier_mask);
+      mask.clear();
+      out.verification = {};
+      out.verification.inlier_mask = std::move(mask);
+      return false;
+    }
+    bool deferred = false;
+    if constexpr (detail::VerifiesInto<E>)
+      deferred = estimator_.verify_into(key, frame, matches_, out.verification, verify_scratch_, defer_degeneracy);
+    else
+      out.verification = estimator_.verify(key, frame, matches_);
+    out.verified_run = true;
+    out.similarity = out.verification.ok() ? static_cast<double>(similarity_(key, frame, out.verification)) : 0.0;
+    return deferred;
+  }
+
+  /// Completes a score whose degeneracy check `score_into` deferred: the same matches
+  /// are found again (matching is deterministic) and the estimator runs the check.
+  /// Nothing to do for an estimator that never defers.
+  void complete_degeneracy(const Features& key, const Features& frame, PairScore& s) const {
+    if constexpr (detail::VerifiesInto<E>)
+      estimator_.complete_degeneracy(key, frame, matcher_.match(key, frame), s.verification);
+  }
+
   [[nodiscard]] const Features& features_of(const Features& item) const noexcept { return item; }
 
   [[nodiscard]] D& descriptor() noexcept { return descriptor_; }
@@ -125,7 +203,25 @@ class FeatureFrontEnd {
   M matcher_;
   E estimator_;
   S similarity_;
+  // score_into's buffers, reused between pairs.
+  Matches matches_;
+  [[no_unique_address]] detail::MatchScratch<M> match_scratch_;
+  [[no_unique_address]] detail::VerifyScratch<E> verify_scratch_;
 };
+
+namespace detail {
+
+/// A front end that scores into the caller's PairScore with reusable buffers and can
+/// complete a deferred degeneracy check (FeatureFrontEnd); the selector uses it when
+/// present and `score` otherwise.
+template <class F>
+concept ScoresIntoBuffers = requires(F& f, const F& cf, const typename F::Item& a, const typename F::Item& b,
+                                     PairScore& out) {
+  { f.score_into(a, b, 0.0, out, true) } -> std::same_as<bool>;
+  cf.complete_degeneracy(a, b, out);
+};
+
+}  // namespace detail
 
 // ---- detector-free pair matcher -----------------------------------------------------
 
@@ -134,9 +230,10 @@ namespace detail {
 /// Correspondences as Features + one-to-one Matches, so any Estimator verifies them.
 inline void correspondences_as_features(const Correspondences& c, cv::Size size_a, cv::Size size_b, Features& a,
                                         Features& b, Matches& m) {
-  check(c.points_b.size() == c.points_a.size(),
-        "PairMatcher: points_a and points_b differ in length (" + std::to_string(c.points_a.size()) + " vs " +
-            std::to_string(c.points_b.size()) + ")");
+  check(c.points_b.size() == c.points_a.size(), [&] {
+    return "PairMatcher: points_a and points_b differ in length (" + std::to_string(c.points_a.size()) + " vs " +
+           std::to_string(c.points_b.size()) + ")";
+  });
   const std::size_t n = c.size();
   a.keypoints.resize(n);
   b.keypoints.resize(n);

@@ -98,8 +98,9 @@ inline void write_features(BinaryWriter& w, const Features& f) {
     w.i32(k.class_id);
   }
   const cv::Mat& d = f.descriptors;
-  check(d.empty() || d.type() == CV_8UC1 || d.type() == CV_32FC1,
-        "save_map: descriptors of type " + cv::typeToString(d.type()) + " cannot be stored (CV_8UC1 or CV_32FC1)");
+  check(d.empty() || d.type() == CV_8UC1 || d.type() == CV_32FC1, [&] {
+    return "save_map: descriptors of type " + cv::typeToString(d.type()) + " cannot be stored (CV_8UC1 or CV_32FC1)";
+  });
   check(d.empty() || d.rows == static_cast<int>(f.keypoints.size()),
         "save_map: descriptor rows and keypoint count differ");
   w.i32(d.empty() ? CV_8UC1 : d.type());
@@ -165,8 +166,10 @@ inline void write_image(BinaryWriter& w, const cv::Mat& image) {
     w.u8(0);
     return;
   }
-  check(valid_image_type(image.type()), "save_map: key image of type " + cv::typeToString(image.type()) +
-                                            " cannot be stored (8-bit grey/BGR/BGRA or 16-bit grey)");
+  check(valid_image_type(image.type()), [&] {
+    return "save_map: key image of type " + cv::typeToString(image.type()) +
+           " cannot be stored (8-bit grey/BGR/BGRA or 16-bit grey)";
+  });
   std::vector<unsigned char> png;
   if (!cv::imencode(".png", image, png)) fail("save_map: PNG encoding of a key image failed");
   w.u8(1);
@@ -283,9 +286,10 @@ inline VisualMap parse_map(std::string_view file, const std::string& name, const
 
 /// The map file's bytes (format above). Images are stored when the key images carry them.
 [[nodiscard]] inline std::string serialize_map(const VisualMap& map) {
-  detail::check(map.pairs.size() == (map.keys.empty() ? 0 : map.keys.size() - 1),
-                "save_map: the map has " + std::to_string(map.pairs.size()) + " pairs for " +
-                    std::to_string(map.keys.size()) + " key images");
+  detail::check(map.pairs.size() == (map.keys.empty() ? 0 : map.keys.size() - 1), [&] {
+    return "save_map: the map has " + std::to_string(map.pairs.size()) + " pairs for " +
+           std::to_string(map.keys.size()) + " key images";
+  });
   detail::BinaryWriter w;
   w.u64(map.frames);
   w.u32(static_cast<std::uint32_t>(map.keys.size()));

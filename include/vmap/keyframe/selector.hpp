@@ -121,14 +121,13 @@ class BasicKeyframeSelector {
   explicit BasicKeyframeSelector(F front_end, const SelectorOptions& options = {})
       : front_(std::move(front_end)), options_(options) {
     detail::check(std::isfinite(options_.tau) && options_.tau > 0.0 && options_.tau <= 1.0,
-                  "SelectorOptions.tau must be in (0, 1], got " + std::to_string(options_.tau));
+                  [&] { return "SelectorOptions.tau must be in (0, 1], got " + std::to_string(options_.tau); });
   }
 
   [[nodiscard]] Prepared prepare(const Frame& frame)
     requires PreparesFrames<F>
   {
-    detail::check(!frame.image.empty(), "key-image selector: frame " + std::to_string(frame.index) + " ('" +
-                                            frame.name + "') is an empty image");
+    check_frame(frame);
     Prepared p{front_.prepare(frame.image), frame.index, frame.name, frame.timestamp, {}};
     if (options_.keep_images) p.image = frame.image;
     return p;
@@ -137,7 +136,13 @@ class BasicKeyframeSelector {
   FrameResult push(const Frame& frame)
     requires PreparesFrames<F>
   {
-    return push(prepare(frame));
+    // prepare(), with the name's buffer taken from the last frame this selector dropped
+    // (a frame name is longer than the short-string buffer: one allocation per frame).
+    check_frame(frame);
+    Prepared p{front_.prepare(frame.image), frame.index, std::move(spare_name_), frame.timestamp, {}};
+    p.name.assign(frame.name);
+    if (options_.keep_images) p.image = frame.image;
+    return push(std::move(p));
   }
 
   /// A bare image: its index is the number of frames pushed so far.
@@ -164,7 +169,15 @@ class BasicKeyframeSelector {
       add_key(std::move(frame), nullptr);
       return r;
     }
-    PairScore s = front_.score(key_->item, frame.item, options_.skip_by_upper_bound ? options_.tau : 0.0);
+    // Scored into a buffer kept across calls; the homography degeneracy check is
+    // deferred because only state() reads it (see complete_previous_score).
+    PairScore& s = scratch_score_;
+    bool deferred = false;
+    const double skip_below = options_.skip_by_upper_bound ? options_.tau : 0.0;
+    if constexpr (detail::ScoresIntoBuffers<F>)
+      deferred = front_.score_into(key_->item, frame.item, skip_below, s, true);
+    else
+      s = front_.score(key_->item, frame.item, skip_below);
     r.raw_matches = s.raw_matches;
     r.exact = s.verified_run;
     r.similarity = s.verified_run ? s.similarity : s.upper_bound;
@@ -179,9 +192,10 @@ class BasicKeyframeSelector {
     else if (s.similarity < options_.tau)
       r.reason = KeyReason::below_threshold;
     if (r.reason == KeyReason::none) {
-      prev_ = std::move(frame);
-      prev_score_ = std::move(s);
+      set_previous(std::move(frame));
+      std::swap(prev_score_, scratch_score_);  // the buffers change hands, none is freed
       prev_scored_ = true;
+      prev_degeneracy_pending_ = deferred;
       return r;
     }
     r.key_taken = true;
@@ -191,18 +205,20 @@ class BasicKeyframeSelector {
       // compared with the current key. Comparison resumes with I_{j+1} against the new
       // key (as in the reference implementation); I_j is scored against it only if it
       // has to become the next key image itself.
-      PairScore link = prev_scored_ ? std::move(prev_score_) : full_score(prev_->item);
+      if (!prev_scored_) full_score_into(prev_->item, prev_score_);
       r.key_frame = prev_->index;
-      add_key(std::move(*prev_), &link);
+      add_key(std::move(*prev_), &prev_score_);  // a link keeps no degeneracy: none is computed
       prev_ = std::move(frame);
       prev_scored_ = false;
+      prev_degeneracy_pending_ = false;
     } else {
       // Algorithm 1's rule, or eq. 6 when I_{j-1} already is the key image: take I_j.
-      if (!s.verified_run) s = full_score(frame.item);
+      if (!s.verified_run) full_score_into(frame.item, s);
       r.key_frame = frame.index;
       add_key(std::move(frame), &s);
-      prev_.reset();
+      set_previous(std::nullopt);
       prev_scored_ = false;
+      prev_degeneracy_pending_ = false;
     }
     return r;
   }
@@ -219,12 +235,16 @@ class BasicKeyframeSelector {
     key_.reset();
     prev_.reset();
     prev_scored_ = false;
+    prev_degeneracy_pending_ = false;
   }
 
   /// A copy of everything push() continues from (see SelectorState).
   [[nodiscard]] SelectorState<Item> state() const {
     SelectorState<Item> s{map_, prev_, std::nullopt};
-    if (prev_scored_) s.previous_score = prev_score_;
+    if (prev_scored_) {
+      s.previous_score = prev_score_;
+      if (prev_degeneracy_pending_) complete_previous_score(*s.previous_score);
+    }
     return s;
   }
 
@@ -235,9 +255,10 @@ class BasicKeyframeSelector {
     requires std::same_as<Item, Features>
   {
     const VisualMap& m = s.map;
-    detail::check(m.pairs.size() == (m.keys.empty() ? 0 : m.keys.size() - 1),
-                  "KeyframeSelector::restore: " + std::to_string(m.pairs.size()) + " pairs for " +
-                      std::to_string(m.keys.size()) + " key images");
+    detail::check(m.pairs.size() == (m.keys.empty() ? 0 : m.keys.size() - 1), [&] {
+      return "KeyframeSelector::restore: " + std::to_string(m.pairs.size()) + " pairs for " +
+             std::to_string(m.keys.size()) + " key images";
+    });
     detail::check(m.keys.empty() || m.frames >= m.keys.size(),
                   "KeyframeSelector::restore: fewer frames than key images");
     detail::check(!s.previous_score || s.previous, "KeyframeSelector::restore: a previous score without a previous frame");
@@ -252,6 +273,7 @@ class BasicKeyframeSelector {
     }
     prev_ = std::move(s.previous);
     prev_scored_ = s.previous_score.has_value();
+    prev_degeneracy_pending_ = false;  // a saved score is complete
     if (prev_scored_) prev_score_ = std::move(*s.previous_score);
   }
 
@@ -264,7 +286,31 @@ class BasicKeyframeSelector {
   [[nodiscard]] const F& front_end() const noexcept { return front_; }
 
  private:
-  PairScore full_score(const Item& item) { return front_.score(key_->item, item, 0.0); }
+  /// S(key, item) with the estimator run whatever the bound, into `out`'s buffers.
+  void full_score_into(const Item& item, PairScore& out) {
+    if constexpr (detail::ScoresIntoBuffers<F>)
+      (void)front_.score_into(key_->item, item, 0.0, out, true);  // a link keeps no degeneracy
+    else
+      out = front_.score(key_->item, item, 0.0);
+  }
+
+  void check_frame(const Frame& frame) const {
+    detail::check(!frame.image.empty(), [&] {
+      return "key-image selector: frame " + std::to_string(frame.index) + " ('" + frame.name + "') is an empty image";
+    });
+  }
+
+  /// I_{j-1} := p; the frame it replaces lends its name's buffer to the next frame.
+  void set_previous(std::optional<Prepared> p) {
+    if (prev_) spare_name_ = std::move(prev_->name);
+    prev_ = std::move(p);
+  }
+
+  /// The degeneracy of S(key, I_{j-1}), deferred by push() (only state() reads it): the
+  /// same value the estimator's verify() gives, computed on the same pair.
+  void complete_previous_score(PairScore& score) const {
+    if constexpr (detail::ScoresIntoBuffers<F>) front_.complete_degeneracy(key_->item, prev_->item, score);
+  }
 
   void add_key(Prepared&& p, const PairScore* link) {
     KeyImage k;
@@ -285,6 +331,7 @@ class BasicKeyframeSelector {
       map_.pairs.push_back(pair);
     }
     map_.keys.push_back(std::move(k));
+    if (key_) spare_name_ = std::move(key_->name);
     key_ = std::move(p);
   }
 
@@ -295,6 +342,9 @@ class BasicKeyframeSelector {
   std::optional<Prepared> prev_;  // I_{j-1} when it is not the key image
   PairScore prev_score_;          // S(key, prev) when prev_scored_
   bool prev_scored_ = false;
+  bool prev_degeneracy_pending_ = false;  // prev_score_'s degeneracy check was deferred
+  PairScore scratch_score_;               // push()'s score, reused between frames
+  std::string spare_name_;                // a dropped frame's name buffer, reused
 };
 
 /// The paper's stack: Descriptor + Matcher + Estimator + Similarity.

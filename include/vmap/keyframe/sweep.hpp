@@ -248,7 +248,8 @@ template <Descriptor D, Matcher M, Estimator E, Similarity S>
     if (options.on_frame) options.on_frame(n);
   };
   auto prepare = [&](const Frame& f) {
-    detail::check(!f.image.empty(), "threshold sweep: frame " + std::to_string(f.index) + " is an empty image");
+    detail::check(!f.image.empty(),
+                  [&] { return "threshold sweep: frame " + std::to_string(f.index) + " is an empty image"; });
     return PreparedFrame<Features>{front.prepare(f.image), f.index, f.name, f.timestamp, {}};
   };
   if (options.pipelined)

@@ -51,8 +51,9 @@ class BinaryClassifiedTree {
   static constexpr std::uint64_t max_load_nodes = std::uint64_t{1} << 22;
 
   explicit BinaryClassifiedTree(std::size_t depth = 0) : depth_(depth) {
-    detail::check(depth <= max_depth, "BinaryClassifiedTree: depth " + std::to_string(depth) + " exceeds " +
-                                          std::to_string(max_depth));
+    detail::check(depth <= max_depth, [&] {
+      return "BinaryClassifiedTree: depth " + std::to_string(depth) + " exceeds " + std::to_string(max_depth);
+    });
     nodes_.emplace_back();
   }
 

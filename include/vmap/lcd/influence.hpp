@@ -35,8 +35,10 @@ namespace detail {
 inline void check_influence_options(const InfluenceOptions& o) {
   check(std::isfinite(o.min_influence) && std::isfinite(o.max_influence) && o.min_influence >= 0.0 &&
             o.max_influence <= 1.0 && o.min_influence <= o.max_influence,
-        "InfluenceOptions: need 0 <= min_influence <= max_influence <= 1, got [" + std::to_string(o.min_influence) +
-            ", " + std::to_string(o.max_influence) + "]");
+        [&] {
+          return "InfluenceOptions: need 0 <= min_influence <= max_influence <= 1, got [" +
+                 std::to_string(o.min_influence) + ", " + std::to_string(o.max_influence) + "]";
+        });
 }
 
 }  // namespace detail
@@ -49,10 +51,13 @@ inline void check_influence_options(const InfluenceOptions& o) {
   const std::size_t n = sample.front().size();
   std::vector<std::size_t> p(n, 0);
   for (std::size_t k = 0; k < sample.size(); ++k) {
-    detail::check(sample[k].size() == n, "label_influence: vector " + std::to_string(k) + " has length " +
-                                             std::to_string(sample[k].size()) + ", the first has " + std::to_string(n));
+    detail::check(sample[k].size() == n, [&] {
+      return "label_influence: vector " + std::to_string(k) + " has length " + std::to_string(sample[k].size()) +
+             ", the first has " + std::to_string(n);
+    });
     for (std::size_t i = 0; i < n; ++i) {
-      detail::check(sample[k][i] <= 1, "label_influence: vector " + std::to_string(k) + " holds a value other than 0/1");
+      detail::check(sample[k][i] <= 1,
+                    [&] { return "label_influence: vector " + std::to_string(k) + " holds a value other than 0/1"; });
       p[i] += sample[k][i];
     }
   }

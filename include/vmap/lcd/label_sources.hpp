@@ -88,13 +88,15 @@ struct LabelVectorAgreement {
 /// frame k's). The vectors must have one length and the ground truth n frames.
 [[nodiscard]] inline LabelVectorAgreement label_vector_agreement(const std::vector<LabelVector>& vectors,
                                                                  const LoopGroundTruth& gt, std::size_t window) {
-  detail::check(gt.frames() == vectors.size(), "label_vector_agreement: the ground truth covers " +
-                                                   std::to_string(gt.frames()) + " frames, the vectors " +
-                                                   std::to_string(vectors.size()));
+  detail::check(gt.frames() == vectors.size(), [&] {
+    return "label_vector_agreement: the ground truth covers " + std::to_string(gt.frames()) + " frames, the vectors " +
+           std::to_string(vectors.size());
+  });
   for (std::size_t k = 0; k < vectors.size(); ++k)
-    detail::check(vectors[k].size() == vectors.front().size(),
-                  "label_vector_agreement: vector " + std::to_string(k) + " has length " +
-                      std::to_string(vectors[k].size()) + ", the first has " + std::to_string(vectors.front().size()));
+    detail::check(vectors[k].size() == vectors.front().size(), [&] {
+      return "label_vector_agreement: vector " + std::to_string(k) + " has length " +
+             std::to_string(vectors[k].size()) + ", the first has " + std::to_string(vectors.front().size());
+    });
   LabelVectorAgreement a;
   // Keyed by the bytes as a string: GCC 12 at -O3 warns falsely (stringop-overread)
   // inside std::vector's <=> that a std::map<LabelVector, ...> would use.

@@ -32,7 +32,7 @@ namespace detail {
 
 inline void check_label_min_score(float min_score) {
   check(min_score >= 0.0f && min_score <= 1.0f,
-        "LabelVectorOptions.min_score must be in [0, 1], got " + std::to_string(min_score));
+        [&] { return "LabelVectorOptions.min_score must be in [0, 1], got " + std::to_string(min_score); });
 }
 
 inline void check_detection_score(const Detection& d) {
@@ -108,8 +108,9 @@ class LabelStatistics {
     for (const Detection& d : detections) {
       if (d.score < options_.min_score) continue;
       const double area = static_cast<double>(d.box.width) * static_cast<double>(d.box.height);
-      detail::check(std::isfinite(area) && area >= 0.0,
-                    "detection of label " + std::to_string(d.label) + " has a non-finite or negative box");
+      detail::check(std::isfinite(area) && area >= 0.0, [&] {
+        return "detection of label " + std::to_string(d.label) + " has a non-finite or negative box";
+      });
       auto& s = per_label_[d.label];
       s.area_sum += area;
       ++s.boxes;

@@ -220,14 +220,16 @@ class LoopDetector {
 
   /// Extracts the features of `image`, then `add(features, detections)`.
   LoopResult push(const cv::Mat& image, const std::vector<Detection>& detections) {
-    detail::check(!image.empty(), "LoopDetector::push: frame " + std::to_string(frames_.size()) + " is empty");
+    detail::check(!image.empty(),
+                  [&] { return "LoopDetector::push: frame " + std::to_string(frames_.size()) + " is empty"; });
     return add(descriptor_.extract(image), detections);
   }
 
   /// Runs `detector` on `image`, then `push(image, detections)`.
   template <ObjectDetector Detector>
   LoopResult push(const cv::Mat& image, Detector& detector) {
-    detail::check(!image.empty(), "LoopDetector::push: frame " + std::to_string(frames_.size()) + " is empty");
+    detail::check(!image.empty(),
+                  [&] { return "LoopDetector::push: frame " + std::to_string(frames_.size()) + " is empty"; });
     return push(image, detector.detect(image));
   }
 

@@ -29,20 +29,36 @@ class BruteForceMatcher {
  public:
   explicit BruteForceMatcher(const BruteForceOptions& options = {}) : options_(options) {
     detail::check(std::isfinite(options_.ratio) && options_.ratio > 0.0f && options_.ratio <= 1.0f,
-                  "BruteForceOptions.ratio must be in (0, 1], got " + std::to_string(options_.ratio));
+                  [&] { return "BruteForceOptions.ratio must be in (0, 1], got " + std::to_string(options_.ratio); });
   }
+
+  /// Buffers `match_into` reuses between calls, so that matching a stream of frames
+  /// does not allocate once warm. One per thread.
+  struct Scratch {
+    detail::MutualResult mutual;
+    cv::Mat dist, idx;
+  };
 
   /// Empty inputs give empty matches; descriptors of different kinds are an Error.
   [[nodiscard]] Matches match(const Features& a, const Features& b) const {
     Matches out;
-    if (a.descriptors.empty() || b.descriptors.empty()) return out;
+    Scratch scratch;
+    match_into(a, b, out, scratch);
+    return out;
+  }
+
+  /// `match` into `out` (its capacity is kept), with the caller's buffers.
+  void match_into(const Features& a, const Features& b, Matches& out, Scratch& scratch) const {
+    out.clear();
+    if (a.descriptors.empty() || b.descriptors.empty()) return;
     check_compatible(a, b);
-    cv::Mat dist, idx;
+    cv::Mat& dist = scratch.dist;
+    cv::Mat& idx = scratch.idx;
     const int dtype = a.descriptors.depth() == CV_8U ? CV_32S : CV_32F;
     if (options_.mode == MatchMode::mutual && dtype == CV_32S) {
       // Binary descriptors: one pass over the distance matrix (detail/hamming.hpp),
       // the same matches as OpenCV's cross-check at about a third of its cost.
-      detail::MutualResult r;
+      detail::MutualResult& r = scratch.mutual;
       detail::mutual_hamming(a.descriptors, b.descriptors, r);
       out.reserve(r.best_b.size());
       for (std::size_t i = 0; i < r.best_b.size(); ++i) {
@@ -62,7 +78,7 @@ class BruteForceMatcher {
         out.emplace_back(i, j, distance_at(dist, i, 0));
       }
     } else {
-      if (b.descriptors.rows < 2) return out;  // no second neighbour to compare with
+      if (b.descriptors.rows < 2) return;  // no second neighbour to compare with
       cv::batchDistance(a.descriptors, b.descriptors, dist, dtype, idx, a.norm, 2);
       out.reserve(static_cast<std::size_t>(idx.rows));
       for (int i = 0; i < idx.rows; ++i) {
@@ -73,7 +89,6 @@ class BruteForceMatcher {
         if (d1 < options_.ratio * d2) out.emplace_back(i, j, d1);
       }
     }
-    return out;
   }
 
   [[nodiscard]] const BruteForceOptions& options() const noexcept { return options_; }

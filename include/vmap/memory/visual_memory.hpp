@@ -418,7 +418,8 @@ class VisualMemory {
   /// Key images linked to `key`: the chain neighbours (key - 1, key + 1), then loop edges.
   [[nodiscard]] std::vector<GraphNeighbour> neighbours(std::uint32_t key) const {
     const std::size_t m = selector_.map().keys.size();
-    detail::check(key < m, "VisualMemory::neighbours: key " + std::to_string(key) + " of " + std::to_string(m));
+    detail::check(key < m,
+                  [&] { return "VisualMemory::neighbours: key " + std::to_string(key) + " of " + std::to_string(m); });
     std::vector<GraphNeighbour> out;
     if (key > 0) out.push_back({key - 1, GraphNeighbour::Kind::link});
     if (key + 1 < m) out.push_back({key + 1, GraphNeighbour::Kind::link});
@@ -681,11 +682,13 @@ class VisualMemory {
 
   BowVector transform(const cv::Mat& descriptors) const {
     if (descriptors.empty()) return {};
-    detail::check(descriptors.type() == vocabulary_.descriptor_type() && descriptors.cols == vocabulary_.descriptor_cols(),
-                  "VisualMemory: descriptors of type " + cv::typeToString(descriptors.type()) + " x " +
-                      std::to_string(descriptors.cols) + " do not fit the vocabulary (" +
-                      cv::typeToString(vocabulary_.descriptor_type()) + " x " +
-                      std::to_string(vocabulary_.descriptor_cols()) + ")");
+    detail::check(
+        descriptors.type() == vocabulary_.descriptor_type() && descriptors.cols == vocabulary_.descriptor_cols(), [&] {
+          return "VisualMemory: descriptors of type " + cv::typeToString(descriptors.type()) + " x " +
+                 std::to_string(descriptors.cols) + " do not fit the vocabulary (" +
+                 cv::typeToString(vocabulary_.descriptor_type()) + " x " +
+                 std::to_string(vocabulary_.descriptor_cols()) + ")";
+        });
     return vocabulary_.transform(descriptors);
   }
 

@@ -43,8 +43,9 @@ class TemporalConsistency {
  public:
   explicit TemporalConsistency(const TemporalConsistencyOptions& options = {}, ConsistencyState<Id> state = {})
       : options_(options), state_(state) {
-    detail::check(options_.required >= 1,
-                  "TemporalConsistencyOptions.required must be >= 1, got " + std::to_string(options_.required));
+    detail::check(options_.required >= 1, [&] {
+      return "TemporalConsistencyOptions.required must be >= 1, got " + std::to_string(options_.required);
+    });
   }
 
   /// The next query's best match: consistent when within `tolerance` ids of the previous

@@ -164,19 +164,25 @@ class VocabularyTree {
     for (std::size_t i = 0; i < descriptor_sets.size(); ++i) {
       const cv::Mat& d = descriptor_sets[i];
       if (d.empty()) continue;
-      detail::check(d.type() == Traits::descriptor_type, "VocabularyTree::learn: descriptors of image " +
-                                                             std::to_string(i) + " are " + cv::typeToString(d.type()) +
-                                                             ", this vocabulary is " + Traits::name);
+      detail::check(d.type() == Traits::descriptor_type, [&] {
+        return "VocabularyTree::learn: descriptors of image " + std::to_string(i) + " are " +
+               cv::typeToString(d.type()) + ", this vocabulary is " + Traits::name;
+      });
       if (cols < 0) cols = d.cols;
-      detail::check(d.cols == cols, "VocabularyTree::learn: descriptors of image " + std::to_string(i) + " have " +
-                                        std::to_string(d.cols) + " columns, earlier ones " + std::to_string(cols));
+      detail::check(d.cols == cols, [&] {
+        return "VocabularyTree::learn: descriptors of image " + std::to_string(i) + " have " + std::to_string(d.cols) +
+               " columns, earlier ones " + std::to_string(cols);
+      });
       for (int r = 0; r < d.rows; ++r) rows.push_back(d.ptr<value_type>(r));
     }
-    detail::check(rows.size() >= static_cast<std::size_t>(o.branching),
-                  "VocabularyTree::learn: " + std::to_string(rows.size()) + " descriptors cannot make " +
-                      std::to_string(o.branching) + " clusters (VocabularyTreeOptions.branching)");
-    detail::check(cols <= max_cols, "VocabularyTree::learn: descriptors of " + std::to_string(cols) +
-                                        " columns (at most " + std::to_string(max_cols) + ")");
+    detail::check(rows.size() >= static_cast<std::size_t>(o.branching), [&] {
+      return "VocabularyTree::learn: " + std::to_string(rows.size()) + " descriptors cannot make " +
+             std::to_string(o.branching) + " clusters (VocabularyTreeOptions.branching)";
+    });
+    detail::check(cols <= max_cols, [&] {
+      return "VocabularyTree::learn: descriptors of " + std::to_string(cols) + " columns (at most " +
+             std::to_string(max_cols) + ")";
+    });
     std::mt19937_64 rng(o.seed);
     std::shuffle(rows.begin(), rows.end(), rng);
     // The sample is one cv::Mat: at most INT_MAX rows whatever max_descriptors says.
@@ -232,10 +238,13 @@ class VocabularyTree {
     v.depth_ = depth;
     v.child_count_ = std::move(child_count);
     if (const std::string problem = v.tree_problem(); !problem.empty()) detail::fail("VocabularyTree::from_tree: " + problem);
-    detail::check(centres.type() == Traits::descriptor_type && static_cast<std::size_t>(centres.rows) == v.child_count_.size() &&
-                      centres.cols >= 1 && centres.cols <= max_cols,
-                  "VocabularyTree::from_tree: centres must be " + cv::typeToString(Traits::descriptor_type) +
-                      " with one row per node (" + std::to_string(v.child_count_.size()) + ") and 1..4096 columns");
+    detail::check(centres.type() == Traits::descriptor_type &&
+                      static_cast<std::size_t>(centres.rows) == v.child_count_.size() && centres.cols >= 1 &&
+                      centres.cols <= max_cols,
+                  [&] {
+                    return "VocabularyTree::from_tree: centres must be " + cv::typeToString(Traits::descriptor_type) +
+                           " with one row per node (" + std::to_string(v.child_count_.size()) + ") and 1..4096 columns";
+                  });
     if constexpr (std::is_same_v<value_type, float>)
       detail::check(cv::checkRange(centres), "VocabularyTree::from_tree: a centre value is not finite");
     v.cols_ = centres.cols;
@@ -320,11 +329,14 @@ class VocabularyTree {
 
   /// Sets the idf weights (one per word, finite and >= 0).
   void set_idf(std::vector<float> idf) {
-    detail::check(idf.size() == size(), "VocabularyTree::set_idf: " + std::to_string(idf.size()) + " weights for " +
-                                            std::to_string(size()) + " words");
+    detail::check(idf.size() == size(), [&] {
+      return "VocabularyTree::set_idf: " + std::to_string(idf.size()) + " weights for " + std::to_string(size()) +
+             " words";
+    });
     for (std::size_t w = 0; w < idf.size(); ++w)
-      detail::check(std::isfinite(idf[w]) && idf[w] >= 0.0f,
-                    "VocabularyTree::set_idf: weight of word " + std::to_string(w) + " is negative or not finite");
+      detail::check(std::isfinite(idf[w]) && idf[w] >= 0.0f, [&] {
+        return "VocabularyTree::set_idf: weight of word " + std::to_string(w) + " is negative or not finite";
+      });
     idf_ = std::move(idf);
   }
 
@@ -447,22 +459,28 @@ class VocabularyTree {
 
  private:
   static void check_options(const VocabularyTreeOptions& o) {
-    detail::check(o.branching >= 2 && o.branching <= max_branching,
-                  "VocabularyTreeOptions.branching must be in 2..4096, got " + std::to_string(o.branching));
+    detail::check(o.branching >= 2 && o.branching <= max_branching, [&] {
+      return "VocabularyTreeOptions.branching must be in 2..4096, got " + std::to_string(o.branching);
+    });
     detail::check(o.depth >= 1 && o.depth <= max_depth,
-                  "VocabularyTreeOptions.depth must be in 1..64, got " + std::to_string(o.depth));
-    detail::check(o.iterations >= 1, "VocabularyTreeOptions.iterations must be >= 1, got " + std::to_string(o.iterations));
-    detail::check(o.max_descriptors >= static_cast<std::size_t>(o.branching),
-                  "VocabularyTreeOptions.max_descriptors must be >= branching, got " + std::to_string(o.max_descriptors));
+                  [&] { return "VocabularyTreeOptions.depth must be in 1..64, got " + std::to_string(o.depth); });
+    detail::check(o.iterations >= 1,
+                  [&] { return "VocabularyTreeOptions.iterations must be >= 1, got " + std::to_string(o.iterations); });
+    detail::check(o.max_descriptors >= static_cast<std::size_t>(o.branching), [&] {
+      return "VocabularyTreeOptions.max_descriptors must be >= branching, got " + std::to_string(o.max_descriptors);
+    });
   }
 
   void check_descriptors(const cv::Mat& d, const char* what) const {
-    detail::check(size() > 0, std::string("VocabularyTree::") + what + ": the vocabulary is empty (learn or load it first)");
+    detail::check(size() > 0, [&] {
+      return std::string("VocabularyTree::") + what + ": the vocabulary is empty (learn or load it first)";
+    });
     if (d.empty()) return;
-    detail::check(d.type() == Traits::descriptor_type && d.cols == cols_,
-                  std::string("VocabularyTree::") + what + ": descriptors must be " + cv::typeToString(Traits::descriptor_type) +
-                      " with " + std::to_string(cols_) + " columns (the vocabulary's), got " + cv::typeToString(d.type()) +
-                      " with " + std::to_string(d.cols));
+    detail::check(d.type() == Traits::descriptor_type && d.cols == cols_, [&] {
+      return std::string("VocabularyTree::") + what + ": descriptors must be " +
+             cv::typeToString(Traits::descriptor_type) + " with " + std::to_string(cols_) +
+             " columns (the vocabulary's), got " + cv::typeToString(d.type()) + " with " + std::to_string(d.cols);
+    });
   }
 
   /// Clusters `members` of the sample into at most k groups: k-means++ seeding, then

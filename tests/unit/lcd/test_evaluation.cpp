@@ -4,7 +4,10 @@
 
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <functional>
+#include <random>
 #include <limits>
 #include <vector>
 
@@ -141,5 +144,60 @@ TEST_SUITE("data") {
     bool last_closes = false;
     for (std::size_t j = 0; j < 10; ++j) last_closes = last_closes || gt(57, j);
     CHECK(last_closes);
+  }
+}
+
+namespace {
+
+// The curve as written before it was made one sort (issue 10, item 6): evaluate_loops at
+// every distinct proposed score, highest first.
+std::vector<vmap::PrecisionRecall> reference_curve(const std::vector<LoopScore>& scores, const LoopGroundTruth& gt) {
+  std::vector<double> thresholds;
+  for (const LoopScore& s : scores)
+    if (s.match) thresholds.push_back(s.score);
+  std::sort(thresholds.begin(), thresholds.end(), std::greater<>());
+  thresholds.erase(std::unique(thresholds.begin(), thresholds.end()), thresholds.end());
+  std::vector<vmap::PrecisionRecall> curve;
+  for (double t : thresholds) curve.push_back(vmap::evaluate_loops(scores, gt, t));
+  return curve;
+}
+
+}  // namespace
+
+TEST_CASE("evaluation: the one-sort PR curve equals evaluate_loops at every threshold (random scores with ties)") {
+  std::mt19937_64 rng(20261123);
+  for (int trial = 0; trial < 20; ++trial) {
+    const std::size_t frames = 40 + static_cast<std::size_t>(trial) * 7;
+    LoopGroundTruth gt(frames);
+    std::bernoulli_distribution loop(0.15);
+    for (std::size_t q = 1; q < frames; ++q)
+      for (std::size_t f = 0; f < q; ++f)
+        if (loop(rng)) gt.set(q, f, true);
+    std::vector<LoopScore> scores;
+    // Scores on a coarse grid (many ties), some negative zero, some queries without a proposal.
+    std::uniform_int_distribution<int> level(-2, 12);
+    std::bernoulli_distribution proposes(0.8);
+    for (std::size_t q = 0; q < frames; ++q) {
+      LoopScore s;
+      s.query = q;
+      s.score = level(rng) * 0.25;
+      if (s.score == 0.0 && (q % 2) == 1) s.score = -0.0;
+      if (q > 0 && proposes(rng)) s.match = std::uniform_int_distribution<std::size_t>(0, q - 1)(rng);
+      scores.push_back(s);
+    }
+    const auto fast = vmap::precision_recall_curve(scores, gt);
+    const auto slow = reference_curve(scores, gt);
+    REQUIRE(fast.size() == slow.size());
+    CHECK(fast.size() > 5);
+    for (std::size_t i = 0; i < fast.size(); ++i) {
+      CHECK(std::signbit(fast[i].threshold) == std::signbit(slow[i].threshold));
+      CHECK(fast[i].threshold == slow[i].threshold);
+      CHECK(fast[i].true_positives == slow[i].true_positives);
+      CHECK(fast[i].false_positives == slow[i].false_positives);
+      CHECK(fast[i].false_negatives == slow[i].false_negatives);
+      CHECK(fast[i].positives == slow[i].positives);
+      CHECK(fast[i].precision == slow[i].precision);  // exact: the same counts and formula
+      CHECK(fast[i].recall == slow[i].recall);
+    }
   }
 }

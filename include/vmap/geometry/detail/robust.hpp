@@ -51,11 +51,11 @@ inline void check_threshold_options(double threshold_px, double confidence, int 
                                      int min_inliers, const char* who) {
   const std::string w(who);
   check(std::isfinite(threshold_px) && threshold_px > 0,
-        w + ".threshold_px must be a finite number > 0, got " + std::to_string(threshold_px));
+        [&] { return w + ".threshold_px must be a finite number > 0, got " + std::to_string(threshold_px); });
   check(std::isfinite(confidence) && confidence > 0 && confidence < 1,
-        w + ".confidence must be in (0, 1), got " + std::to_string(confidence));
-  check(max_iterations > 0, w + ".max_iterations must be > 0, got " + std::to_string(max_iterations));
-  check(min_inliers >= 0, w + ".min_inliers must be >= 0, got " + std::to_string(min_inliers));
+        [&] { return w + ".confidence must be in (0, 1), got " + std::to_string(confidence); });
+  check(max_iterations > 0, [&] { return w + ".max_iterations must be > 0, got " + std::to_string(max_iterations); });
+  check(min_inliers >= 0, [&] { return w + ".min_inliers must be >= 0, got " + std::to_string(min_inliers); });
 }
 
 /// Fills `v` from an OpenCV model and mask computed on permuted points.
@@ -67,10 +67,16 @@ inline void fill_from_estimate(const cv::Mat& model, const cv::Mat& mask, const 
     v.status = VerificationStatus::no_model;
     return;
   }
-  cv::Mat m64;
-  model.convertTo(m64, CV_64F);
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) v.model(r, c) = m64.at<double>(r, c);
+  // OpenCV's estimators return CV_64F: read it in place (no conversion buffer per call).
+  if (model.type() == CV_64FC1) {
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) v.model(r, c) = model.at<double>(r, c);
+  } else {
+    cv::Mat m64;
+    model.convertTo(m64, CV_64F);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) v.model(r, c) = m64.at<double>(r, c);
+  }
   if (!std::isfinite(cv::norm(v.model))) {
     v.status = VerificationStatus::no_model;
     v.model = cv::Matx33d::zeros();
