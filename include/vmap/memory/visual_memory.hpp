@@ -10,12 +10,29 @@
 // a graph (neighbours()). localize(image) answers the visual-map paper's localization
 // stage (sec. 1): the key image(s) a query image matches, verified by an F-matrix.
 //
+// Object labels (LFM-LCD, Zhu et al., Sensors 2021; DESIGN.md sec. 1.2): frames pushed
+// with detections (any detector, or a file of precomputed ones) make the loop search
+// go through the binary classified tree instead of the whole database: each key
+// image's label vector (eq. 3-4) leads to a leaf, backtracked to m candidates (sec.
+// 3.3), whose key images are ranked by BoW score and the best verified (tree_ranked) or
+// all verified (tree). The schema (label order) is the user's, or eq. 5 over the first
+// M key images' detections, fixed from then on; the key images before it are then
+// checked in order, so nothing runs over the whole sequence first and the result is
+// the one a schema known from the start gives. Frames without detections keep the
+// plain BoW search.
+//
+// GCS (Trujillo-Romero 2024, DESIGN.md sec. 1.3): train_gcs() learns a GCS on the key
+// images that have SE(2) poses, from their own features; localize() then also gives the
+// position estimate of Algorithm 5.
+//
 // The whole state saves to one file and loads back; push() after load() continues
 // exactly as the uninterrupted run would (same key images, same loops).
 //
-// Memory file format, version 1 (io/binary.hpp's encoding: little-endian fixed width,
-// f32/f64 as IEEE-754 bit patterns, str = u32 length + bytes):
-//   header: u8[8] magic "VMAPMEMO", u32 version (1), u32 section count
+// Memory file format, version 2 (io/binary.hpp's encoding: little-endian fixed width,
+// f32/f64 as IEEE-754 bit patterns, str = u32 length + bytes). Version 1 is the same
+// without the last three sections (section count 7); it still loads (no labels, no GCS,
+// policies unchecked).
+//   header: u8[8] magic "VMAPMEMO", u32 version (2), u32 section count (10)
 //   sections, in this order, each { u8[4] tag, u64 length, u32 CRC-32 of the bytes, bytes }:
 //     "opts" options: f64 tau, u8 rule, u8 skip_by_upper_bound, u8 images, i32 jpeg quality,
 //            u64 vocabulary_after, i32 branching, i32 depth, i32 iterations,
@@ -37,6 +54,28 @@
 //            last pushed frame (where a resumed stream goes on).
 //     "voca" u8 has vocabulary; if 1: u64 length + the vocabulary file (place/vocabulary.hpp)
 //     "plcd" u64 length + the place database file (place/database.hpp), ids = key indices
+//            (exactly the key images already checked for loops, 0 .. n-1)
+//     "plcy" 4 x str: what is recorded of the descriptor, matcher, estimator and similarity
+//            (memory_policy_record: name and every option, e.g. "OrbDescriptor features=1000
+//            scale_factor=1.2000000476837158 levels=8 edge_threshold=31 fast_threshold=20";
+//            recorded: OrbDescriptor, AkazeDescriptor, SiftDescriptor, BruteForceMatcher,
+//            FundamentalEstimator, InlierRatio, InlierRatioMin; any other policy is ""
+//            (not recorded, not checked; e.g. network-backed descriptors, whose model
+//            file is not recorded either). load() compares them with the policies it is
+//            given and refuses a difference with an Error naming the policy and both.
+//     "labl" label options: f32 min_score, u64 sample M, f64 min_influence, f64
+//            max_influence, u8 index (CandidateIndex), u64 min_candidates, u32 n + n x i32
+//            the given order; u8 labelled; u8 has schema, if 1: u32 n + n x i32 the schema;
+//            u32 m, m x detections of key image k; detections of the selector's I_{j-1}.
+//            detections = u32 count, count x { i32 label, f32 score, f32 x, y, w, h }.
+//            The tree is not stored: it is rebuilt exactly from the schema, the key images'
+//            detections and the database (the checked key images less the exclusion
+//            window, inserted in order as the run inserted them).
+//     "gcsl" u8 has GCS; if 1: BowHistogramOptions (i32 words, i32 iterations, u64
+//            max_descriptors, u64 seed, u8 norm), u64 length + the histogram's vocabulary
+//            (place/vocabulary.hpp), u64 length + the network (som/gcs.hpp's file, holding
+//            the GcsOptions), u32 n + n x { u32 key image, u64 the neuron it won }: the
+//            pose map is rebuilt exactly from these and the key images' poses (Algorithm 4).
 // Each section is parsed by its own reader, so every error names its section; counts
 // are checked against the bytes that remain before anything is allocated.
 //
@@ -45,8 +84,10 @@
 // bench_memory: 61.4 KB per key image of the whole file on tum_fr1_rpy, 31.8 KB on
 // rtabmap_loop's 512x384 frames), about 8 B per distinct word in the place database,
 // 97 B per link and per loop edge, and the image when kept (640x480 grey: about +143 KB
-// as PNG, +50 KB as JPEG quality 90). Nothing is kept for frames that are not key images
-// except the one I_{j-1} of eq. 6.
+// as PNG, +50 KB as JPEG quality 90). With labels: 24 B per detection of each key image
+// and one tree entry per key image; the GCS: its vocabulary and network (4 B per weight).
+// Nothing is kept for frames that are not key images except the one I_{j-1} of eq. 6
+// (its features, pose and detections).
 //
 // Threading: push() and localize() modify scratch state of the descriptor and must not
 // run concurrently on one object; const members only read. The memory is move-only (a
