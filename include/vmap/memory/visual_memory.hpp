@@ -66,7 +66,8 @@
 //     "labl" label options: f32 min_score, u64 sample M, f64 min_influence, f64
 //            max_influence, u8 index (CandidateIndex), u64 min_candidates, u32 n + n x i32
 //            the given order; u8 labelled; u8 has schema, if 1: u32 n + n x i32 the schema;
-//            u32 m, m x detections of key image k; detections of the selector's I_{j-1}.
+//            u32 m, m x detections of key image k; detections of the selector's I_{j-1}
+//            (an empty list when "selc" holds none).
 //            detections = u32 count, count x { i32 label, f32 score, f32 x, y, w, h }.
 //            The tree is not stored: it is rebuilt exactly from the schema, the key images'
 //            detections and the database (the checked key images less the exclusion
@@ -1267,7 +1268,11 @@ class VisualMemory {
     if (schema_) write_labels(schema_->labels());
     w.u32(static_cast<std::uint32_t>(key_detections_.size()));
     for (const auto& d : key_detections_) detail::memory_write_detections(w, d);
-    detail::memory_write_detections(w, previous_detections_);
+    // Those of I_{j-1} only while the selector holds it (not when the last frame is the
+    // last key image): the only case a later key image can be that frame.
+    const auto& keys = selector_.map().keys;
+    const bool has_previous = last_index_ && !(!keys.empty() && keys.back().frame_index == *last_index_);
+    detail::memory_write_detections(w, has_previous ? previous_detections_ : std::vector<Detection>{});
     return std::move(w).take();
   }
 
@@ -1327,7 +1332,9 @@ class VisualMemory {
         if (!d.empty()) r.corrupt("detections in a memory without labels");
       if (!previous_detections_.empty()) r.corrupt("detections in a memory without labels");
     }
-    if (!has_previous && !previous_detections_.empty()) r.corrupt("detections of a previous frame that is not there");
+    // Without an I_{j-1} in the selector no later key image can be that frame: its
+    // detections are never read.
+    if (!has_previous) previous_detections_.clear();
     if (schema_ && o.order.empty() && (!labelled_ || m < o.sample)) r.corrupt("a schema before its sample");
     if (labelled_ && o.order.empty() && !schema_ && m >= o.sample) r.corrupt("no schema after the sample");
     const std::size_t checked_keys = database_.size();

@@ -410,3 +410,20 @@ TEST_SUITE("data") {
     CHECK(near_loops * 10 >= whole.loops().size() * 9);
   }
 }
+
+TEST_CASE("memory fuzz seeds: both load, fill every section and write back the same bytes") {
+  const auto dir = vmap::test::source_dir() / "tests/fuzz/corpus/memory";
+  const std::string full = vmap::read_file(dir / "labels_gcs.vmem", 1 << 20, "seed");
+  const auto mem = vmap::OrbVisualMemory::deserialize(full, "labels_gcs.vmem");
+  CHECK(mem.key_images() == 5);
+  CHECK(mem.labelled());
+  REQUIRE(mem.label_schema().has_value());
+  CHECK(mem.label_schema()->size() == 2);
+  CHECK(mem.has_gcs());
+  CHECK(mem.gcs_keys().size() == 5);
+  CHECK(mem.serialize() == full);
+  const std::string empty = vmap::read_file(dir / "empty.vmem", 1 << 20, "seed");
+  const auto none = vmap::OrbVisualMemory::deserialize(empty, "empty.vmem");
+  CHECK(none.key_images() == 0);
+  CHECK(none.serialize() == empty);
+}
