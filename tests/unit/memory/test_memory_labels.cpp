@@ -427,3 +427,25 @@ TEST_CASE("memory fuzz seeds: both load, fill every section and write back the s
   CHECK(none.key_images() == 0);
   CHECK(none.serialize() == empty);
 }
+
+TEST_CASE("memory files v1: a file written by the version 1 code loads; v2 writes its seven sections unchanged") {
+  // tests/fuzz/corpus/memory/v1_five_keys.vmem: written by main at 6af038d (format 1)
+  // from five 72x72 crops of seeded noise with SE(2) poses.
+  const std::string v1 = vmap::read_file(vmap::test::source_dir() / "tests/fuzz/corpus/memory/v1_five_keys.vmem",
+                                         1 << 20, "seed");
+  REQUIRE(v1.size() > 16);
+  CHECK(v1[8] == 1);
+  const auto mem = vmap::OrbVisualMemory::deserialize(v1, "v1_five_keys.vmem");
+  CHECK(mem.key_images() == 5);
+  CHECK(mem.database().size() == 5);
+  CHECK(!mem.labelled());
+  CHECK(!mem.has_gcs());
+  REQUIRE(std::get_if<vmap::Pose2>(&mem.poses()[4]) != nullptr);
+  CHECK(std::get_if<vmap::Pose2>(&mem.poses()[4])->x() == 2.0);
+  const std::string v2 = mem.serialize();
+  const auto starts = section_starts(v2);
+  REQUIRE(starts.size() == 10);
+  // Header (version and count aside) and the first seven sections: the same bytes.
+  CHECK(v2.substr(0, 8) == v1.substr(0, 8));
+  CHECK(v2.substr(16, starts[7] - 16) == v1.substr(16));
+}
