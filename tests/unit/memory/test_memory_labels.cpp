@@ -215,6 +215,13 @@ TEST_CASE("memory with labels: detections must come with every frame or none; ba
   plain.push(frames[0]);
   CHECK(vmap::test::error_of([&] { plain.push(frames[1], {}, scripted(1)); }).find("comes with detections") !=
         std::string::npos);
+  // Any ObjectDetector: here the precomputed detections, frame by frame.
+  vmap::PrecomputedDetections detector({scripted(0), scripted(1), scripted(2)});
+  auto by_detector = make_memory(small_options());
+  for (std::size_t i = 0; i < 3; ++i) by_detector.push(frames[i], {}, detector);
+  REQUIRE(by_detector.key_images() >= 1);
+  CHECK(by_detector.labelled());
+  CHECK(by_detector.key_detections()[0].size() == scripted(by_detector.map().keys[0].frame_index).size());
   // A memory without detections is not labelled and keeps no schema.
   CHECK(!plain.labelled());
   CHECK(!plain.label_schema());
