@@ -4,18 +4,28 @@
 // save again, and localize frames that were held out of the memory.
 //
 //   robot_memory INPUT MEMORY_FILE [--restart-at 0.5] [--hold-out 10] [--images none|png|jpeg]
-//                [--tau 0.3] [--end N] [--within 15]
+//                [--tau 0.3] [--end N] [--within 15] [--detections FILE] [--label-sample 20]
+//                [--poses FILE] [--gcs]
 //
 // Every --hold-out-th frame (index % hold_out == hold_out / 2) is kept out of the memory
 // and localized at the end; "near" counts answers whose key image is within --within
 // frames of the query.
+//
+// --detections: object detections per frame (hooks/precomputed_detections.hpp's file,
+// e.g. from `vmap detect`): loops are then searched through LFM-LCD's label tree, its
+// schema learned from the first --label-sample key images. --poses: a TUM ground-truth
+// file standing in for odometry (the pose nearest in time, as an SE(2) floor pose);
+// --gcs then trains the GCS localizer on the key images after the restart, and the
+// held-out frames get a position estimate too (error against their pose reported).
 #include <vmap/vmap.hpp>
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <iterator>
 #include <map>
 #include <optional>
 #include <string>
@@ -35,18 +45,44 @@ struct Args {
   double tau = 0.3;
   std::size_t end = 0;
   std::size_t within = 15;
+  std::string detections;
+  std::size_t label_sample = 20;
+  std::string poses;
+  bool gcs = false;
 };
+
+/// The odometry stand-in: the pose of `poses` (sorted by time) nearest to `t`.
+std::optional<vmap::Pose2> pose_at(const std::vector<vmap::TimedPose>& poses, double t) {
+  if (poses.empty()) return std::nullopt;
+  auto it = std::lower_bound(poses.begin(), poses.end(), t,
+                             [](const vmap::TimedPose& p, double v) { return p.timestamp < v; });
+  if (it == poses.end()) --it;
+  if (it != poses.begin() && t - std::prev(it)->timestamp < it->timestamp - t) --it;
+  return it->pose;
+}
+
+struct Inputs {
+  std::optional<vmap::PrecomputedDetections> detections;
+  std::vector<vmap::TimedPose> poses;
+};
+
+vmap::MemoryStep push(vmap::OrbVisualMemory& mem, const vmap::Frame& f, const Inputs& in) {
+  vmap::OdometryPose pose;
+  if (const auto p = pose_at(in.poses, f.timestamp)) pose = *p;
+  if (in.detections) return mem.push(f, pose, in.detections->at(f.index));
+  return mem.push(f, pose);
+}
 
 /// Pushes the frames of `src` into `mem`, keeping the held-out ones aside; stops after
 /// frame index `stop` (inclusive) when given.
-std::size_t stream(vmap::FrameSource& src, vmap::OrbVisualMemory& mem, const Args& a, std::optional<std::size_t> stop,
-                   std::vector<vmap::Frame>& held) {
+std::size_t stream(vmap::FrameSource& src, vmap::OrbVisualMemory& mem, const Args& a, const Inputs& in,
+                   std::optional<std::size_t> stop, std::vector<vmap::Frame>& held) {
   std::size_t loops = 0;
   while (auto f = src.next()) {
     if (a.hold_out > 0 && f->index % a.hold_out == a.hold_out / 2)
       held.push_back(std::move(*f));
     else
-      loops += mem.push(*f).loops.size();
+      loops += push(mem, *f, in).loops.size();
     if (stop && f->index >= *stop) break;
   }
   return loops;
@@ -58,6 +94,14 @@ int run(const Args& a) {
   const std::map<std::string, vmap::ImageStorage> storage{
       {"none", vmap::ImageStorage::none}, {"png", vmap::ImageStorage::png}, {"jpeg", vmap::ImageStorage::jpeg}};
   o.images = storage.at(a.images);
+  o.labels.sample = a.label_sample;
+  Inputs in;
+  if (!a.detections.empty()) in.detections = vmap::PrecomputedDetections::load(a.detections);
+  if (!a.poses.empty()) {
+    in.poses = vmap::read_tum_poses(a.poses);
+    std::sort(in.poses.begin(), in.poses.end(),
+              [](const vmap::TimedPose& x, const vmap::TimedPose& y) { return x.timestamp < y.timestamp; });
+  }
 
   vmap::FrameSourceOptions so{.grey = true};
   if (a.end > 0) so.end = a.end;
@@ -65,13 +109,14 @@ int run(const Args& a) {
 
   // 1. The first part of the stream.
   auto src = vmap::FrameSource::open(a.input, so);
-  const std::size_t total = src.total().value_or(0);
+  // total() counts the whole input; --end cuts it.
+  const std::size_t total = a.end > 0 ? std::min(a.end, src.total().value_or(a.end)) : src.total().value_or(0);
   const auto stop = static_cast<std::size_t>(a.restart_at * static_cast<double>(total));
   std::size_t loops = 0;
   {
     vmap::OrbVisualMemory mem(o);
     auto t = Clock::now();
-    loops += stream(src, mem, a, stop, held);
+    loops += stream(src, mem, a, in, stop, held);
     const double push_ms = ms_since(t);
     t = Clock::now();
     mem.save(a.memory);
@@ -90,17 +135,34 @@ int run(const Args& a) {
   so.start = mem.last_frame_index().value_or(0) + 1;
   if (so.start < so.end) {
     auto rest = vmap::FrameSource::open(a.input, so);
-    loops += stream(rest, mem, a, std::nullopt, held);
+    loops += stream(rest, mem, a, in, std::nullopt, held);
+  }
+  if (a.gcs) {
+    t = Clock::now();
+    const auto stats = mem.train_gcs();
+    std::printf("GCS: %zu cells trained on %zu key images in %.1f ms\n", stats.cells, mem.gcs_keys().size(),
+                ms_since(t));
   }
   mem.save(a.memory);
   std::printf("run 2: %zu frames in all, %zu key images, %zu loop edges (%zu found while streaming)\n", mem.frames(),
               mem.key_images(), mem.loops().size(), loops);
+  if (mem.label_schema()) {
+    std::printf("labels: schema of %zu labels (", mem.label_schema()->size());
+    for (int l : mem.label_schema()->labels()) std::printf(" %d", l);
+    std::printf(" ), %zu key images in the tree\n", mem.label_tree().size());
+  }
 
   // 3. Localize the held-out frames.
-  std::size_t localized = 0, near = 0;
+  std::size_t localized = 0, near = 0, positions = 0;
+  double position_error = 0.0;
   t = Clock::now();
   for (const auto& f : held) {
     const auto answer = mem.localize(f.image);
+    const auto truth = pose_at(in.poses, f.timestamp);
+    if (answer.position && truth) {
+      ++positions;
+      position_error += (answer.position->pose.translation() - truth->translation()).norm();
+    }
     if (!answer.ok()) continue;
     ++localized;
     const std::size_t k = mem.map().keys[answer.best()->key].frame_index;
@@ -111,6 +173,9 @@ int run(const Args& a) {
               "%.1f ms per query\n",
               held.size(), localized, near, a.within,
               held.empty() ? 0.0 : 100.0 * static_cast<double>(near) / static_cast<double>(held.size()), per_query);
+  if (positions > 0)
+    std::printf("GCS: %zu held-out frames with a position, mean error %.3f m\n", positions,
+                position_error / static_cast<double>(positions));
   return 0;
 }
 
@@ -128,6 +193,10 @@ int main(int argc, char** argv) {
   app.add_option("--tau", a.tau, "Key-image threshold tau of eq. 6")->check(CLI::Range(0.0, 1.0));
   app.add_option("--end", a.end, "Read frames [0, end) only (0: all)");
   app.add_option("--within", a.within, "A localization is near when its key image is within this many frames");
+  app.add_option("--detections", a.detections, "Detections per frame (labels file): loops through the label tree");
+  app.add_option("--label-sample", a.label_sample, "Key images whose detections fix the label schema (eq. 5)");
+  app.add_option("--poses", a.poses, "TUM ground truth used as odometry (nearest pose in time, SE(2))");
+  app.add_flag("--gcs", a.gcs, "Train the GCS localizer on the key images' poses after the restart (needs --poses)");
   CLI11_PARSE(app, argc, argv);
   try {
     return run(a);

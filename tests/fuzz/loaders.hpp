@@ -23,6 +23,8 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
+#include <string>
 #include <string_view>
 
 #define VMAP_FUZZ_LOADER(name, body) \
@@ -39,5 +41,14 @@ VMAP_FUZZ_LOADER(class_names, { (void)vmap::parse_class_names(bytes, "fuzz"); })
 VMAP_FUZZ_LOADER(image_header, { (void)vmap::image_header_size(bytes); })
 VMAP_FUZZ_LOADER(vocabulary, { (void)vmap::BinaryVocabularyTree::deserialize(bytes, "fuzz"); (void)vmap::FloatVocabularyTree::deserialize(bytes, "fuzz"); })
 VMAP_FUZZ_LOADER(place_database, { (void)vmap::PlaceDatabase<std::uint32_t>::deserialize(bytes, "fuzz"); })
-VMAP_FUZZ_LOADER(memory, { (void)vmap::OrbVisualMemory::deserialize(bytes, "fuzz"); })
+// A memory file that loads is written back by the loaded memory into bytes that load
+// again (whatever it accepted is a state it can save); anything else is a bug: abort.
+VMAP_FUZZ_LOADER(memory, {
+  const std::string again = vmap::OrbVisualMemory::deserialize(bytes, "fuzz").serialize();
+  try {
+    (void)vmap::OrbVisualMemory::deserialize(again, "fuzz again");
+  } catch (...) {
+    std::abort();
+  }
+})
 // clang-format on

@@ -10,12 +10,29 @@
 // a graph (neighbours()). localize(image) answers the visual-map paper's localization
 // stage (sec. 1): the key image(s) a query image matches, verified by an F-matrix.
 //
+// Object labels (LFM-LCD, Zhu et al., Sensors 2021; DESIGN.md sec. 1.2): frames pushed
+// with detections (any detector, or a file of precomputed ones) make the loop search
+// go through the binary classified tree instead of the whole database: each key
+// image's label vector (eq. 3-4) leads to a leaf, backtracked to m candidates (sec.
+// 3.3), whose key images are ranked by BoW score and the best verified (tree_ranked) or
+// all verified (tree). The schema (label order) is the user's, or eq. 5 over the first
+// M key images' detections, fixed from then on; the key images before it are then
+// checked in order, so nothing runs over the whole sequence first and the result is
+// the one a schema known from the start gives. Frames without detections keep the
+// plain BoW search.
+//
+// GCS (Trujillo-Romero 2024, DESIGN.md sec. 1.3): train_gcs() learns a GCS on the key
+// images that have SE(2) poses, from their own features; localize() then also gives the
+// position estimate of Algorithm 5.
+//
 // The whole state saves to one file and loads back; push() after load() continues
 // exactly as the uninterrupted run would (same key images, same loops).
 //
-// Memory file format, version 1 (io/binary.hpp's encoding: little-endian fixed width,
-// f32/f64 as IEEE-754 bit patterns, str = u32 length + bytes):
-//   header: u8[8] magic "VMAPMEMO", u32 version (1), u32 section count
+// Memory file format, version 2 (io/binary.hpp's encoding: little-endian fixed width,
+// f32/f64 as IEEE-754 bit patterns, str = u32 length + bytes). Version 1 is the same
+// without the last three sections (section count 7); it still loads (no labels, no GCS,
+// policies unchecked).
+//   header: u8[8] magic "VMAPMEMO", u32 version (2), u32 section count (10)
 //   sections, in this order, each { u8[4] tag, u64 length, u32 CRC-32 of the bytes, bytes }:
 //     "opts" options: f64 tau, u8 rule, u8 skip_by_upper_bound, u8 images, i32 jpeg quality,
 //            u64 vocabulary_after, i32 branching, i32 depth, i32 iterations,
@@ -37,6 +54,29 @@
 //            last pushed frame (where a resumed stream goes on).
 //     "voca" u8 has vocabulary; if 1: u64 length + the vocabulary file (place/vocabulary.hpp)
 //     "plcd" u64 length + the place database file (place/database.hpp), ids = key indices
+//            (exactly the key images already checked for loops, 0 .. n-1)
+//     "plcy" 4 x str: what is recorded of the descriptor, matcher, estimator and similarity
+//            (memory_policy_record: name and every option, e.g. "OrbDescriptor features=1000
+//            scale_factor=1.2000000476837158 levels=8 edge_threshold=31 fast_threshold=20";
+//            recorded: OrbDescriptor, AkazeDescriptor, SiftDescriptor, BruteForceMatcher,
+//            FundamentalEstimator, InlierRatio, InlierRatioMin; any other policy is ""
+//            (not recorded, not checked; e.g. network-backed descriptors, whose model
+//            file is not recorded either). load() compares them with the policies it is
+//            given and refuses a difference with an Error naming the policy and both.
+//     "labl" label options: f32 min_score, u64 sample M, f64 min_influence, f64
+//            max_influence, u8 index (CandidateIndex), u64 min_candidates, u32 n + n x i32
+//            the given order; u8 labelled; u8 has schema, if 1: u32 n + n x i32 the schema;
+//            u32 m, m x detections of key image k; detections of the selector's I_{j-1}
+//            (an empty list when "selc" holds none).
+//            detections = u32 count, count x { i32 label, f32 score, f32 x, y, w, h }.
+//            The tree is not stored: it is rebuilt exactly from the schema, the key images'
+//            detections and the database (the checked key images less the exclusion
+//            window, inserted in order as the run inserted them).
+//     "gcsl" u8 has GCS; if 1: BowHistogramOptions (i32 words, i32 iterations, u64
+//            max_descriptors, u64 seed, u8 norm), u64 length + the histogram's vocabulary
+//            (place/vocabulary.hpp), u64 length + the network (som/gcs.hpp's file, holding
+//            the GcsOptions), u32 n + n x { u32 key image, u64 the neuron it won }: the
+//            pose map is rebuilt exactly from these and the key images' poses (Algorithm 4).
 // Each section is parsed by its own reader, so every error names its section; counts
 // are checked against the bytes that remain before anything is allocated.
 //
@@ -45,8 +85,10 @@
 // bench_memory: 61.4 KB per key image of the whole file on tum_fr1_rpy, 31.8 KB on
 // rtabmap_loop's 512x384 frames), about 8 B per distinct word in the place database,
 // 97 B per link and per loop edge, and the image when kept (640x480 grey: about +143 KB
-// as PNG, +50 KB as JPEG quality 90). Nothing is kept for frames that are not key images
-// except the one I_{j-1} of eq. 6.
+// as PNG, +50 KB as JPEG quality 90). With labels: 24 B per detection of each key image
+// and one tree entry per key image; the GCS: its vocabulary and network (4 B per weight).
+// Nothing is kept for frames that are not key images except the one I_{j-1} of eq. 6
+// (its features, pose and detections).
 //
 // Threading: push() and localize() modify scratch state of the descriptor and must not
 // run concurrently on one object; const members only read. The memory is move-only (a
@@ -62,17 +104,33 @@
 #include <vmap/io/files.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/image.hpp>
+#include <vmap/features/akaze.hpp>
+#include <vmap/features/orb.hpp>
+#include <vmap/features/sift.hpp>
+#include <vmap/geometry/fundamental.hpp>
+#include <vmap/geometry/similarity.hpp>
+#include <vmap/hooks/detection.hpp>
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/keyframe/selector.hpp>
+#include <vmap/lcd/binary_tree.hpp>
+#include <vmap/lcd/influence.hpp>
+#include <vmap/lcd/label_vector.hpp>
+#include <vmap/lcd/loop_detector.hpp>
+#include <vmap/matching/brute_force.hpp>
 #include <vmap/place/bow.hpp>
 #include <vmap/place/database.hpp>
 #include <vmap/place/vocabulary.hpp>
+#include <vmap/som/gcs.hpp>
+#include <vmap/som/histogram.hpp>
+#include <vmap/som/pose_map.hpp>
 
 #include <opencv2/core.hpp>
 #include <opencv2/core/affine.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include <algorithm>
+#include <array>
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -87,7 +145,9 @@
 
 namespace vmap {
 
-inline constexpr std::uint32_t memory_format_version = 1;
+/// Written by this build; version 1 files (without the plcy, labl and gcsl sections)
+/// still load.
+inline constexpr std::uint32_t memory_format_version = 2;
 
 /// How key images' pixels are kept and saved.
 enum class ImageStorage : std::uint8_t {
@@ -98,6 +158,36 @@ enum class ImageStorage : std::uint8_t {
 
 /// An odometry pose given with a frame: none, SE(2) (a ground robot) or SE(3).
 using OdometryPose = std::variant<std::monostate, Pose2, cv::Affine3d>;
+
+/// LFM-LCD's label tree inside the memory (Zhu et al., Sensors 2021, sec. 3.2-3.3;
+/// DESIGN.md sec. 1.2), used when the frames are pushed with object detections.
+struct MemoryLabelOptions {
+  /// Eq. 3: detections scoring below `labels.min_score` (0.5) are not labels.
+  LabelVectorOptions labels{};
+  /// The label order, large objects first. Given: it is the schema from the first key
+  /// image on, as given (no eq. 5 pruning). Empty: the schema is learned online (below).
+  std::vector<int> order{};
+  /// Without an order: the detections of the first `sample` key images are the eq. 5
+  /// sample M; the schema (labels by mean box area, pruned to the `influence` band) is
+  /// then fixed, the tree built and the earlier key images caught up in order (>= 1).
+  std::size_t sample = 20;
+  InfluenceOptions influence{};
+  /// `tree` (every key image of the leaf verified: the paper) or `tree_ranked` (the
+  /// leaf's key images ranked by BoW score, the best MemoryOptions::loop_candidates
+  /// verified). The other sources are not label sources: bow is the memory without
+  /// detections, brute_force is for evaluation (lcd/loop_detector.hpp).
+  CandidateIndex index = CandidateIndex::tree_ranked;
+  /// m of sec. 3.3: backtrack up the tree until at least this many candidates (5, as
+  /// LoopDetectorOptions::min_candidates).
+  std::size_t min_candidates = 5;
+};
+
+/// The GCS localizer trained on the memory's key images (Trujillo-Romero 2024,
+/// DESIGN.md sec. 1.3): their own features -> BowHistogram -> GCS -> a pose per neuron.
+struct MemoryGcsOptions {
+  BowHistogramOptions histogram{};  ///< its vocabulary is learned from the key images
+  GcsOptions gcs{};                 ///< the network's options (max_cells 100, seed 1)
+};
 
 struct MemoryOptions {
   /// The key-image selector's options (tau, eq. 6 / Algorithm 1 rule, fast path).
@@ -122,6 +212,8 @@ struct MemoryOptions {
   std::size_t localize_candidates = 5;
   /// A localization answer needs a verified F-matrix with at least this many inliers.
   int min_localize_inliers = 20;
+  /// The label-tree loop detection, used when frames are pushed with detections.
+  MemoryLabelOptions labels{};
 };
 
 /// A verified match between two key images (a loop edge) or a query and a key image.
@@ -170,6 +262,10 @@ struct MemoryLocalization {
   LocalizeStatus status = LocalizeStatus::empty_memory;
   std::vector<PlaceLink> matches;
   std::size_t verified_candidates = 0;  ///< key images the estimator ran on
+  /// The GCS position estimate (Algorithm 5 with the one query image), when a GCS was
+  /// trained (VisualMemory::train_gcs) and the query has features; independent of the
+  /// F-matrix verification.
+  std::optional<Localization> position;
   [[nodiscard]] bool ok() const noexcept { return status == LocalizeStatus::localized; }
   [[nodiscard]] const PlaceLink* best() const noexcept { return matches.empty() ? nullptr : &matches.front(); }
 };
@@ -184,7 +280,92 @@ struct GraphNeighbour {
 namespace detail {
 
 inline constexpr char memory_magic[8] = {'V', 'M', 'A', 'P', 'M', 'E', 'M', 'O'};
-inline constexpr std::uint32_t memory_sections = 7;
+inline constexpr std::uint32_t memory_sections_v1 = 7;
+inline constexpr std::uint32_t memory_sections = 10;
+/// Longest policy description a file may hold.
+inline constexpr std::uint32_t memory_max_policy = 4096;
+/// Most detections one key image may have in a file (a detector gives a few hundred).
+inline constexpr std::uint32_t memory_max_detections = 1U << 16;
+
+// What the file records of a policy (section "plcy"): its name and every option, as
+// text so that a mismatch on load reads as it is. Policies not listed here are recorded
+// as "" (not recorded, not checked).
+inline std::string memory_number(double v) {
+  char buf[40];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);  // shortest text that reads back as v
+  return std::string(buf, r.ptr);
+}
+template <class P>
+std::string memory_policy_record(const P&) {
+  return {};
+}
+inline std::string memory_policy_record(const OrbDescriptor& d) {
+  const OrbOptions& o = d.options();
+  return "OrbDescriptor features=" + std::to_string(o.features) + " scale_factor=" + memory_number(o.scale_factor) +
+         " levels=" + std::to_string(o.levels) + " edge_threshold=" + std::to_string(o.edge_threshold) +
+         " fast_threshold=" + std::to_string(o.fast_threshold);
+}
+inline std::string memory_policy_record(const AkazeDescriptor& d) {
+  const AkazeOptions& o = d.options();
+  return "AkazeDescriptor threshold=" + memory_number(o.threshold) + " octaves=" + std::to_string(o.octaves) +
+         " octave_layers=" + std::to_string(o.octave_layers);
+}
+inline std::string memory_policy_record(const SiftDescriptor& d) {
+  const SiftOptions& o = d.options();
+  return "SiftDescriptor features=" + std::to_string(o.features) + " octave_layers=" + std::to_string(o.octave_layers) +
+         " contrast_threshold=" + memory_number(o.contrast_threshold) + " edge_threshold=" +
+         memory_number(o.edge_threshold) + " sigma=" + memory_number(o.sigma);
+}
+inline std::string memory_policy_record(const BruteForceMatcher& m) {
+  const BruteForceOptions& o = m.options();
+  return std::string("BruteForceMatcher mode=") + (o.mode == MatchMode::mutual ? "mutual" : "ratio") +
+         " ratio=" + memory_number(o.ratio);
+}
+inline std::string memory_policy_record(const FundamentalEstimator& e) {
+  const FundamentalOptions& o = e.options();
+  return "FundamentalEstimator method=" + std::to_string(static_cast<int>(o.method)) + " threshold_px=" +
+         memory_number(o.threshold_px) + " confidence=" + memory_number(o.confidence) + " max_iterations=" +
+         std::to_string(o.max_iterations) + " min_inliers=" + std::to_string(o.min_inliers) +
+         " check_degeneracy=" + (o.check_degeneracy ? "1" : "0") + " degeneracy_ratio=" +
+         memory_number(o.degeneracy_ratio) + " seed=" + std::to_string(o.seed);
+}
+inline std::string memory_policy_record(const InlierRatio&) { return "InlierRatio"; }
+inline std::string memory_policy_record(const InlierRatioMin&) { return "InlierRatioMin"; }
+
+inline void memory_write_detections(BinaryWriter& w, const std::vector<Detection>& d) {
+  if (d.size() > memory_max_detections)
+    fail("VisualMemory::save: a key image has " + std::to_string(d.size()) + " detections, more than " +
+         std::to_string(memory_max_detections));
+  w.u32(static_cast<std::uint32_t>(d.size()));
+  for (const Detection& x : d) {
+    w.i32(x.label);
+    w.f32(x.score);
+    w.f32(x.box.x);
+    w.f32(x.box.y);
+    w.f32(x.box.width);
+    w.f32(x.box.height);
+  }
+}
+
+inline std::vector<Detection> memory_read_detections(BinaryReader& r) {
+  const std::uint32_t n = r.u32("detection count");
+  if (n > memory_max_detections) r.corrupt(std::to_string(n) + " detections in one key image");
+  r.require_items(n, 24, "detection count");
+  std::vector<Detection> out(n);
+  for (Detection& d : out) {
+    d.label = r.i32("detection label");
+    d.score = r.f32("detection score");
+    d.box.x = r.f32("detection box");
+    d.box.y = r.f32("detection box");
+    d.box.width = r.f32("detection box");
+    d.box.height = r.f32("detection box");
+    if (!(d.score >= 0.0f && d.score <= 1.0f)) r.corrupt("a detection score is not in [0, 1]");
+    if (!std::isfinite(d.box.x) || !std::isfinite(d.box.y) || !std::isfinite(d.box.width) ||
+        !std::isfinite(d.box.height))
+      r.corrupt("a detection box is not finite");
+  }
+  return out;
+}
 
 inline void memory_write_matx(BinaryWriter& w, const cv::Matx33d& m) {
   for (double e : m.val) w.f64(e);
@@ -353,10 +534,14 @@ class VisualMemory {
   explicit VisualMemory(D descriptor = D(), M matcher = M(), E estimator = E(), S similarity = S(),
                         const MemoryOptions& options = {}, AnyVocabulary vocabulary = {})
       : options_(checked(options)),
+        policies_{detail::memory_policy_record(descriptor), detail::memory_policy_record(matcher),
+                  detail::memory_policy_record(estimator), detail::memory_policy_record(similarity)},
         selector_(std::move(descriptor), std::move(matcher), std::move(estimator), std::move(similarity),
                   selector_options(options_)),
         vocabulary_(std::move(vocabulary)),
-        database_(vocabulary_.size(), options_.scoring) {}
+        database_(vocabulary_.size(), options_.scoring) {
+    if (!options_.labels.order.empty()) fix_schema(LabelSchema(options_.labels.order));
+  }
 
   explicit VisualMemory(const MemoryOptions& options, AnyVocabulary vocabulary = {})
       : VisualMemory(D{}, M{}, E{}, S{}, options, std::move(vocabulary)) {}
@@ -371,22 +556,34 @@ class VisualMemory {
   ~VisualMemory() = default;
 
   /// Pushes a frame of a sequence (its index is its place in the sequence).
-  MemoryStep push(const Frame& frame, const OdometryPose& pose = {}) {
-    MemoryStep step;
-    step.frame = selector_.push(frame);
-    after_push(step, frame.index, pose);
-    return step;
+  MemoryStep push(const Frame& frame, const OdometryPose& pose = {}) { return push_frame(frame, pose, nullptr); }
+
+  /// Pushes a frame with its object detections (any detector, or precomputed): the
+  /// memory then finds loops through LFM-LCD's label tree (MemoryOptions::labels). The
+  /// first frame decides: a memory whose frames come with detections needs them with
+  /// every frame (an empty list when nothing was detected), and one without takes none.
+  MemoryStep push(const Frame& frame, const OdometryPose& pose, const std::vector<Detection>& detections) {
+    return push_frame(frame, pose, &detections);
+  }
+
+  /// Runs `detector` on the frame (every frame: eq. 6 may take it as the next key
+  /// image), then push(frame, pose, detections).
+  template <ObjectDetector Detector>
+  MemoryStep push(const Frame& frame, const OdometryPose& pose, Detector& detector) {
+    detail::check(!frame.image.empty(), "VisualMemory::push: frame " + std::to_string(frame.index) + " is empty");
+    return push(frame, pose, detector.detect(frame.image));
   }
 
   /// Pushes a bare image: its index is the number of frames pushed so far; the timestamp
   /// defaults to that index.
   MemoryStep push(const cv::Mat& image, std::optional<double> timestamp = {}, const OdometryPose& pose = {}) {
-    Frame f;
-    f.image = image;
-    f.index = frames();
-    f.name = "frame#" + std::to_string(f.index);
-    f.timestamp = timestamp.value_or(static_cast<double>(f.index));
-    return push(f, pose);
+    return push_frame(bare_frame(image, timestamp), pose, nullptr);
+  }
+
+  /// A bare image with its detections (see push(frame, pose, detections)).
+  MemoryStep push(const cv::Mat& image, std::optional<double> timestamp, const OdometryPose& pose,
+                  const std::vector<Detection>& detections) {
+    return push_frame(bare_frame(image, timestamp), pose, &detections);
   }
 
   /// The key image(s) `image` matches (visual-map paper, sec. 1): key images ranked by
@@ -412,8 +609,54 @@ class VisualMemory {
     std::stable_sort(out.matches.begin(), out.matches.end(),
                      [](const PlaceLink& a, const PlaceLink& b) { return a.inliers > b.inliers; });
     out.status = out.matches.empty() ? LocalizeStatus::not_verified : LocalizeStatus::localized;
+    if (gcs_) out.position = gcs_->map.localize({gcs_->histogram(q)});
     return out;
   }
+
+  /// Trains the GCS localizer on the key images that have an SE(2) pose (at least 3),
+  /// from their own features (no second extraction): a BowHistogram vocabulary learned
+  /// on them, the network (Trujillo-Romero 2024, Algorithm 1), a pose per neuron
+  /// (Algorithm 4). localize() then also answers a position (Algorithm 5). Key images
+  /// added later are not in it until train_gcs runs again. Deterministic (seeded).
+  GcsTrainStats train_gcs(const MemoryGcsOptions& options = {}) {
+    const VisualMap& map = selector_.map();
+    std::vector<std::uint32_t> keys;
+    std::vector<Features> features;
+    std::vector<Pose2> poses;
+    for (std::size_t k = 0; k < map.keys.size(); ++k)
+      if (const auto* p = std::get_if<Pose2>(&poses_[k])) {
+        keys.push_back(static_cast<std::uint32_t>(k));
+        features.push_back(map.keys[k].features);
+        poses.push_back(*p);
+      }
+    detail::check(keys.size() >= 3, "VisualMemory::train_gcs: " + std::to_string(keys.size()) +
+                                        " key images have an SE(2) pose, the GCS needs at least 3");
+    for (const Features& f : features)
+      detail::check(f.descriptors.empty() || f.descriptors.type() == CV_8UC1,
+                    "VisualMemory::train_gcs: the BowHistogram needs binary (CV_8UC1) descriptors, the key images "
+                    "have " + cv::typeToString(f.descriptors.type()));
+    BowHistogram histogram(options.histogram);
+    histogram.fit(features);
+    std::vector<Eigen::VectorXf> vectors;
+    for (const Features& f : features) vectors.push_back(histogram(f));
+    GcsXf network(options.gcs);
+    const GcsTrainStats stats = network.train(vectors);
+    std::vector<std::size_t> winners;
+    for (const auto& v : vectors) winners.push_back(network.bmu(v).cell);
+    gcs_.emplace(GcsPart{options, std::move(histogram), PoseMap<GcsXf>::from_assignments(std::move(network), winners, poses),
+                         std::move(keys), std::move(winners)});
+    return stats;
+  }
+
+  /// Whether a GCS was trained (train_gcs) or loaded with the memory.
+  [[nodiscard]] bool has_gcs() const noexcept { return gcs_.has_value(); }
+  /// The trained GCS and its pose per neuron; an Error without one.
+  [[nodiscard]] const PoseMap<GcsXf>& gcs() const {
+    detail::check(gcs_.has_value(), "VisualMemory::gcs: no GCS trained (call train_gcs first)");
+    return gcs_->map;
+  }
+  /// The key images the GCS was trained on (ascending).
+  [[nodiscard]] std::vector<std::uint32_t> gcs_keys() const { return gcs_ ? gcs_->keys : std::vector<std::uint32_t>{}; }
 
   /// Key images linked to `key`: the chain neighbours (key - 1, key + 1), then loop edges.
   [[nodiscard]] std::vector<GraphNeighbour> neighbours(std::uint32_t key) const {
@@ -443,6 +686,19 @@ class VisualMemory {
   [[nodiscard]] const PlaceDatabase<std::uint32_t>& database() const noexcept { return database_; }
   [[nodiscard]] const MemoryOptions& options() const noexcept { return options_; }
   [[nodiscard]] Selector& selector() noexcept { return selector_; }
+  /// Whether the frames come with detections (the label-tree loop detection runs).
+  [[nodiscard]] bool labelled() const noexcept { return labelled_; }
+  /// The label schema once fixed (given order, or after MemoryLabelOptions::sample key
+  /// images); nullopt before, and in a memory without detections.
+  [[nodiscard]] const std::optional<LabelSchema>& label_schema() const noexcept { return schema_; }
+  /// The binary classified tree: the key images older than `exclude_recent` of the
+  /// last one checked for loops, each at the leaf of its label vector.
+  [[nodiscard]] const BinaryClassifiedTree<std::uint32_t>& label_tree() const noexcept { return tree_; }
+  /// The detections pushed with each key image's frame (empty without detections).
+  [[nodiscard]] const std::vector<std::vector<Detection>>& key_detections() const noexcept { return key_detections_; }
+  /// What the memory records of its policies (descriptor, matcher, estimator,
+  /// similarity): name and options, "" for a policy vmap does not know (file "plcy").
+  [[nodiscard]] const std::array<std::string, 4>& policy_records() const noexcept { return policies_; }
 
   /// The memory file's bytes (format at the top of this header). `images` overrides
   /// MemoryOptions::images for this file (e.g. none for a small copy; png or jpeg store
@@ -468,6 +724,9 @@ class VisualMemory {
     d.u64(db.size());
     d.bytes(db);
     s.add("plcd", std::move(d).take());
+    s.add("plcy", policies_bytes());
+    s.add("labl", labels_bytes());
+    s.add("gcsl", gcs_bytes());
     detail::BinaryWriter h;
     h.bytes(detail::memory_magic, 8);
     h.u32(memory_format_version);
@@ -493,11 +752,13 @@ class VisualMemory {
     if (file.bytes(8, "magic") != std::string_view(detail::memory_magic, 8))
       file.corrupt("header: not a vmap memory (wrong magic bytes)");
     const std::uint32_t version = file.u32("version");
-    if (version != memory_format_version)
-      file.corrupt("header: format version " + std::to_string(version) + " is not supported (this build reads " +
+    if (version != 1 && version != memory_format_version)
+      file.corrupt("header: format version " + std::to_string(version) + " is not supported (this build reads 1 to " +
                    std::to_string(memory_format_version) + ")");
-    if (const std::uint32_t n = file.u32("section count"); n != detail::memory_sections)
-      file.corrupt("header: " + std::to_string(n) + " sections, expected " + std::to_string(detail::memory_sections));
+    const std::uint32_t sections = version == 1 ? detail::memory_sections_v1 : detail::memory_sections;
+    if (const std::uint32_t n = file.u32("section count"); n != sections)
+      file.corrupt("header: " + std::to_string(n) + " sections, expected " + std::to_string(sections) +
+                   " in version " + std::to_string(version));
 
     auto opts = detail::memory_open_section(file, "opts");
     const MemoryOptions options = read_options(opts);
@@ -593,12 +854,25 @@ class VisualMemory {
     const std::uint64_t dlen = db.u64("database length");
     mem.database_ = PlaceDatabase<std::uint32_t>::deserialize(db.bytes(dlen, "database"), db.source() + " database");
     db.expect_end("the database");
-    if (!file.at_end()) file.corrupt(std::to_string(file.remaining()) + " unexpected bytes after the last section");
 
     if (mem.database_.scoring() != options.scoring || mem.database_.words() != mem.vocabulary_.size())
       detail::fail(db.source() + ": the database does not match the vocabulary or the scoring");
-    for (const auto id : mem.database_.ids())
-      if (id >= m) detail::fail(db.source() + ": image id " + std::to_string(id) + " is not a key image");
+    {
+      // The database holds the key images checked for loops: 0 .. n-1, in order.
+      const auto ids = mem.database_.ids();
+      for (std::size_t i = 0; i < ids.size(); ++i)
+        if (ids[i] != i || ids[i] >= m) detail::fail(db.source() + ": image id " + std::to_string(ids[i]) + " is not key image " + std::to_string(i));
+    }
+    mem.key_detections_.assign(m, {});
+    if (version >= 2) {
+      auto plcy = detail::memory_open_section(file, "plcy");
+      mem.read_policies(plcy);
+      auto labl = detail::memory_open_section(file, "labl");
+      mem.read_labels(labl, options, m, has_prev == 1);
+      auto gcsl = detail::memory_open_section(file, "gcsl");
+      mem.read_gcs(gcsl, m);
+    }
+    if (!file.at_end()) file.corrupt(std::to_string(file.remaining()) + " unexpected bytes after the last section");
     mem.selector_.restore(std::move(state));
     return mem;
   }
@@ -619,9 +893,68 @@ class VisualMemory {
     detail::check(o.jpeg_quality >= 1 && o.jpeg_quality <= 100, "MemoryOptions.jpeg_quality must be in 1..100, got " +
                                                                     std::to_string(o.jpeg_quality));
     detail::check(o.images <= ImageStorage::jpeg, "MemoryOptions.images is not a known ImageStorage");
+    const MemoryLabelOptions& l = o.labels;
+    detail::check_label_min_score(l.labels.min_score);
+    detail::check_influence_options(l.influence);
+    detail::check(l.sample >= 1, "MemoryOptions.labels.sample must be >= 1");
+    detail::check(l.index == CandidateIndex::tree || l.index == CandidateIndex::tree_ranked,
+                  "MemoryOptions.labels.index must be tree or tree_ranked, got " + std::string(to_string(l.index)));
+    try {
+      (void)LabelSchema(l.order);
+    } catch (const Error& e) {
+      detail::fail(std::string("MemoryOptions.labels.order: ") + e.what());
+    }
     o.selector.keep_images = o.images != ImageStorage::none;
     return o;
   }
+
+  static Frame bare_frame(const cv::Mat& image, std::optional<double> timestamp, std::size_t index) {
+    Frame f;
+    f.image = image;
+    f.index = index;
+    f.name = "frame#" + std::to_string(f.index);
+    f.timestamp = timestamp.value_or(static_cast<double>(f.index));
+    return f;
+  }
+
+  Frame bare_frame(const cv::Mat& image, std::optional<double> timestamp) const {
+    return bare_frame(image, timestamp, frames());
+  }
+
+  MemoryStep push_frame(const Frame& frame, const OdometryPose& pose, const std::vector<Detection>* detections) {
+    const bool with = detections != nullptr;
+    if (!last_index_) {
+      labelled_ = with;  // the first frame decides
+    } else if (with != labelled_) {
+      detail::fail("VisualMemory::push: frame " + std::to_string(frame.index) +
+                   (with ? " comes with detections, but the memory's frames had none"
+                         : " comes without detections, but the memory's frames had them (give an empty list when "
+                           "nothing was detected)"));
+    }
+    // Scores are checked before anything changes, so a bad detection leaves the memory as it was.
+    if (with) (void)present_labels(*detections, options_.labels.labels.min_score);
+    MemoryStep step;
+    step.frame = selector_.push(frame);
+    after_push(step, frame.index, pose, detections);
+    return step;
+  }
+
+  /// Fixes the label schema and sizes the tree for it (nothing is in the tree yet).
+  void fix_schema(LabelSchema schema) {
+    schema_ = std::move(schema);
+    tree_ = BinaryClassifiedTree<std::uint32_t>(schema_->size());
+  }
+
+  /// Eq. 5 over the first `sample` key images' detections (label order by mean box area).
+  void sample_schema() {
+    if (!labelled_ || schema_ || key_detections_.size() < options_.labels.sample) return;
+    LabelStatistics stats(options_.labels.labels);
+    for (std::size_t k = 0; k < options_.labels.sample; ++k) stats.observe(key_detections_[k]);
+    fix_schema(make_label_schema(stats, options_.labels.influence));
+  }
+
+  /// Loop detection runs once there is a vocabulary and, for labels, a schema.
+  [[nodiscard]] bool detecting() const noexcept { return !vocabulary_.empty() && (!labelled_ || schema_); }
 
   static SelectorOptions selector_options(const MemoryOptions& o) { return o.selector; }
 
@@ -630,23 +963,30 @@ class VisualMemory {
     return l;
   }
 
-  void after_push(MemoryStep& step, std::size_t index, const OdometryPose& pose) {
+  void after_push(MemoryStep& step, std::size_t index, const OdometryPose& pose,
+                  const std::vector<Detection>* detections) {
     const FrameResult& r = step.frame;
+    static const std::vector<Detection> none;
+    const std::vector<Detection>& current = detections ? *detections : none;
     if (r.key_taken) {
-      // Eq. 6 takes I_{j-1}: its pose is the one pushed with it.
-      poses_.push_back(*r.key_frame == index ? pose : previous_pose_);
+      // Eq. 6 takes I_{j-1}: its pose and detections are the ones pushed with it.
+      const bool this_frame = *r.key_frame == index;
+      poses_.push_back(this_frame ? pose : previous_pose_);
+      key_detections_.push_back(this_frame ? current : previous_detections_);
       step.new_key = static_cast<std::uint32_t>(key_images() - 1);
       on_new_key(*step.new_key, step.loops);
     }
     previous_pose_ = pose;
+    previous_detections_ = current;
     last_index_ = index;
   }
 
   /// Adds key image `key` to the place database and detects its loops; learns the
-  /// vocabulary once enough key images exist, then catches up with the earlier ones in
-  /// order.
+  /// vocabulary once enough key images exist (and, with detections, fixes the label
+  /// schema after the sample), then catches up with the earlier ones in order.
   void on_new_key(std::uint32_t key, std::vector<LoopEdge>& found) {
     const auto& keys = selector_.map().keys;
+    sample_schema();
     if (vocabulary_.empty()) {
       if (keys.size() < options_.vocabulary_after) return;
       std::vector<cv::Mat> sets;
@@ -658,27 +998,51 @@ class VisualMemory {
       if (rows < static_cast<std::size_t>(std::max(options_.vocabulary.branching, 1))) return;
       vocabulary_ = AnyVocabulary::learn(sets, options_.vocabulary);
       database_ = PlaceDatabase<std::uint32_t>(vocabulary_.size(), options_.scoring);
-      for (std::uint32_t k = 0; k < key; ++k) detect_and_add(k, found);
     }
-    detect_and_add(key, found);
+    if (!detecting()) return;
+    // The database holds exactly the key images already checked, in order.
+    for (auto k = static_cast<std::uint32_t>(database_.size()); k <= key; ++k) detect_and_add(k, found);
   }
 
   void detect_and_add(std::uint32_t key, std::vector<LoopEdge>& found) {
     const Features& f = selector_.map().keys[key].features;
     const BowVector bow = transform(f.descriptors);
-    if (key >= options_.exclude_recent + 1 && !database_.empty()) {
+    if (labelled_) {
+      detect_by_labels(key, f, bow, found);
+    } else if (key >= options_.exclude_recent + 1 && !database_.empty()) {
       QueryFilter<std::uint32_t> filter;
       filter.exclude_from = static_cast<std::uint32_t>(key - options_.exclude_recent);
-      for (const auto& c : database_.query(bow, options_.loop_candidates, filter)) {
-        PlaceLink l = verify(c.id, c.score, f);
-        if (l.status == VerificationStatus::verified && l.inliers >= options_.min_loop_inliers) {
-          loops_.push_back({key, l});
-          found.push_back({key, l});
-        }
-      }
+      for (const auto& c : database_.query(bow, options_.loop_candidates, filter)) add_if_loop(key, verify(c.id, c.score, f), found);
     }
     database_.add(key, bow);
   }
+
+  void add_if_loop(std::uint32_t key, const PlaceLink& l, std::vector<LoopEdge>& found) {
+    if (l.status == VerificationStatus::verified && l.inliers >= options_.min_loop_inliers) {
+      loops_.push_back({key, l});
+      found.push_back({key, l});
+    }
+  }
+
+  /// LFM-LCD (sec. 3.3): the key images older than the exclusion window are in the tree
+  /// (inserted in order as they leave it, so the backtracking to m counts only valid
+  /// candidates, as LoopDetector does); the query's leaf, after backtracking, is
+  /// verified whole (tree) or ranked by BoW score and its best verified (tree_ranked).
+  void detect_by_labels(std::uint32_t key, const Features& f, const BowVector& bow, std::vector<LoopEdge>& found) {
+    while (static_cast<std::size_t>(tree_next_) + options_.exclude_recent < key) insert_in_tree(tree_next_++);
+    const LabelVector v = schema_->vector(key_detections_[key], options_.labels.labels);
+    const std::vector<std::uint32_t> leaf = tree_.candidates(v, options_.labels.min_candidates);
+    if (leaf.empty()) return;
+    if (options_.labels.index == CandidateIndex::tree) {
+      for (const std::uint32_t j : leaf) add_if_loop(key, verify(j, 0.0, f), found);
+      return;
+    }
+    QueryFilter<std::uint32_t> filter;
+    filter.only = leaf;
+    for (const auto& c : database_.query(bow, options_.loop_candidates, filter)) add_if_loop(key, verify(c.id, c.score, f), found);
+  }
+
+  void insert_in_tree(std::uint32_t key) { tree_.insert(schema_->vector(key_detections_[key], options_.labels.labels), key); }
 
   BowVector transform(const cv::Mat& descriptors) const {
     if (descriptors.empty()) return {};
@@ -869,6 +1233,195 @@ class VisualMemory {
     return std::move(w).take();
   }
 
+  std::string policies_bytes() const {
+    detail::BinaryWriter w;
+    for (const std::string& p : policies_) w.str(p, detail::memory_max_policy, "VisualMemory::save: a policy record");
+    return std::move(w).take();
+  }
+
+  void read_policies(detail::BinaryReader& r) const {
+    static constexpr const char* roles[4] = {"descriptor", "matcher", "estimator", "similarity"};
+    for (std::size_t i = 0; i < 4; ++i) {
+      const std::string recorded = r.str("policy record", detail::memory_max_policy);
+      if (recorded != policies_[i])
+        detail::fail(r.source() + ": the " + roles[i] + " given to load (" +
+                     (policies_[i].empty() ? std::string("not recorded") : policies_[i]) +
+                     ") is not the one the memory was built with (" +
+                     (recorded.empty() ? std::string("not recorded") : recorded) + ")");
+    }
+    r.expect_end("the policies");
+  }
+
+  std::string labels_bytes() const {
+    const MemoryLabelOptions& o = options_.labels;
+    detail::BinaryWriter w;
+    w.f32(o.labels.min_score);
+    w.u64(o.sample);
+    w.f64(o.influence.min_influence);
+    w.f64(o.influence.max_influence);
+    w.u8(static_cast<std::uint8_t>(o.index));
+    w.u64(o.min_candidates);
+    const auto write_labels = [&](const std::vector<int>& labels) {
+      w.u32(static_cast<std::uint32_t>(labels.size()));
+      for (const int l : labels) w.i32(l);
+    };
+    write_labels(o.order);
+    w.u8(labelled_ ? 1 : 0);
+    w.u8(schema_ ? 1 : 0);
+    if (schema_) write_labels(schema_->labels());
+    w.u32(static_cast<std::uint32_t>(key_detections_.size()));
+    for (const auto& d : key_detections_) detail::memory_write_detections(w, d);
+    // Those of I_{j-1} only while the selector holds it (not when the last frame is the
+    // last key image): the only case a later key image can be that frame.
+    const auto& keys = selector_.map().keys;
+    const bool has_previous = last_index_ && !(!keys.empty() && keys.back().frame_index == *last_index_);
+    detail::memory_write_detections(w, has_previous ? previous_detections_ : std::vector<Detection>{});
+    return std::move(w).take();
+  }
+
+  /// Reads "labl" and rebuilds the tree exactly: the key images checked so far (the
+  /// database's) less the exclusion window, inserted in order as the run inserted them.
+  void read_labels(detail::BinaryReader& r, const MemoryOptions& file_options, std::uint32_t m, bool has_previous) {
+    MemoryLabelOptions o;
+    o.labels.min_score = r.f32("label min_score");
+    o.sample = static_cast<std::size_t>(r.u64("label sample"));
+    o.influence.min_influence = r.f64("min_influence");
+    o.influence.max_influence = r.f64("max_influence");
+    const std::uint8_t index = r.u8("label candidate source");
+    if (index > static_cast<std::uint8_t>(CandidateIndex::brute_force)) r.corrupt("unknown candidate source");
+    o.index = static_cast<CandidateIndex>(index);
+    o.min_candidates = static_cast<std::size_t>(r.u64("min_candidates"));
+    const auto read_labels = [&](const char* what) {
+      const std::uint32_t n = r.u32(what);
+      r.require_items(n, 4, what);
+      std::vector<int> labels(n);
+      for (int& l : labels) l = r.i32(what);
+      return labels;
+    };
+    o.order = read_labels("label order");
+    MemoryOptions all = file_options;
+    all.labels = o;
+    try {
+      options_ = checked(all);
+      if (!o.order.empty()) fix_schema(LabelSchema(o.order));
+      else schema_.reset();
+    } catch (const Error& e) {
+      r.corrupt(e.what());
+    }
+    const std::uint8_t labelled = r.u8("labelled flag");
+    if (labelled > 1) r.corrupt("labelled flag is not 0 or 1");
+    labelled_ = labelled == 1;
+    const std::uint8_t has_schema = r.u8("schema flag");
+    if (has_schema > 1) r.corrupt("schema flag is not 0 or 1");
+    if (has_schema == 1) {
+      std::vector<int> labels = read_labels("schema label count");
+      if (!o.order.empty() && labels != o.order) r.corrupt("the schema is not the given label order");
+      try {
+        fix_schema(LabelSchema(std::move(labels)));
+      } catch (const Error& e) {
+        r.corrupt(e.what());
+      }
+    } else if (!o.order.empty()) {
+      r.corrupt("a given label order but no schema");
+    }
+    const std::uint32_t n = r.u32("key detection count");
+    if (n != m) r.corrupt("detections for " + std::to_string(n) + " key images, the memory has " + std::to_string(m));
+    key_detections_.clear();
+    for (std::uint32_t k = 0; k < m; ++k) key_detections_.push_back(detail::memory_read_detections(r));
+    previous_detections_ = detail::memory_read_detections(r);
+    r.expect_end("the detections");
+    if (!labelled_) {
+      for (const auto& d : key_detections_)
+        if (!d.empty()) r.corrupt("detections in a memory without labels");
+      if (!previous_detections_.empty()) r.corrupt("detections in a memory without labels");
+    }
+    // Without an I_{j-1} in the selector no later key image can be that frame: its
+    // detections are never read.
+    if (!has_previous) previous_detections_.clear();
+    if (schema_ && o.order.empty() && (!labelled_ || m < o.sample)) r.corrupt("a schema before its sample");
+    if (labelled_ && o.order.empty() && !schema_ && m >= o.sample) r.corrupt("no schema after the sample");
+    const std::size_t checked_keys = database_.size();
+    if (labelled_ && !schema_ && checked_keys > 0) r.corrupt("key images checked for loops without a schema");
+    if (labelled_ && checked_keys > 0) {
+      const std::size_t last = checked_keys - 1;
+      tree_next_ = last > options_.exclude_recent ? static_cast<std::uint32_t>(last - options_.exclude_recent) : 0;
+      try {
+        for (std::uint32_t k = 0; k < tree_next_; ++k) insert_in_tree(k);
+      } catch (const Error& e) {
+        r.corrupt(e.what());
+      }
+    }
+  }
+
+  std::string gcs_bytes() const {
+    detail::BinaryWriter w;
+    w.u8(gcs_ ? 1 : 0);
+    if (!gcs_) return std::move(w).take();
+    const BowHistogramOptions& h = gcs_->options.histogram;
+    w.i32(h.vocabulary.words);
+    w.i32(h.vocabulary.iterations);
+    w.u64(h.vocabulary.max_descriptors);
+    w.u64(h.vocabulary.seed);
+    w.u8(static_cast<std::uint8_t>(h.norm));
+    const std::string voc = gcs_->histogram.vocabulary().serialize();
+    w.u64(voc.size());
+    w.bytes(voc);
+    const std::string net = gcs_->map.network().serialize();  // holds the GcsOptions
+    w.u64(net.size());
+    w.bytes(net);
+    w.u32(static_cast<std::uint32_t>(gcs_->keys.size()));
+    for (std::size_t i = 0; i < gcs_->keys.size(); ++i) {
+      w.u32(gcs_->keys[i]);
+      w.u64(gcs_->winners[i]);
+    }
+    return std::move(w).take();
+  }
+
+  void read_gcs(detail::BinaryReader& r, std::uint32_t m) {
+    const std::uint8_t has = r.u8("GCS flag");
+    if (has > 1) r.corrupt("GCS flag is not 0 or 1");
+    if (has == 0) {
+      r.expect_end("the GCS flag");
+      return;
+    }
+    MemoryGcsOptions o;
+    o.histogram.vocabulary.words = r.i32("histogram words");
+    o.histogram.vocabulary.iterations = r.i32("histogram iterations");
+    o.histogram.vocabulary.max_descriptors = static_cast<std::size_t>(r.u64("histogram max_descriptors"));
+    o.histogram.vocabulary.seed = r.u64("histogram seed");
+    const std::uint8_t norm = r.u8("histogram norm");
+    if (norm > 1) r.corrupt("unknown histogram norm");
+    o.histogram.norm = static_cast<HistogramNorm>(norm);
+    const std::uint64_t vlen = r.u64("histogram vocabulary length");
+    BinaryVocabularyTree voc = BinaryVocabularyTree::deserialize(r.bytes(vlen, "histogram vocabulary"),
+                                                                 r.source() + " histogram vocabulary");
+    if (voc.size() == 0) r.corrupt("the histogram vocabulary has no words");
+    const std::uint64_t nlen = r.u64("network length");
+    GcsXf net = GcsXf::deserialize(r.bytes(nlen, "network"), r.source() + " network");
+    if (net.empty()) r.corrupt("the network is not trained");
+    if (net.dimension() != voc.size()) r.corrupt("the network's dimension is not the histogram's");
+    o.gcs = net.options();
+    const std::uint32_t n = r.u32("GCS key count");
+    r.require_items(n, 12, "GCS key count");
+    std::vector<std::uint32_t> keys(n);
+    std::vector<std::size_t> winners(n);
+    std::vector<Pose2> poses;
+    for (std::uint32_t i = 0; i < n; ++i) {
+      keys[i] = r.u32("GCS key");
+      winners[i] = static_cast<std::size_t>(r.u64("GCS winner"));
+      if (keys[i] >= m || (i > 0 && keys[i] <= keys[i - 1])) r.corrupt("GCS key images are not increasing key images");
+      const auto* p = std::get_if<Pose2>(&poses_[keys[i]]);
+      if (!p) r.corrupt("GCS key image " + std::to_string(keys[i]) + " has no SE(2) pose");
+      if (winners[i] >= net.size()) r.corrupt("a GCS winner is not a neuron");
+      poses.push_back(*p);
+    }
+    r.expect_end("the GCS key images");
+    if (n < 3) r.corrupt("a GCS trained on fewer than 3 key images");
+    gcs_.emplace(GcsPart{o, BowHistogram(std::move(voc), o.histogram),
+                         PoseMap<GcsXf>::from_assignments(std::move(net), winners, poses), std::move(keys),
+                         std::move(winners)});
+  }
+
   static PairScore read_score(detail::BinaryReader& r) {
     PairScore p;
     p.raw_matches = r.i32("raw matches");
@@ -891,7 +1444,17 @@ class VisualMemory {
     return p;
   }
 
+  /// The GCS part (train_gcs): what it was trained with and on, and the trained map.
+  struct GcsPart {
+    MemoryGcsOptions options;
+    BowHistogram histogram;
+    PoseMap<GcsXf> map;
+    std::vector<std::uint32_t> keys;   ///< the key images trained on
+    std::vector<std::size_t> winners;  ///< the neuron each of them won (Algorithm 4)
+  };
+
   MemoryOptions options_;
+  std::array<std::string, 4> policies_;  ///< detail::memory_policy_record of each policy
   Selector selector_;
   AnyVocabulary vocabulary_;
   PlaceDatabase<std::uint32_t> database_;
@@ -899,6 +1462,13 @@ class VisualMemory {
   std::vector<OdometryPose> poses_;  ///< per key image
   OdometryPose previous_pose_;       ///< of the last pushed frame (eq. 6's I_{j-1})
   std::optional<std::size_t> last_index_;
+  bool labelled_ = false;                              ///< frames come with detections
+  std::vector<std::vector<Detection>> key_detections_;  ///< per key image
+  std::vector<Detection> previous_detections_;          ///< of the last pushed frame
+  std::optional<LabelSchema> schema_;
+  BinaryClassifiedTree<std::uint32_t> tree_;
+  std::uint32_t tree_next_ = 0;  ///< key images [0, tree_next_) are in the tree
+  std::optional<GcsPart> gcs_;
 };
 
 // Named stacks: the paper's ORB 1000 + mutual NN + MAGSAC++ + eq. 5, and A-KAZE / SIFT.
