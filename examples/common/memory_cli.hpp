@@ -12,6 +12,7 @@
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
 #include <vmap/memory/visual_memory.hpp>
+#include <vmap/som/pose_io.hpp>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/core/affine.hpp>
@@ -141,10 +142,13 @@ struct StreamResult {
 /// load_camera_poses reads it): by order when the file has one pose per frame of the
 /// sequence, else the pose nearest in time within 50 ms (TUM fr1's ground truth has gaps
 /// of up to 49 ms). A frame without one is an Error naming the file and the frame.
+/// `floor`: the SE(2) floor pose (som/pose_io.hpp: TUM's z-up floor, KITTI's y-down)
+/// instead of the SE(3) camera pose, as the GCS localizer learns them.
 class FramePoses {
  public:
-  FramePoses(const std::filesystem::path& file, const FrameSource& src)
-      : name_(file.string()), poses_(load_camera_poses(file)) {
+  FramePoses(const std::filesystem::path& file, const FrameSource& src, bool floor = false)
+      : name_(file.string()), poses_(load_camera_poses(file)), floor_(floor) {
+    if (floor_) format_ = guess_camera_pose_format(read_text_file(file, "pose file"), name_);
     const auto times = src.timestamps();  // empty for a video
     by_order_ = poses_.size() == (times.empty() ? src.total().value_or(0) : times.size());
   }
@@ -158,12 +162,16 @@ class FramePoses {
     if (!k || *k >= poses_.size())
       vmap::detail::fail(name_ + ": no pose for frame " + std::to_string(f.index) + " (" + f.name + ", time " +
                          std::to_string(f.timestamp) + ")");
+    if (floor_)
+      return format_ == CameraPoseFormat::kitti ? floor_pose_y_down(poses_[*k]) : floor_pose_z_up(poses_[*k]);
     return cv::Affine3d(poses_[*k].rotation, poses_[*k].position);
   }
 
  private:
   std::string name_;
   std::vector<CameraPose> poses_;
+  bool floor_ = false;
+  CameraPoseFormat format_ = CameraPoseFormat::tum;
   bool by_order_ = false;
 };
 
@@ -288,6 +296,9 @@ inline nlohmann::json localizations_json(const CliMemory& mem, const std::vector
                      {"verified_candidates", q.answer.verified_candidates},
                      {"ms", q.ms},
                      {"matches", nlohmann::json::array()}};
+    // The GCS position (Algorithm 5), present when the memory holds a trained GCS
+    // (VisualMemory::train_gcs); null otherwise.
+    j["position"] = q.answer.position ? pose_json(q.answer.position->pose) : nlohmann::json(nullptr);
     for (const auto& l : q.answer.matches) j["matches"].push_back(link_json(mem, l));
     out.push_back(std::move(j));
   }
@@ -305,6 +316,10 @@ inline void print_localizations(const CliMemory& mem, const std::vector<MemoryQu
     } else {
       std::printf("%s: not localized (%s), %.1f ms\n", q.image.c_str(), std::string(to_string(q.answer.status)).c_str(),
                   q.ms);
+    }
+    if (q.answer.position) {
+      const Pose2& p = q.answer.position->pose;
+      std::printf("  GCS position (%.3f, %.3f, %.3f rad)\n", p.x(), p.y(), p.theta());
     }
   }
 }

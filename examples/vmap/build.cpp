@@ -46,6 +46,7 @@ struct BuildArgs {
   std::string images = "none";
   std::string vocabulary;
   std::string poses;  // --poses FILE: odometry kept with the memory's key images
+  bool gcs = false;   // --gcs: floor poses, and the GCS localizer trained at the end
   std::size_t vocabulary_after = vmap::MemoryOptions{}.vocabulary_after;
 };
 
@@ -309,7 +310,8 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
     ex::usage_error("--out with --memory on a live source needs the memory's pixels (--images png or jpeg): a live "
                     "stream cannot be read again");
   std::optional<ex::FramePoses> poses;
-  if (!args.poses.empty()) poses.emplace(args.poses, src);
+  if (args.gcs && args.poses.empty()) ex::usage_error("--gcs needs --poses FILE (the GCS learns a pose per neuron)");
+  if (!args.poses.empty()) poses.emplace(args.poses, src, args.gcs);
   ex::Progress progress("vmap build", expected_frames(src, so));
   MemoryRun run{file, args.resume, {}, 0, std::nullopt, 0};
   run.stream = ex::stream_into(*mem, src, file, args.save_every, poses, [&](const ex::CliMemory& m) {
@@ -319,6 +321,13 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   if (run.stream.pushed == 0)
     vmap::detail::fail("'" + a.input + "' gave no frame in the requested range" +
                        (args.resume ? " after the memory's last frame " + std::to_string(mem->last_frame_index().value_or(0)) : ""));
+  if (args.gcs) {
+    // The GCS (Trujillo-Romero 2024, Algorithms 1 and 4) learns from every key image with
+    // a floor pose, the resumed ones included, so it is trained again after each run.
+    mem->train_gcs();
+    mem->save(file);
+    ++run.stream.saves;
+  }
   run.loops = mem->loops().size();
   run.last_frame = mem->last_frame_index();
   run.bytes = fs::file_size(file);
@@ -351,12 +360,15 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--poses", args->poses,
                  "With --memory: each frame's odometry pose (TUM or KITTI camera poses; by order when there is one "
                  "per frame, else the nearest in time within 50 ms), kept with its key image");
+  app.add_flag("--gcs", args->gcs,
+               "With --memory and --poses: keep floor poses (x, y, heading: TUM's z-up floor, KITTI's y-down) and "
+               "train the GCS localizer on the key images at the end; localize --memory then answers a position too");
   return [args, &app]() -> int {
     const auto& a = args->common;
     ex::current_inputs() = {a.input};
     ex::check_range(a);
     if (!args->memory.empty()) return build_memory(*args, app);
-    for (const char* o : {"--resume", "--save-every", "--images", "--vocabulary", "--vocabulary-after", "--poses"})
+    for (const char* o : {"--resume", "--save-every", "--images", "--vocabulary", "--vocabulary-after", "--poses", "--gcs"})
       if (app.get_option(o)->count() > 0) ex::usage_error(std::string(o) + " needs --memory DIR|FILE");
     const auto camera = ex::load_camera_option(a.camera);
     const bool pictures = !a.out.empty();

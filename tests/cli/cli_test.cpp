@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -568,7 +569,33 @@ TEST_SUITE("data") {
             doctest::Approx(1.0).epsilon(1e-9));
     const Run text = run_vmap({"localize", "--memory", file.string(), frame_a});
     CHECK(text.out.find(", position (1.299, 0.688, 1.573), ") != std::string::npos);
+    CHECK(nlohmann::json::parse(r.out)["queries"][0]["position"].is_null());  // no GCS trained
     usage_error({"build", sample, "--poses", gt}, "--poses needs --memory");
+  }
+
+  TEST_CASE("cli: build --memory --poses --gcs keeps floor poses and trains the GCS; localize answers a position") {
+    const std::string gt = vmap::test::data_path("tum_fr1_rpy/groundtruth.txt").string();
+    const fs::path file = work_dir() / "memory_gcs.vmem";
+    const Run b = run_vmap({"build", sample, "--memory", file.string(), "--poses", gt, "--gcs", "--end", "30"});
+    INFO(b.err);
+    REQUIRE(b.code == 0);
+    const Run r = run_vmap({"localize", "--memory", file.string(), frame_a, "--json"});
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+    const auto q = nlohmann::json::parse(r.out)["queries"][0];
+    // Key image 0 keeps frame 0's floor pose (z-up: x, y of the ground-truth line 360).
+    REQUIRE(q["matches"][0]["key"] == 0);
+    CHECK(q["matches"][0]["pose"]["x"].get<double>() == doctest::Approx(1.2989).epsilon(1e-9));
+    CHECK(q["matches"][0]["pose"]["y"].get<double>() == doctest::Approx(0.6880).epsilon(1e-9));
+    // The GCS position of frame 0: the first 30 frames of fr1/rpy stay within a few cm
+    // of where they start (the camera mostly rotates), so the answer is within 5 cm.
+    REQUIRE(q["position"].is_object());
+    CHECK(std::abs(q["position"]["x"].get<double>() - 1.2989) < 0.05);
+    CHECK(std::abs(q["position"]["y"].get<double>() - 0.6880) < 0.05);
+    const Run text = run_vmap({"localize", "--memory", file.string(), frame_a});
+    CHECK(text.out.find("GCS position (") != std::string::npos);
+    usage_error({"build", sample, "--memory", (work_dir() / "gcs_nop.vmem").string(), "--gcs"}, "--gcs needs --poses");
+    usage_error({"build", sample, "--gcs"}, "--gcs needs --memory");
   }
 
   TEST_CASE("cli: detect, command line and --config give the same JSON; --out writes detections.txt") {
