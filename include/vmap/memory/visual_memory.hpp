@@ -159,6 +159,13 @@ enum class ImageStorage : std::uint8_t {
 /// An odometry pose given with a frame: none, SE(2) (a ground robot) or SE(3).
 using OdometryPose = std::variant<std::monostate, Pose2, cv::Affine3d>;
 
+namespace detail {
+/// The default pose argument of push(). A named object rather than a `{}` temporary:
+/// GCC 12 at -O2 reports copying a defaulted std::variant temporary as a read of
+/// uninitialised storage (a false -Wmaybe-uninitialized).
+inline const OdometryPose no_odometry_pose{};
+}  // namespace detail
+
 /// LFM-LCD's label tree inside the memory (Zhu et al., Sensors 2021, sec. 3.2-3.3;
 /// DESIGN.md sec. 1.2), used when the frames are pushed with object detections.
 struct MemoryLabelOptions {
@@ -556,7 +563,7 @@ class VisualMemory {
   ~VisualMemory() = default;
 
   /// Pushes a frame of a sequence (its index is its place in the sequence).
-  MemoryStep push(const Frame& frame, const OdometryPose& pose = {}) { return push_frame(frame, pose, nullptr); }
+  MemoryStep push(const Frame& frame, const OdometryPose& pose = detail::no_odometry_pose) { return push_frame(frame, pose, nullptr); }
 
   /// Pushes a frame with its object detections (any detector, or precomputed): the
   /// memory then finds loops through LFM-LCD's label tree (MemoryOptions::labels). The
@@ -576,7 +583,8 @@ class VisualMemory {
 
   /// Pushes a bare image: its index is the number of frames pushed so far; the timestamp
   /// defaults to that index.
-  MemoryStep push(const cv::Mat& image, std::optional<double> timestamp = {}, const OdometryPose& pose = {}) {
+  MemoryStep push(const cv::Mat& image, std::optional<double> timestamp = {},
+                  const OdometryPose& pose = detail::no_odometry_pose) {
     return push_frame(bare_frame(image, timestamp), pose, nullptr);
   }
 
