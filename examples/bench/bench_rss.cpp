@@ -75,11 +75,14 @@ void report(const char* what, const std::vector<Sample>& s, double base, double 
   std::printf("  peak RSS before the first frame %.1f MB, after the last %.1f MB\n", base / mb, last.peak / mb);
   std::printf("  peak growth per frame %.0f B (whole run), slope %.0f B per frame (second half)\n",
               (last.peak - base) / last.frames, slope(s, &Sample::frames));
-  if (last.keys > 0)
+  // The sweep's key images are known only at the end (its selectors are internal): no slope.
+  if (s.size() > 1 && s[s.size() - 2].keys > 0)
     std::printf("  per key image: %.0f B (whole run), slope %.0f B per key image (second half)\n",
                 (last.peak - base) / last.keys, slope(s, &Sample::keys));
+  else if (last.keys > 0)
+    std::printf("  per key image: %.0f B (whole run)\n", (last.peak - base) / last.keys);
   std::printf("  samples (frames, key images, peak MB):");
-  for (std::size_t i = 0; i < s.size(); i += std::max<std::size_t>(1, s.size() / 12))
+  for (std::size_t i = 0; i + 1 < s.size(); i += std::max<std::size_t>(1, s.size() / 12))
     std::printf(" (%.0f, %.0f, %.1f)", s[i].frames, s[i].keys, s[i].peak / mb);
   std::printf(" (%.0f, %.0f, %.1f)\n", last.frames, last.keys, last.peak / mb);
 }
