@@ -11,6 +11,28 @@
 // the selectors see frame j, the distinct pairs (their key images, j) are scored in
 // parallel (two threads); each pair's score is a pure function of the pair,
 // so the rows do not depend on the number of threads.
+//
+// Memory: the sweep streams. After frame j has been pushed, a selector can only ever
+// read two earlier frames again (Algorithm 1 / eq. 6, keyframe/selector.hpp): its
+// current key image K (every later frame is scored against it) and I_j itself (it is
+// the I_{j-1} of the next step, which becomes the key image under eq. 6 and may then be
+// scored against K). So the cache keeps the features of I_j and of the current key image
+// of each threshold and drops every other frame's: while frame j is scored it holds at
+// most (thresholds + 2) frames (the key images, I_{j-1} and I_j); the
+// pair scores of frames before I_{j-1} are dropped as well. The selectors' own maps keep
+// no features (the rows need only the frame indices and the links). Bytes held:
+//   - per cached frame: its features, 28 B per keypoint (cv::KeyPoint) + 32 B per ORB
+//     descriptor = about 60 KB for ORB 1000 (61 B per keypoint for A-KAZE's 61-byte
+//     descriptors, 28 + 512 B for SIFT's 128 floats); at most (thresholds + 2) frames,
+//     plus up to 4 prepared frames queued by the decoding thread;
+//   - per pair score cached: its raw matches until it is verified (16 B per cv::DMatch)
+//     and a PairScore (264 B); only pairs of the last two frames are kept;
+//   - per key image, per threshold: a KeyImage without features or pixels (280 B, mostly
+//     empty cv::Mat headers, plus its name) and a KeyPair link (96 B; sizes for GCC 12
+//     x86-64): the only part that grows with the video, by the number of key images.
+// Measured (bench_rss, examples/memory.md): the peak resident memory grows by 2.8 KB per
+// frame on tum_fr1_rpy with the nine default thresholds (5.1 key images per frame over
+// them), where caching every frame's features grew by 210 KB per frame.
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/frame_source.hpp>
@@ -58,14 +80,18 @@ struct SweepResult {
   std::size_t frames = 0;
   std::size_t pairs_scored = 0;  ///< distinct (key, frame) pairs matched (cache misses)
   std::size_t pair_requests = 0;  ///< pair scores the selectors asked for
+  /// The most frames whose features the sweep held at once (at most thresholds + 2; the
+  /// decoding thread's queue of up to 4 prepared frames comes on top).
+  std::size_t frames_held = 0;
 
   [[nodiscard]] double best_threshold() const { return rows.empty() ? 0.0 : rows[best].threshold; }
 };
 
 namespace detail {
 
-/// Features of every frame seen so far and the scores of the pairs compared, shared by
-/// the lockstep selectors of a sweep. Single-threaded (the sweep's selection thread).
+/// Features of the frames the lockstep selectors of a sweep can still read (see the
+/// file comment), and the scores of the pairs compared. Single-threaded (the sweep's
+/// selection thread).
 template <Matcher M, Estimator E, Similarity S>
 class SweepCache {
  public:
@@ -74,8 +100,17 @@ class SweepCache {
     PairScore score;
   };
 
-  const Features& features(std::size_t i) const { return features_[i]; }
-  void add(Features f) { features_.push_back(std::move(f)); }
+  const Features& features(std::size_t i) const {
+    const auto it = features_.find(i);
+    if (it == features_.end()) fail("threshold sweep: the features of frame " + std::to_string(i) + " were dropped");
+    return it->second;
+  }
+  void add(std::size_t i, Features f) { features_.insert_or_assign(i, std::move(f)); }
+  /// Drops the features of every frame not in `live` (the frames still referenced).
+  void keep_only(const std::vector<std::size_t>& live) {
+    std::erase_if(features_, [&](const auto& kv) { return std::find(live.begin(), live.end(), kv.first) == live.end(); });
+  }
+  [[nodiscard]] std::size_t frames_held() const noexcept { return features_.size(); }
 
   template <Descriptor D>
   PairScore score(const FeatureFrontEnd<D, M, E, S>& stages, std::size_t key, std::size_t frame,
@@ -85,13 +120,13 @@ class SweepCache {
     if (it == entries_.end()) {
       ++misses_;
       Entry e;
-      e.matches = stages.match(features_[key], features_[frame]);
-      e.score = stages.bound(features_[key], features_[frame], e.matches);
+      e.matches = stages.match(features(key), features(frame));
+      e.score = stages.bound(features(key), features(frame), e.matches);
       it = entries_.emplace(id(key, frame), std::move(e)).first;
     }
     Entry& e = it->second;
     if (!e.score.verified_run && !(e.score.upper_bound < skip_below)) {
-      stages.verify(features_[key], features_[frame], e.matches, e.score);
+      stages.verify(features(key), features(frame), e.matches, e.score);
       e.matches = {};  // verified once; the matches are not needed again
     }
     return e.score;
@@ -108,14 +143,17 @@ class SweepCache {
     for (std::size_t k = 0; k < keys.size(); ++k)
       if (!entries_.count(id(keys[k], frame))) todo.push_back(k);
     if (todo.empty()) return;
+    // Looked up here, on this thread: the workers only read the features.
+    std::vector<const Features*> key_features(todo.size());
+    for (std::size_t t = 0; t < todo.size(); ++t) key_features[t] = &features(keys[todo[t]]);
+    const Features& b = features(frame);
     std::vector<Entry> computed(todo.size());
     std::atomic<std::size_t> next{0};
     auto work = [&] {
       for (std::size_t t = next++; t < todo.size(); t = next++) {
         const std::size_t k = todo[t];
         Entry& e = computed[t];
-        const Features& a = features_[keys[k]];
-        const Features& b = features_[frame];
+        const Features& a = *key_features[t];
         e.matches = stages.match(a, b);
         e.score = stages.bound(a, b, e.matches);
         if (!(e.score.upper_bound < skip_below[k])) {
@@ -171,7 +209,7 @@ class SweepCache {
     return (static_cast<std::uint64_t>(key) << 32) | static_cast<std::uint64_t>(frame);
   }
 
-  std::vector<Features> features_;
+  std::unordered_map<std::size_t, Features> features_;  // frame index -> features
   std::unordered_map<std::uint64_t, Entry> entries_;
   std::size_t requests_ = 0;
   std::size_t misses_ = 0;
@@ -189,11 +227,14 @@ class CachedFrontEnd {
   [[nodiscard]] PairScore score(std::size_t key, std::size_t frame, double skip_below) {
     return cache_->score(*stages_, key, frame, skip_below);
   }
-  [[nodiscard]] const Features& features_of(std::size_t item) const { return cache_->features(item); }
+  /// What a key image keeps in the selector's map: nothing (the sweep reads only the
+  /// maps' frame indices and links, and keeping features would grow with the key images).
+  [[nodiscard]] const Features& features_of(std::size_t) const noexcept { return none_; }
 
  private:
   const FeatureFrontEnd<D, M, E, S>* stages_;
   SweepCache<M, E, S>* cache_;
+  Features none_;
 };
 
 }  // namespace detail
@@ -222,8 +263,11 @@ template <Descriptor D, Matcher M, Estimator E, Similarity S>
   std::size_t n = 0;
   std::vector<std::size_t> keys;
   std::vector<double> skips;
+  std::vector<std::size_t> live;
+  std::size_t frames_held = 0;
   auto select = [&](PreparedFrame<Features>&& p) {
-    cache.add(std::move(p.item));
+    cache.add(n, std::move(p.item));
+    const std::size_t held_before_drop = cache.frames_held();
     {
       keys.clear();
       skips.clear();
@@ -244,6 +288,12 @@ template <Descriptor D, Matcher M, Estimator E, Similarity S>
     }
     for (auto& s : selectors) s.push(PreparedFrame<std::size_t>{n, p.index, p.name, p.timestamp, {}});
     if (n > 0) cache.forget_before(n - 1);
+    // Still readable: frame n (the next step's I_{j-1}) and each selector's key image.
+    live.assign(1, n);
+    for (const auto& s : selectors)
+      if (const std::size_t* key = s.key_item()) live.push_back(*key);
+    cache.keep_only(live);
+    frames_held = std::max(frames_held, held_before_drop);
     ++n;
     if (options.on_frame) options.on_frame(n);
   };
@@ -261,6 +311,7 @@ template <Descriptor D, Matcher M, Estimator E, Similarity S>
   out.frames = n;
   out.pair_requests = cache.requests();
   out.pairs_scored = cache.misses();
+  out.frames_held = frames_held;
   for (std::size_t k = 0; k < selectors.size(); ++k) {
     const VisualMap& m = selectors[k].map();
     SweepRow row;
