@@ -577,7 +577,8 @@ class VisualMemory {
   /// image), then push(frame, pose, detections).
   template <ObjectDetector Detector>
   MemoryStep push(const Frame& frame, const OdometryPose& pose, Detector& detector) {
-    detail::check(!frame.image.empty(), "VisualMemory::push: frame " + std::to_string(frame.index) + " is empty");
+    detail::check(!frame.image.empty(),
+                  [&] { return "VisualMemory::push: frame " + std::to_string(frame.index) + " is empty"; });
     return push(frame, pose, detector.detect(frame.image));
   }
 
