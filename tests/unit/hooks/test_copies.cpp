@@ -10,6 +10,7 @@
 #include <vmap/hooks/xfeat.hpp>
 #include <vmap/hooks/xfeat_dense.hpp>
 
+#include "support/protobuf_bytes.hpp"
 #include "support/errors.hpp"
 #include "support/images.hpp"
 #include "support/shared_data.hpp"
@@ -137,18 +138,8 @@ std::vector<cv::Mat> office_frames() {
 // LoFTR export runs in OpenCV 4.6, see ../shared/models/README.md): inputs image0 and
 // image1 1x1x16x16; each is average-pooled over 8x8 cells (2x2 = 4 cells), and the
 // confidence matrix is the outer product of the two cell means, a 4x4 matrix in [0, 1].
-std::string varint(std::uint64_t v) {
-  std::string s;
-  do {
-    auto byte = static_cast<char>(v & 0x7Fu);
-    v >>= 7;
-    if (v) byte = static_cast<char>(byte | 0x80);
-    s += byte;
-  } while (v);
-  return s;
-}
-std::string field_varint(std::uint32_t f, std::uint64_t v) { return varint(f << 3) + varint(v); }
-std::string field_bytes(std::uint32_t f, const std::string& b) { return varint((f << 3) | 2u) + varint(b.size()) + b; }
+using vmap::test::field_bytes;
+using vmap::test::field_varint;
 
 std::string node(const std::string& op, const std::vector<std::string>& in, const std::string& out,
                  const std::string& attributes = {}) {

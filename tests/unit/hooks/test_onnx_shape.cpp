@@ -1,5 +1,6 @@
 #include <vmap/hooks/detail/onnx_shape.hpp>
 
+#include "support/protobuf_bytes.hpp"
 #include "support/shared_data.hpp"
 
 #include <doctest/doctest.h>
@@ -12,18 +13,8 @@
 
 namespace {
 
-std::string varint(std::uint64_t v) {
-  std::string s;
-  do {
-    auto byte = static_cast<char>(v & 0x7Fu);
-    v >>= 7;
-    if (v) byte = static_cast<char>(byte | 0x80);
-    s += byte;
-  } while (v);
-  return s;
-}
-std::string field_varint(std::uint32_t f, std::uint64_t v) { return varint(f << 3) + varint(v); }
-std::string field_bytes(std::uint32_t f, const std::string& b) { return varint((f << 3) | 2u) + varint(b.size()) + b; }
+using vmap::test::field_bytes;
+using vmap::test::field_varint;
 
 // ModelProto{ir_version: 7, graph: {node: <junk>, input: {name: "input", type: {tensor_type:
 // {elem_type: 1, shape: {dim: 1, dim: 3, dim: "H", dim: 320}}}}}}

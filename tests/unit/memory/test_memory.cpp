@@ -2,6 +2,7 @@
 // images' own features, the graph, save/load/resume equal to an uninterrupted run, and
 // hostile memory files (truncated at every section, flipped bytes, wrong version).
 #include "support/errors.hpp"
+#include "support/memory_file.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/keyframe/map_io.hpp>
@@ -28,6 +29,8 @@ static_assert(!std::is_copy_constructible_v<vmap::OrbVisualMemory>, "a copy woul
 static_assert(std::is_move_constructible_v<vmap::OrbVisualMemory> && std::is_move_assignable_v<vmap::OrbVisualMemory>);
 
 namespace {
+
+using vmap::test::section_starts;
 
 std::filesystem::path sample_list() { return vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt"; }
 
@@ -107,17 +110,6 @@ void check_same(const vmap::OrbVisualMemory& a, const vmap::OrbVisualMemory& b) 
   CHECK(a.database().ids() == b.database().ids());
 }
 
-std::vector<std::size_t> section_starts(const std::string& file) {
-  std::vector<std::size_t> out;
-  std::size_t at = 16;
-  while (at + 16 <= file.size()) {
-    out.push_back(at);
-    std::uint64_t len = 0;
-    for (int i = 0; i < 8; ++i) len |= static_cast<std::uint64_t>(static_cast<unsigned char>(file[at + 4 + i])) << (8 * i);
-    at += 16 + len;
-  }
-  return out;
-}
 
 bool names_a_part(const std::string& message) {
   return message.find("section '") != std::string::npos || message.find("header") != std::string::npos;

@@ -2,6 +2,7 @@
 // localizer trained on the key images, the policies' options recorded in the file, and
 // format version 2 against version 1.
 #include "support/errors.hpp"
+#include "support/memory_file.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/hooks/precomputed_detections.hpp>
@@ -21,6 +22,8 @@
 #include <vector>
 
 namespace {
+
+using vmap::test::section_starts;
 
 std::vector<vmap::Frame> read_frames(const std::filesystem::path& input, vmap::FrameSourceOptions o = {}) {
   o.grey = true;
@@ -129,17 +132,6 @@ vmap::LabelSchema offline_schema(const vmap::OrbVisualMemory& mem, std::size_t m
   return vmap::make_label_schema(stats);
 }
 
-std::vector<std::size_t> section_starts(const std::string& file) {
-  std::vector<std::size_t> out;
-  std::size_t at = 16;
-  while (at + 16 <= file.size()) {
-    out.push_back(at);
-    std::uint64_t len = 0;
-    for (int i = 0; i < 8; ++i) len |= static_cast<std::uint64_t>(static_cast<unsigned char>(file[at + 4 + i])) << (8 * i);
-    at += 16 + len;
-  }
-  return out;
-}
 
 }  // namespace
 
