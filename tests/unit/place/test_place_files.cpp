@@ -15,15 +15,16 @@
 
 namespace {
 
-/// The bytes with the header's size and CRC recomputed, so the parser sees the
-/// mutated payload.
+/// The bytes with the header's size and checksum recomputed, so the parser sees the
+/// mutated payload (CRC-32C for vocabulary files of version 2, else io/binary.hpp's CRC).
 std::string reheader(std::string bytes) {
   if (bytes.size() < 24) return bytes;
   const std::string payload = bytes.substr(24);
   vmap::detail::BinaryWriter h;
   h.bytes(std::string_view(bytes.data(), 12));
   h.u64(payload.size());
-  h.u32(vmap::detail::crc32(payload));  // io/binary.hpp's CRC: the files' checksum is the same
+  const bool castagnoli = bytes.compare(0, 8, "VMAPVOCB") == 0 && bytes[8] == 2;
+  h.u32(castagnoli ? vmap::detail::crc32c(payload) : vmap::detail::crc32(payload));
   return std::move(h).take() + payload;
 }
 
@@ -85,6 +86,23 @@ TEST_CASE("the eight-bytes-a-step CRC-32 equals io/binary.hpp's") {
   CHECK(vmap::detail::crc32_fast("123456789") == 0xCBF43926U);  // the standard check value
 }
 
+TEST_CASE("CRC-32C: the hardware path equals the portable one") {
+  std::mt19937 rng(2);
+  std::string s;
+  for (std::size_t n = 0; n < 300; ++n) {
+    CHECK(vmap::detail::crc32c(s) == vmap::detail::crc32c(s, true));
+    s.push_back(static_cast<char>(rng() & 0xFF));
+  }
+  // lengths around the three-stream block (3 x 4096 bytes) and its multiples
+  s.resize(5 * 3 * 4096 + 77);
+  for (auto& c : s) c = static_cast<char>(rng() & 0xFF);
+  for (std::size_t n : {std::size_t{12287}, std::size_t{12288}, std::size_t{12289}, std::size_t{24576}, s.size()})
+    CHECK(vmap::detail::crc32c(std::string_view(s).substr(0, n)) == vmap::detail::crc32c(std::string_view(s).substr(0, n), true));
+  CHECK(vmap::detail::crc32c("123456789") == 0xE3069283U);  // the standard check value
+  CHECK(vmap::detail::crc32c("123456789", true) == 0xE3069283U);
+  MESSAGE("CRC-32C in hardware: " << (vmap::detail::crc32c_hardware_available() ? "yes" : "no"));
+}
+
 TEST_CASE_TEMPLATE("vocabulary files: round trip and fuzzing", Tree, vmap::BinaryVocabularyTree, vmap::FloatVocabularyTree) {
   constexpr bool binary = std::is_same_v<Tree, vmap::BinaryVocabularyTree>;
   const auto data = binary ? vmap::test::binary_clusters(3, 3, 6, 2) : vmap::test::float_clusters(3, 3, 6, 2);
@@ -117,11 +135,13 @@ TEST_CASE("a vocabulary file whose counts do not form a tree is refused") {
   const auto v = vmap::BinaryVocabularyTree::learn(data.images, {.branching = 2, .depth = 2, .seed = 3});
   REQUIRE(v.nodes() == 7);
   const std::string good = v.serialize();
-  // child counts start after kind (1), cols (4), branching (4), depth (4), nodes (8)
-  const std::size_t counts = 24 + 1 + 4 + 4 + 4 + 8;
+  // one-byte child counts start after kind (1), cols (4), branching (4), depth (4),
+  // weighting (1), count width (1), nodes (8)
+  const std::size_t counts = 24 + 1 + 4 + 4 + 4 + 1 + 1 + 8;
+  REQUIRE(good[counts - 9] == 1);
   auto with_count = [&](std::size_t node, std::uint32_t c) {
     std::string b = good;
-    for (int i = 0; i < 4; ++i) b[counts + 4 * node + static_cast<std::size_t>(i)] = static_cast<char>((c >> (8 * i)) & 0xFF);
+    b[counts + node] = static_cast<char>(c);
     return reheader(b);
   };
   CHECK_THROWS_WITH_AS((void)vmap::BinaryVocabularyTree::deserialize(with_count(0, 0)), doctest::Contains("root"), vmap::Error);

@@ -6,8 +6,12 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/binary.hpp>
+#include <vmap/place/detail/crc32c.hpp>
 
+#include <algorithm>
 #include <array>
+#include <bit>
+#include <cstring>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -29,13 +33,11 @@ inline constexpr std::array<std::array<std::uint32_t, 256>, 8> crc32_slices = []
   return t;
 }();
 
-/// The same CRC-32 as io/binary.hpp's crc32(), eight bytes a step (Intel's
-/// slicing-by-8): several times faster, which matters for the tens of megabytes of a
-/// large vocabulary.
-inline std::uint32_t crc32_fast(std::string_view bytes) noexcept {
-  const auto* p = reinterpret_cast<const unsigned char*>(bytes.data());
-  std::size_t n = bytes.size();
-  std::uint32_t c = 0xFFFFFFFFU;
+/// Raw update (no inversions) of the CRC-32 of io/binary.hpp, eight bytes a step
+/// (Intel's slicing-by-8): several times faster than byte by byte, which matters for the
+/// tens of megabytes of a large vocabulary.
+inline std::uint32_t crc32_update(std::uint32_t c, const void* data, std::size_t n) noexcept {
+  const auto* p = static_cast<const unsigned char*>(data);
   const auto& t = crc32_slices;
   while (n >= 8) {
     const std::uint32_t lo = c ^ (static_cast<std::uint32_t>(p[0]) | static_cast<std::uint32_t>(p[1]) << 8 |
@@ -48,7 +50,12 @@ inline std::uint32_t crc32_fast(std::string_view bytes) noexcept {
     n -= 8;
   }
   while (n-- > 0) c = t[0][(c ^ *p++) & 0xFFU] ^ (c >> 8);
-  return c ^ 0xFFFFFFFFU;
+  return c;
+}
+
+/// The same CRC-32 as io/binary.hpp's crc32(), with crc32_update.
+inline std::uint32_t crc32_fast(std::string_view bytes) noexcept {
+  return crc32_update(0xFFFFFFFFU, bytes.data(), bytes.size()) ^ 0xFFFFFFFFU;
 }
 
 /// Header + payload.
@@ -94,6 +101,137 @@ inline std::string read_whole_file(const std::filesystem::path& path) {
   in.seekg(0);
   if (!in.read(data.data(), static_cast<std::streamsize>(size))) fail("reading '" + path.string() + "' failed");
   return data;
+}
+
+/// Float values read as raw little-endian bytes, put in host order (nothing to do on a
+/// little-endian host).
+inline void f32_from_little_endian(float* p, std::size_t n) noexcept {
+  if constexpr (std::endian::native != std::endian::little)
+    for (std::size_t i = 0; i < n; ++i) {
+      std::uint32_t u = std::bit_cast<std::uint32_t>(p[i]);
+      u = (u >> 24) | ((u >> 8) & 0xFF00U) | ((u << 8) & 0xFF0000U) | (u << 24);
+      p[i] = std::bit_cast<float>(u);
+    }
+  (void)p;
+  (void)n;
+}
+
+/// An input stream on a regular file: a missing file, a folder, a FIFO or a device is
+/// an Error naming it (reading one could block or never end).
+inline std::ifstream open_regular_file(const std::filesystem::path& path) {
+  std::error_code ec;
+  const auto status = std::filesystem::status(path, ec);
+  if (ec || !std::filesystem::exists(status)) fail("cannot open '" + path.string() + "': no such file");
+  if (!std::filesystem::is_regular_file(status)) fail("'" + path.string() + "' is not a regular file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail("cannot open '" + path.string() + "'");
+  return in;
+}
+
+/// Which checksum a file's header holds.
+enum class PayloadChecksum { crc32, crc32c };
+
+/// Reads a payload front to back into the caller's buffers, from memory or straight from
+/// a file, checksumming each piece right after it lands (while it is still in cache), so
+/// a large file is read and checked in one pass with no intermediate copy. Every read is
+/// checked against the bytes that remain; require_items() checks a count before the
+/// caller allocates for it. finish() checks that nothing is left and the checksum.
+class PayloadStream {
+ public:
+  /// A payload in memory; `base` is its offset in the file (for messages).
+  PayloadStream(std::string_view payload, std::string source, std::size_t base, PayloadChecksum sum)
+      : mem_(payload.data()), size_(payload.size()), source_(std::move(source)), base_(base), sum_(sum) {}
+  /// `size` payload bytes from the current position of `in`.
+  PayloadStream(std::istream& in, std::uint64_t size, std::string source, std::size_t base, PayloadChecksum sum)
+      : in_(&in), size_(size), source_(std::move(source)), base_(base), sum_(sum) {}
+
+  /// n bytes into dst (checked first).
+  void read(void* dst, std::uint64_t n, std::string_view field) {
+    if (n > remaining())
+      corrupt("truncated or corrupt: " + std::string(field) + " needs " + std::to_string(n) + " bytes, " +
+              std::to_string(remaining()) + " left");
+    auto* out = static_cast<char*>(dst);
+    constexpr std::uint64_t chunk = 256 * 1024;  // fits in L2: checksummed while there
+    while (n > 0) {
+      const auto m = static_cast<std::size_t>(std::min(n, chunk));
+      if (in_ != nullptr) {
+        if (!in_->read(out, static_cast<std::streamsize>(m))) corrupt("reading failed (the file changed or is unreadable)");
+      } else {
+        std::memcpy(out, mem_ + pos_, m);
+      }
+      crc_ = sum_ == PayloadChecksum::crc32c ? crc32c_update(crc_, out, m) : crc32_update(crc_, out, m);
+      pos_ += m;
+      out += m;
+      n -= m;
+    }
+  }
+  std::uint8_t u8(std::string_view field) { return static_cast<std::uint8_t>(le(1, field)); }
+  std::uint32_t u32(std::string_view field) { return static_cast<std::uint32_t>(le(4, field)); }
+  std::uint64_t u64(std::string_view field) { return le(8, field); }
+  std::int32_t i32(std::string_view field) { return static_cast<std::int32_t>(u32(field)); }
+
+  /// Fails unless `count` items of `item_bytes` (>= 1) each fit in what remains.
+  void require_items(std::uint64_t count, std::uint64_t item_bytes, std::string_view field) const {
+    if (count > remaining() / item_bytes)
+      corrupt("truncated or corrupt: " + std::string(field) + " claims " + std::to_string(count) + " items of " +
+              std::to_string(item_bytes) + " bytes, " + std::to_string(remaining()) + " bytes left");
+  }
+  /// Fails if bytes are left (`after` names the last field) or the checksum differs.
+  void finish(std::uint32_t expected_checksum, std::string_view after) const {
+    if (remaining() != 0)
+      corrupt("corrupt: " + std::to_string(remaining()) + " unexpected bytes after " + std::string(after));
+    if ((crc_ ^ 0xFFFFFFFFU) != expected_checksum) corrupt("checksum mismatch (the file is corrupt)");
+  }
+  [[nodiscard]] std::uint64_t remaining() const noexcept { return size_ - pos_; }
+  /// Throws vmap::Error "<source>: <what> (at byte <offset>)".
+  [[noreturn]] void corrupt(const std::string& what) const {
+    fail(source_ + ": " + what + " (at byte " + std::to_string(base_ + pos_) + ")");
+  }
+
+ private:
+  std::uint64_t le(int n, std::string_view field) {
+    unsigned char b[8] = {};
+    read(b, static_cast<std::uint64_t>(n), field);
+    std::uint64_t v = 0;
+    for (int i = 0; i < n; ++i) v |= static_cast<std::uint64_t>(b[i]) << (8 * i);
+    return v;
+  }
+
+  const char* mem_ = nullptr;
+  std::istream* in_ = nullptr;
+  std::uint64_t size_ = 0;
+  std::uint64_t pos_ = 0;
+  std::string source_;
+  std::size_t base_ = 0;
+  PayloadChecksum sum_;
+  std::uint32_t crc_ = 0xFFFFFFFFU;
+};
+
+/// The 24-byte header of a place file: magic, version (one of `versions`), payload
+/// size, checksum. `available` is the number of bytes after the header.
+struct PayloadHeader {
+  std::uint32_t version = 0;
+  std::uint64_t size = 0;
+  std::uint32_t checksum = 0;
+};
+inline PayloadHeader parse_header(std::string_view head, std::uint64_t available, std::string_view magic,
+                                  std::uint32_t oldest, std::uint32_t newest, const std::string& what,
+                                  const std::string& source) {
+  BinaryReader r(head, source);
+  if (head.size() < place_header_size)
+    r.corrupt("too short (" + std::to_string(head.size()) + " bytes) to be a vmap " + what);
+  if (r.bytes(8, "magic") != magic) r.corrupt("not a vmap " + what + " (wrong magic bytes)");
+  PayloadHeader h;
+  h.version = r.u32("version");
+  if (h.version < oldest || h.version > newest)
+    r.corrupt("format version " + std::to_string(h.version) + " is not supported (this build reads " +
+              std::to_string(oldest) + ".." + std::to_string(newest) + ")");
+  h.size = r.u64("payload size");
+  h.checksum = r.u32("checksum");
+  if (h.size != available)
+    r.corrupt("truncated or padded (header says " + std::to_string(h.size) + " payload bytes, file has " +
+              std::to_string(available) + ")");
+  return h;
 }
 
 }  // namespace vmap::detail

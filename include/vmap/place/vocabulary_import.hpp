@@ -1,0 +1,555 @@
+#pragma once
+
+// Readers of the vocabulary files other libraries write, into a BinaryVocabularyTree
+// with the same tree, the same word ids, the same weights and the same weighting, so
+// that transform() gives the bag of words the writing library gives (word ids exact,
+// weights to float precision; tests/unit/place against ../shared/data/vocabularies):
+//  - ORB-SLAM2 / ORB-SLAM3 text (ORBvoc.txt; DBoW2's TemplatedVocabulary::
+//    saveToTextFile): a line "k L scoring weighting", then one line per node (ids 1..,
+//    the root 0 implicit) "parent is_leaf b0 .. b31 weight"; leaves are words in line
+//    order. Blank lines are skipped (ORB-SLAM2's own loader turns the empty line after
+//    the last newline into a phantom word of weight 0; it has no effect on its vectors).
+//  - DBoW2 YAML (.yml, .yml.gz; TemplatedVocabulary::save through cv::FileStorage): map
+//    `vocabulary` with k, L, scoringType, weightingType, `nodes` {nodeId, parentId,
+//    weight, descriptor} in any order (children keep their order in the file) and
+//    `words` {wordId, nodeId}.
+//  - FBoW binary (fbow::Vocabulary::saveToFile): u64 signature 55824124, a 120-byte
+//    parameter block (its struct as laid out in memory: char[50] name, padding, u32
+//    alignment, u32 block count, padding, u64 slot, block, descriptor-offset,
+//    child-offset and total sizes, i32 type, i32 size, u32 k, padding), then blocks of the children of one node: u16 N, u16 (unused),
+//    u32 parent, k descriptor slots, k {u32 child, f32 weight} where a set top bit marks
+//    a leaf (the low bits its word id) and otherwise the child's block.
+// DBoW2's weightings TF_IDF / TF / IDF / BINARY with its L1_NORM or L2_NORM scoring map to
+// BowWeighting (TF and BINARY files store weight 1); its CHI_SQUARE, KL, BHATTACHARYYA
+// and DOT_PRODUCT scorings have no vmap score and are refused. FBoW's transform sums
+// the leaf weights in float and L2-normalises (BowWeighting::fbow).
+//
+// Every reader is bounded and safe on hostile input: sizes are checked against the bytes
+// there before anything is allocated, the node links must form one tree (no cycle, no
+// node twice, every inner node with children, at most `k` children and 64 levels), and
+// anything wrong is a vmap::Error naming the file and what is wrong.
+
+#include <vmap/core/error.hpp>
+#include <vmap/place/detail/format.hpp>
+#include <vmap/place/vocabulary_tree.hpp>
+
+#include <opencv2/core.hpp>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <deque>
+#include <filesystem>
+#include <limits>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace vmap {
+
+/// The vocabulary file formats vmap reads.
+enum class VocabularyFormat { vmap, orbslam_text, dbow2_yaml, fbow };
+
+/// Largest vocabulary file read (the ORB-SLAM2 ORBvoc.txt of 1M words is 145 MB).
+inline constexpr std::uint64_t max_vocabulary_file_bytes = std::uint64_t{4} << 30;
+
+namespace detail {
+
+/// A tree given as parent links (another library's node ids; node 0 the root, children
+/// in the order given), converted to vmap's breadth-first layout.
+struct ForeignTree {
+  int k = 0;
+  int levels = 0;  ///< the file's L, or 0: taken from the tree
+  int cols = 0;
+  std::vector<std::vector<std::uint32_t>> children;  ///< per foreign node id
+  std::vector<const std::uint8_t*> descriptor;       ///< per foreign node id (nullptr for the root)
+  std::vector<std::int64_t> word;                    ///< per foreign node id: word id of a leaf, else -1
+  std::vector<float> weight;                         ///< per word id
+  BowWeighting weighting = BowWeighting::tf_idf_l1;
+};
+
+[[noreturn]] inline void bad_vocabulary(const std::string& source, const std::string& what) {
+  fail(source + ": " + what);
+}
+
+/// Breadth-first from the root: each node visited once (a node reached twice or never
+/// is an error), inner nodes have children, leaves are words.
+inline BinaryVocabularyTree to_vmap_tree(const ForeignTree& t, const std::string& source) {
+  const std::size_t n = t.children.size();
+  if (n < 2 || t.children[0].empty()) bad_vocabulary(source, "the root has no children");
+  if (t.k < 2 || t.k > BinaryVocabularyTree::max_branching)
+    bad_vocabulary(source, "branching " + std::to_string(t.k) + " outside 2..4096");
+  std::vector<std::uint32_t> order{0};
+  std::vector<std::uint8_t> level(n, 0), seen(n, 0);
+  seen[0] = 1;
+  int depth = 0;
+  for (std::size_t i = 0; i < order.size(); ++i) {
+    const std::uint32_t id = order[i];
+    const auto& ch = t.children[id];
+    if (ch.size() > static_cast<std::size_t>(t.k))
+      bad_vocabulary(source, "node " + std::to_string(id) + " has " + std::to_string(ch.size()) + " children, more than k = " +
+                                 std::to_string(t.k));
+    if (ch.empty() && t.word[id] < 0) bad_vocabulary(source, "node " + std::to_string(id) + " is neither a word nor has children");
+    if (!ch.empty() && t.word[id] >= 0) bad_vocabulary(source, "word node " + std::to_string(id) + " has children");
+    for (std::uint32_t c : ch) {
+      if (c >= n || seen[c] != 0) bad_vocabulary(source, "node " + std::to_string(c) + " is reached twice (the links do not form a tree)");
+      seen[c] = 1;
+      level[c] = static_cast<std::uint8_t>(level[id] + 1);
+      if (level[c] > BinaryVocabularyTree::max_depth) bad_vocabulary(source, "the tree is deeper than 64 levels");
+      depth = std::max(depth, static_cast<int>(level[c]));
+      order.push_back(c);
+    }
+  }
+  if (order.size() != n)
+    bad_vocabulary(source, std::to_string(n - order.size()) + " nodes are not reachable from the root");
+  if (t.levels > 0 && depth > t.levels)
+    bad_vocabulary(source, "the tree has " + std::to_string(depth) + " levels, more than its L = " + std::to_string(t.levels));
+  std::vector<std::uint32_t> counts(n);
+  cv::Mat centres(static_cast<int>(n), t.cols, CV_8UC1, cv::Scalar(0));
+  std::vector<std::uint32_t> ids;
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint32_t id = order[i];
+    counts[i] = static_cast<std::uint32_t>(t.children[id].size());
+    if (id != 0) std::memcpy(centres.ptr(static_cast<int>(i)), t.descriptor[id], static_cast<std::size_t>(t.cols));
+    if (t.word[id] >= 0) ids.push_back(static_cast<std::uint32_t>(t.word[id]));
+  }
+  if (ids.size() != t.weight.size())
+    bad_vocabulary(source, std::to_string(t.weight.size()) + " word weights for " + std::to_string(ids.size()) + " words");
+  for (std::size_t w = 0; w < t.weight.size(); ++w)
+    if (!(std::isfinite(t.weight[w]) && t.weight[w] >= 0.0f))
+      bad_vocabulary(source, "the weight of word " + std::to_string(w) + " is negative or not finite");
+  try {
+    return BinaryVocabularyTree::from_tree(t.k, std::max(1, t.levels > 0 ? t.levels : depth), counts, centres, t.weight,
+                                           t.weighting, ids);
+  } catch (const Error& e) {
+    bad_vocabulary(source, e.what());
+  }
+}
+
+/// DBoW2's WeightingType and ScoringType as a BowWeighting.
+inline BowWeighting dbow2_weighting(long weighting, long scoring, const std::string& source) {
+  static const char* const scorings[] = {"L1_NORM", "L2_NORM", "CHI_SQUARE", "KL", "BHATTACHARYYA", "DOT_PRODUCT"};
+  if (weighting < 0 || weighting > 3) bad_vocabulary(source, "unknown DBoW2 weighting type " + std::to_string(weighting));
+  if (scoring < 0 || scoring > 5) bad_vocabulary(source, "unknown DBoW2 scoring type " + std::to_string(scoring));
+  if (scoring > 1)
+    bad_vocabulary(source, std::string("DBoW2 scoring ") + scorings[scoring] +
+                               " is not supported (vmap scores L1_NORM and L2_NORM vocabularies)");
+  const bool once = weighting >= 2;  // IDF, BINARY: each word once
+  if (scoring == 0) return once ? BowWeighting::idf_l1 : BowWeighting::tf_idf_l1;
+  return once ? BowWeighting::idf_l2 : BowWeighting::tf_idf_l2;
+}
+
+/// Parses one unsigned decimal integer (after blanks) from s at pos; false if none.
+inline bool next_uint(std::string_view s, std::size_t& pos, std::uint64_t& out) {
+  while (pos < s.size() && (s[pos] == ' ' || s[pos] == '\t' || s[pos] == '\r')) ++pos;
+  const auto r = std::from_chars(s.data() + pos, s.data() + s.size(), out);
+  if (r.ec != std::errc{} || r.ptr == s.data() + pos) return false;
+  pos = static_cast<std::size_t>(r.ptr - s.data());
+  return true;
+}
+inline bool next_int(std::string_view s, std::size_t& pos, long& out) {
+  while (pos < s.size() && (s[pos] == ' ' || s[pos] == '\t' || s[pos] == '\r')) ++pos;
+  const auto r = std::from_chars(s.data() + pos, s.data() + s.size(), out);
+  if (r.ec != std::errc{} || r.ptr == s.data() + pos) return false;
+  pos = static_cast<std::size_t>(r.ptr - s.data());
+  return true;
+}
+inline bool next_double(std::string_view s, std::size_t& pos, double& out) {
+  while (pos < s.size() && (s[pos] == ' ' || s[pos] == '\t' || s[pos] == '\r')) ++pos;
+  const auto r = std::from_chars(s.data() + pos, s.data() + s.size(), out);
+  if (r.ec != std::errc{} || r.ptr == s.data() + pos) return false;
+  pos = static_cast<std::size_t>(r.ptr - s.data());
+  return true;
+}
+inline bool only_blanks(std::string_view s, std::size_t pos) {
+  for (; pos < s.size(); ++pos)
+    if (s[pos] != ' ' && s[pos] != '\t' && s[pos] != '\r') return false;
+  return true;
+}
+
+}  // namespace detail
+
+/// Reads ORB-SLAM2/3's ORBvoc.txt format (see the top of this header); `name` names the
+/// input in messages.
+inline BinaryVocabularyTree import_orbslam_text(std::string_view text, const std::string& name = "<memory>") {
+  const std::string source = "ORB-SLAM text vocabulary '" + name + "'";
+  std::size_t at = 0;
+  std::size_t line_no = 0;
+  auto next_line = [&](std::string_view& line) {
+    while (at < text.size()) {
+      const std::size_t end = std::min(text.find('\n', at), text.size());
+      line = text.substr(at, end - at);
+      at = end + 1;
+      ++line_no;
+      if (!detail::only_blanks(line, 0)) return true;
+    }
+    return false;
+  };
+  auto bad = [&](const std::string& what) { detail::bad_vocabulary(source, "line " + std::to_string(line_no) + ": " + what); };
+  std::string_view line;
+  if (!next_line(line)) detail::bad_vocabulary(source, "empty");
+  detail::ForeignTree t;
+  {
+    std::size_t p = 0;
+    long k = 0, levels = 0, scoring = 0, weighting = 0;
+    if (!detail::next_int(line, p, k) || !detail::next_int(line, p, levels) || !detail::next_int(line, p, scoring) ||
+        !detail::next_int(line, p, weighting) || !detail::only_blanks(line, p))
+      bad("the first line is not \"k L scoring weighting\"");
+    if (k < 2 || k > BinaryVocabularyTree::max_branching) bad("k = " + std::to_string(k) + " outside 2..4096");
+    if (levels < 1 || levels > BinaryVocabularyTree::max_depth) bad("L = " + std::to_string(levels) + " outside 1..64");
+    t.k = static_cast<int>(k);
+    t.levels = static_cast<int>(levels);
+    t.weighting = detail::dbow2_weighting(weighting, scoring, source);
+  }
+  // A node line is at least "p l " + 1 byte + weight: about 2 bytes a descriptor byte;
+  // the nodes are bounded by the lines there are.
+  const std::size_t max_nodes = static_cast<std::size_t>(std::count(text.begin() + static_cast<std::ptrdiff_t>(at), text.end(), '\n')) + 2;
+  t.children.assign(1, {});
+  t.descriptor.assign(1, nullptr);
+  t.word.assign(1, -1);
+  std::vector<std::uint8_t> bytes;
+  std::vector<std::uint8_t> row;
+  while (next_line(line)) {
+    const auto id = static_cast<std::uint32_t>(t.children.size());
+    if (t.children.size() >= max_nodes) bad("more nodes than lines");
+    std::size_t p = 0;
+    std::uint64_t parent = 0, leaf = 0;
+    if (!detail::next_uint(line, p, parent) || !detail::next_uint(line, p, leaf)) bad("a node line starts with \"parent is_leaf\"");
+    if (parent >= id) bad("node " + std::to_string(id) + " names parent " + std::to_string(parent) + ", not an earlier node");
+    if (leaf > 1) bad("is_leaf is " + std::to_string(leaf) + ", not 0 or 1");
+    row.clear();
+    double weight = 0.0;
+    std::uint64_t v = 0;
+    for (;;) {
+      const std::size_t before = p;
+      if (!detail::next_uint(line, p, v)) bad("a descriptor byte or the weight is missing");
+      // the last number is the weight (it may have a point or an exponent)
+      std::size_t after = p;
+      if (after < line.size() && (line[after] == '.' || line[after] == 'e' || line[after] == 'E' || line[after] == '-')) {
+        p = before;
+        if (!detail::next_double(line, p, weight)) bad("the weight is not a number");
+        break;
+      }
+      if (detail::only_blanks(line, p)) {
+        weight = static_cast<double>(v);
+        break;
+      }
+      if (v > 255) bad("descriptor byte " + std::to_string(v) + " is above 255");
+      row.push_back(static_cast<std::uint8_t>(v));
+      if (row.size() > static_cast<std::size_t>(BinaryVocabularyTree::max_cols)) bad("more than 4096 descriptor bytes");
+    }
+    if (!detail::only_blanks(line, p)) bad("unexpected text after the weight");
+    if (row.empty()) bad("no descriptor");
+    if (t.cols == 0) t.cols = static_cast<int>(row.size());
+    if (row.size() != static_cast<std::size_t>(t.cols))
+      bad(std::to_string(row.size()) + " descriptor bytes, earlier nodes have " + std::to_string(t.cols));
+    if (t.children[parent].size() >= static_cast<std::size_t>(t.k))
+      bad("node " + std::to_string(parent) + " gets more than k = " + std::to_string(t.k) + " children");
+    t.children[parent].push_back(id);
+    t.children.emplace_back();
+    bytes.insert(bytes.end(), row.begin(), row.end());
+    if (leaf == 1) {
+      t.word.push_back(static_cast<std::int64_t>(t.weight.size()));
+      t.weight.push_back(static_cast<float>(weight));
+    } else {
+      t.word.push_back(-1);
+    }
+  }
+  t.descriptor.resize(t.children.size(), nullptr);
+  for (std::size_t i = 1; i < t.children.size(); ++i) t.descriptor[i] = bytes.data() + (i - 1) * static_cast<std::size_t>(t.cols);
+  return detail::to_vmap_tree(t, source);
+}
+
+/// Reads DBoW2's YAML vocabulary (OrbVocabulary::save) from a cv::FileStorage.
+inline BinaryVocabularyTree import_dbow2_yaml(const cv::FileStorage& fs, const std::string& name = "<memory>") {
+  const std::string source = "DBoW2 YAML vocabulary '" + name + "'";
+  const cv::FileNode voc = fs["vocabulary"];
+  if (!voc.isMap()) detail::bad_vocabulary(source, "no map 'vocabulary'");
+  auto integer = [&](const cv::FileNode& node, const char* key) {
+    const cv::FileNode f = node[key];
+    if (!f.isInt()) detail::bad_vocabulary(source, std::string("'") + key + "' is missing or not an integer");
+    return static_cast<long>(static_cast<int>(f));
+  };
+  detail::ForeignTree t;
+  const long k = integer(voc, "k");
+  const long levels = integer(voc, "L");
+  if (k < 2 || k > BinaryVocabularyTree::max_branching) detail::bad_vocabulary(source, "k = " + std::to_string(k) + " outside 2..4096");
+  if (levels < 1 || levels > BinaryVocabularyTree::max_depth)
+    detail::bad_vocabulary(source, "L = " + std::to_string(levels) + " outside 1..64");
+  t.k = static_cast<int>(k);
+  t.levels = static_cast<int>(levels);
+  t.weighting = detail::dbow2_weighting(integer(voc, "weightingType"), integer(voc, "scoringType"), source);
+  const cv::FileNode nodes = voc["nodes"];
+  const cv::FileNode words = voc["words"];
+  if (!nodes.isSeq() || !words.isSeq()) detail::bad_vocabulary(source, "'nodes' or 'words' is missing or not a sequence");
+  const std::size_t n = nodes.size() + 1;  // + the root
+  t.children.assign(n, {});
+  t.descriptor.assign(n, nullptr);
+  t.word.assign(n, -1);
+  std::vector<std::int64_t> parent(n, -1);
+  std::vector<double> node_weight(n, 0.0);
+  std::vector<std::uint8_t> bytes;
+  std::vector<std::uint32_t> file_order;
+  file_order.reserve(n - 1);
+  for (std::size_t i = 0; i + 1 < n; ++i) {
+    const cv::FileNode f = nodes[static_cast<int>(i)];
+    if (!f.isMap()) detail::bad_vocabulary(source, "node entry " + std::to_string(i) + " is not a map");
+    const long id = integer(f, "nodeId");
+    const long pid = integer(f, "parentId");
+    if (id < 1 || static_cast<std::size_t>(id) >= n)
+      detail::bad_vocabulary(source, "nodeId " + std::to_string(id) + " outside 1.." + std::to_string(n - 1));
+    if (pid < 0 || static_cast<std::size_t>(pid) >= n || pid == id)
+      detail::bad_vocabulary(source, "node " + std::to_string(id) + " has parentId " + std::to_string(pid));
+    if (parent[static_cast<std::size_t>(id)] >= 0) detail::bad_vocabulary(source, "node " + std::to_string(id) + " appears twice");
+    parent[static_cast<std::size_t>(id)] = pid;
+    const cv::FileNode w = f["weight"];
+    if (!w.isReal() && !w.isInt()) detail::bad_vocabulary(source, "node " + std::to_string(id) + " has no numeric weight");
+    node_weight[static_cast<std::size_t>(id)] = static_cast<double>(w);
+    const cv::FileNode d = f["descriptor"];
+    if (!d.isString()) detail::bad_vocabulary(source, "node " + std::to_string(id) + " has no descriptor string");
+    const std::string text = static_cast<std::string>(d);
+    std::size_t p = 0;
+    std::uint64_t v = 0;
+    std::size_t count = 0;
+    while (detail::next_uint(text, p, v)) {
+      if (v > 255) detail::bad_vocabulary(source, "node " + std::to_string(id) + ": descriptor byte " + std::to_string(v) + " above 255");
+      bytes.push_back(static_cast<std::uint8_t>(v));
+      ++count;
+    }
+    if (!detail::only_blanks(text, p)) detail::bad_vocabulary(source, "node " + std::to_string(id) + ": the descriptor is not bytes");
+    if (count == 0 || count > static_cast<std::size_t>(BinaryVocabularyTree::max_cols))
+      detail::bad_vocabulary(source, "node " + std::to_string(id) + " has " + std::to_string(count) + " descriptor bytes");
+    if (t.cols == 0) t.cols = static_cast<int>(count);
+    if (count != static_cast<std::size_t>(t.cols))
+      detail::bad_vocabulary(source, "node " + std::to_string(id) + " has " + std::to_string(count) + " descriptor bytes, others " +
+                                         std::to_string(t.cols));
+    file_order.push_back(static_cast<std::uint32_t>(id));
+  }
+  // children in file order, as DBoW2's load appends them
+  for (std::uint32_t id : file_order) {
+    auto& ch = t.children[static_cast<std::size_t>(parent[id])];
+    if (ch.size() >= static_cast<std::size_t>(t.k))
+      detail::bad_vocabulary(source, "node " + std::to_string(parent[id]) + " has more than k = " + std::to_string(t.k) + " children");
+    ch.push_back(id);
+  }
+  for (std::size_t i = 0; i + 1 < n; ++i)
+    t.descriptor[file_order[i]] = bytes.data() + i * static_cast<std::size_t>(t.cols);
+  t.weight.assign(words.size(), -1.0f);
+  for (std::size_t i = 0; i < words.size(); ++i) {
+    const cv::FileNode f = words[static_cast<int>(i)];
+    if (!f.isMap()) detail::bad_vocabulary(source, "word entry " + std::to_string(i) + " is not a map");
+    const long wid = integer(f, "wordId");
+    const long nid = integer(f, "nodeId");
+    if (wid < 0 || static_cast<std::size_t>(wid) >= words.size())
+      detail::bad_vocabulary(source, "wordId " + std::to_string(wid) + " outside 0.." + std::to_string(words.size() - 1));
+    if (nid < 1 || static_cast<std::size_t>(nid) >= n) detail::bad_vocabulary(source, "word " + std::to_string(wid) + " names node " + std::to_string(nid));
+    if (t.word[static_cast<std::size_t>(nid)] >= 0 || t.weight[static_cast<std::size_t>(wid)] >= 0.0f)
+      detail::bad_vocabulary(source, "word " + std::to_string(wid) + " or node " + std::to_string(nid) + " appears twice");
+    t.word[static_cast<std::size_t>(nid)] = wid;
+    t.weight[static_cast<std::size_t>(wid)] = static_cast<float>(node_weight[static_cast<std::size_t>(nid)]);
+  }
+  return detail::to_vmap_tree(t, source);
+}
+
+namespace detail {
+
+/// Refuses YAML that would make OpenCV's recursive parser recurse deeply: flow
+/// collections nested deeper than `max_depth`, or block indentation deeper than it
+/// (the DBoW2 vocabulary needs 3 levels).
+inline void check_yaml_nesting(std::string_view text, const std::string& source, int max_depth = 16) {
+  int flow = 0;
+  std::size_t line_start = 0;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c == '{' || c == '[') {
+      if (++flow > max_depth) bad_vocabulary(source, "YAML nested deeper than " + std::to_string(max_depth) + " levels");
+    } else if (c == '}' || c == ']') {
+      flow = std::max(0, flow - 1);
+    } else if (c == '\n') {
+      line_start = i + 1;
+    } else if (c != ' ' && c != '-' && i > line_start && i - line_start > static_cast<std::size_t>(8 * max_depth)) {
+      // indentation (spaces and "- " items) longer than 8 columns a level
+      bool indentation = true;
+      for (std::size_t j = line_start; j < i; ++j) indentation = indentation && (text[j] == ' ' || text[j] == '-');
+      if (indentation) bad_vocabulary(source, "YAML indented deeper than " + std::to_string(max_depth) + " levels");
+      line_start = text.size();  // one check a line
+    }
+  }
+}
+
+}  // namespace detail
+
+/// Reads DBoW2's YAML vocabulary from text (not gzipped).
+inline BinaryVocabularyTree import_dbow2_yaml(std::string_view text, const std::string& name = "<memory>") {
+  const std::string source = "DBoW2 YAML vocabulary '" + name + "'";
+  detail::check_yaml_nesting(text, source);
+  cv::FileStorage fs;
+  try {
+    fs.open(std::string(text), cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
+  } catch (const cv::Exception& e) {
+    detail::bad_vocabulary(source, std::string("not YAML OpenCV can read: ") + e.err);
+  }
+  if (!fs.isOpened()) detail::bad_vocabulary(source, "not YAML OpenCV can read");
+  try {
+    return import_dbow2_yaml(fs, name);
+  } catch (const cv::Exception& e) {
+    detail::bad_vocabulary(source, std::string("unexpected YAML content: ") + e.err);
+  }
+}
+
+/// Reads FBoW's binary vocabulary (fbow::Vocabulary::saveToFile; binary descriptors).
+inline BinaryVocabularyTree import_fbow(std::string_view bytes, const std::string& name = "<memory>") {
+  const std::string source = "FBoW vocabulary '" + name + "'";
+  detail::BinaryReader r(bytes, source);
+  if (bytes.size() < 128) r.corrupt("too short (" + std::to_string(bytes.size()) + " bytes) to be an FBoW vocabulary");
+  if (r.u64("signature") != 55824124U) r.corrupt("not an FBoW vocabulary (wrong signature)");
+  const std::string_view desc_name = r.bytes(52, "descriptor name");  // char[50] + padding
+  (void)desc_name;
+  const std::uint32_t alignment = r.u32("alignment");
+  const std::uint32_t nblocks = r.u32("block count");
+  (void)r.u32("padding");
+  const std::uint64_t slot = r.u64("descriptor slot bytes");
+  const std::uint64_t block_bytes = r.u64("block bytes");
+  const std::uint64_t feature_off = r.u64("descriptor offset");
+  const std::uint64_t child_off = r.u64("child offset");
+  const std::uint64_t total = r.u64("total size");
+  const std::int32_t type = r.i32("descriptor type");
+  const std::int32_t desc_size = r.i32("descriptor size");
+  const std::uint32_t k = r.u32("k");
+  (void)r.u32("padding");
+  (void)alignment;
+  if (type != CV_8UC1)
+    r.corrupt("holds descriptors of type " + std::to_string(type) + "; vmap imports binary (CV_8UC1) FBoW vocabularies");
+  if (desc_size < 1 || desc_size > BinaryVocabularyTree::max_cols) r.corrupt("descriptor size " + std::to_string(desc_size) + " outside 1..4096");
+  if (k < 2 || k > static_cast<std::uint32_t>(BinaryVocabularyTree::max_branching)) r.corrupt("k = " + std::to_string(k) + " outside 2..4096");
+  if (nblocks < 1) r.corrupt("no blocks");
+  if (slot < static_cast<std::uint64_t>(desc_size) || slot > 8192) r.corrupt("descriptor slot of " + std::to_string(slot) + " bytes");
+  if (feature_off < 8 || feature_off > block_bytes || child_off > block_bytes || k * slot > block_bytes - feature_off ||
+      child_off < feature_off + k * slot || k * 8 > block_bytes - child_off)
+    r.corrupt("the block layout does not fit its " + std::to_string(block_bytes) + " bytes");
+  if (total / block_bytes != nblocks || total % block_bytes != 0 || total != r.remaining())
+    r.corrupt("the data size (" + std::to_string(r.remaining()) + " bytes) is not " + std::to_string(nblocks) + " blocks of " +
+              std::to_string(block_bytes) + " bytes (header total " + std::to_string(total) + ")");
+  const std::string_view data = r.rest();
+  auto u32_at = [&](std::uint64_t off) {
+    std::uint32_t v = 0;
+    for (int i = 0; i < 4; ++i) v |= static_cast<std::uint32_t>(static_cast<unsigned char>(data[off + static_cast<std::uint64_t>(i)])) << (8 * i);
+    return v;
+  };
+  // node 0 the root (block 0's owner); every child entry becomes a node; a non-leaf
+  // child owns the block it points to, which is visited once.
+  detail::ForeignTree t;
+  t.k = static_cast<int>(k);
+  t.cols = desc_size;
+  t.weighting = BowWeighting::fbow;
+  t.children.assign(1, {});
+  t.descriptor.assign(1, nullptr);
+  t.word.assign(1, -1);
+  std::vector<std::uint8_t> block_seen(nblocks, 0);
+  std::deque<std::pair<std::uint32_t, std::uint32_t>> queue{{0U, 0U}};  // (block, owner node)
+  block_seen[0] = 1;
+  std::vector<std::pair<std::uint32_t, float>> word_weights;
+  while (!queue.empty()) {
+    const auto [b, owner] = queue.front();
+    queue.pop_front();
+    const std::uint64_t base = static_cast<std::uint64_t>(b) * block_bytes;
+    const std::uint32_t count = u32_at(base) & 0xFFFFU;
+    if (count < 1 || count > k) r.corrupt("block " + std::to_string(b) + " has " + std::to_string(count) + " children (k = " + std::to_string(k) + ")");
+    for (std::uint32_t c = 0; c < count; ++c) {
+      const auto node = static_cast<std::uint32_t>(t.children.size());
+      t.children[owner].push_back(node);
+      t.children.emplace_back();
+      t.descriptor.push_back(reinterpret_cast<const std::uint8_t*>(data.data() + base + feature_off + c * slot));
+      const std::uint32_t link = u32_at(base + child_off + 8ULL * c);
+      if ((link & 0x80000000U) != 0) {
+        const std::uint32_t word = link & 0x7FFFFFFFU;
+        float w = 0.0f;
+        std::memcpy(&w, data.data() + base + child_off + 8ULL * c + 4, 4);
+        detail::f32_from_little_endian(&w, 1);
+        t.word.push_back(word);
+        word_weights.emplace_back(word, w);
+      } else {
+        if (link >= nblocks || block_seen[link] != 0)
+          r.corrupt("block " + std::to_string(b) + " links to block " + std::to_string(link) + ", which is missing or reached twice");
+        block_seen[link] = 1;
+        t.word.push_back(-1);
+        queue.emplace_back(link, node);
+      }
+    }
+  }
+  t.weight.assign(word_weights.size(), -1.0f);
+  for (const auto& [word, w] : word_weights) {
+    if (word >= t.weight.size() || t.weight[word] != -1.0f)
+      r.corrupt("word ids are not 0.." + std::to_string(t.weight.size() - 1) + " each once (word " + std::to_string(word) + ")");
+    t.weight[word] = w;
+  }
+  return detail::to_vmap_tree(t, source);
+}
+
+/// The format of a vocabulary file, from its first bytes (`head`, at least the first 128
+/// if the file has them) and its name (.gz: gzipped YAML).
+inline VocabularyFormat sniff_vocabulary_format(std::string_view head, const std::filesystem::path& path) {
+  if (head.substr(0, 8) == BinaryVocabularyTree::file_magic()) return VocabularyFormat::vmap;
+  if (head.size() >= 8) {
+    std::uint64_t sig = 0;
+    for (int i = 0; i < 8; ++i) sig |= static_cast<std::uint64_t>(static_cast<unsigned char>(head[static_cast<std::size_t>(i)])) << (8 * i);
+    if (sig == 55824124U) return VocabularyFormat::fbow;
+  }
+  if (head.size() >= 2 && static_cast<unsigned char>(head[0]) == 0x1F && static_cast<unsigned char>(head[1]) == 0x8B)
+    return VocabularyFormat::dbow2_yaml;  // gzip: FileStorage's .yml.gz
+  if (head.substr(0, 5) == "%YAML" || head.find("vocabulary:") != std::string_view::npos) return VocabularyFormat::dbow2_yaml;
+  std::size_t p = 0;
+  long a = 0;
+  if (detail::next_int(head, p, a)) return VocabularyFormat::orbslam_text;
+  detail::fail("'" + path.string() + "' is not a vocabulary file vmap knows (vmap, ORB-SLAM2/3 ORBvoc.txt, DBoW2 YAML "
+                                     "(.yml, .yml.gz) or FBoW binary)");
+}
+
+/// Reads a binary vocabulary of any known format from a file; anything else is a
+/// vmap::Error naming the file.
+inline BinaryVocabularyTree import_binary_vocabulary(const std::filesystem::path& path) {
+  std::ifstream in = detail::open_regular_file(path);
+  const auto size = std::filesystem::file_size(path);
+  if (size > max_vocabulary_file_bytes)
+    detail::fail("'" + path.string() + "' is " + std::to_string(size) + " bytes, larger than a vocabulary file can be (" +
+                 std::to_string(max_vocabulary_file_bytes) + ")");
+  std::string head(static_cast<std::size_t>(std::min<std::uintmax_t>(size, 4096)), '\0');
+  if (!in.read(head.data(), static_cast<std::streamsize>(head.size()))) detail::fail("reading '" + path.string() + "' failed");
+  in.close();
+  switch (sniff_vocabulary_format(head, path)) {
+    case VocabularyFormat::vmap:
+      return BinaryVocabularyTree::load(path);
+    case VocabularyFormat::fbow:
+      return import_fbow(detail::read_whole_file(path), path.string());
+    case VocabularyFormat::orbslam_text:
+      return import_orbslam_text(detail::read_whole_file(path), path.string());
+    case VocabularyFormat::dbow2_yaml:
+      break;
+  }
+  const std::string source = "DBoW2 YAML vocabulary '" + path.string() + "'";
+  if (static_cast<unsigned char>(head[0]) != 0x1F) return import_dbow2_yaml(detail::read_whole_file(path), path.string());
+  // gzipped: OpenCV decompresses it while parsing. The gzip trailer's ISIZE (the
+  // uncompressed size mod 2^32) bounds what it will hold.
+  const std::string all = detail::read_whole_file(path);
+  if (all.size() < 18) detail::bad_vocabulary(source, "too short to be gzip");
+  std::uint32_t isize = 0;
+  for (int i = 0; i < 4; ++i) isize |= static_cast<std::uint32_t>(static_cast<unsigned char>(all[all.size() - 4 + static_cast<std::size_t>(i)])) << (8 * i);
+  if (isize > (1U << 30)) detail::bad_vocabulary(source, "decompresses to " + std::to_string(isize) + " bytes (limit 1 GiB)");
+  cv::FileStorage fs;
+  try {
+    fs.open(path.string(), cv::FileStorage::READ);
+  } catch (const cv::Exception& e) {
+    detail::bad_vocabulary(source, std::string("not YAML OpenCV can read: ") + e.err);
+  }
+  if (!fs.isOpened()) detail::bad_vocabulary(source, "not YAML OpenCV can read");
+  try {
+    return import_dbow2_yaml(fs, path.string());
+  } catch (const cv::Exception& e) {
+    detail::bad_vocabulary(source, std::string("unexpected YAML content: ") + e.err);
+  }
+}
+
+}  // namespace vmap
