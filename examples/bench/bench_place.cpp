@@ -1,23 +1,29 @@
 // Benchmark of the place-recognition layer (include/vmap/place), each figure against a
 // baseline measured in the same run:
-//  (a) loading a 1M-word binary vocabulary (ORB, 32-byte words, k = 10, L = 6) from
-//      vmap's file vs cv::FileStorage reading the same 1M words saved as a cv::Mat (YAML
-//      text, and YAML with base64 data); file sizes.
-//      The tree is generated, not learned (a learned 1M-word tree needs millions of
+//  (a) loading a 1M-word binary vocabulary (ORB, 32-byte words, k = 10, L = 6): vmap's
+//      file against FBoW's (rmsalinas/fbow, ../shared/baselines/fbow, built beside this
+//      program with its own -O3 -mavx2) readFromFile of the same tree in FBoW's format,
+//      and vmap's importers of that FBoW file and of the same tree in ORB-SLAM2's
+//      ORBvoc.txt text format (both written by place/vocabulary_import.hpp's writers);
+//      the same for a 10k-word vocabulary. File sizes.
+//      The 1M tree is generated, not learned (a learned 1M-word tree needs millions of
 //      training descriptors): level-1 centres are real ORB descriptors of rtabmap_loop,
 //      each child its parent with 13 random bits (5 %) flipped, seeded; idf learned on
-//      the rtabmap_loop frames.
-//  (b) transform (bag of words) per image of ORB 1000, through the tree vs assigning
-//      each descriptor to its nearest word by a linear scan (the same popcount Hamming
-//      distance) over the same
-//      words, for the 1M-word tree and for a 10k-word tree learned on real frames.
+//      the rtabmap_loop frames. The 10k tree is learned (k = 10, L = 4) on tum_fr1_rpy +
+//      kitti07_160.
+//  (b) transform (bag of words) per image of ORB 1000 (rtabmap_loop frames): vmap's
+//      against FBoW's transform on the same tree and the same descriptors, checking that
+//      both give the same words, and that vmap reading the FBoW file gives FBoW's
+//      vectors exactly; and against assigning each descriptor to its nearest word by a
+//      linear scan.
 //  (c) query time over databases of 1,000 and 10,000 images (top 10, L1 score) through
 //      the inverted file vs a linear scan scoring every image with bow_score; bytes per
 //      image. The 1,000 images are ORB 1000 of real frames (tum_fr1_rpy, kitti07_160,
 //      rtabmap_loop, tum_fr3_cabinet_kf); the 10,000 are those frames' descriptors with
 //      3 % of their bits flipped (10 seeded variants each), so the vectors are distinct.
 //
-// All times are CPU time of the benchmark's one thread (the machine may be shared).
+// All times are CPU time of the benchmark's one thread (the machine may be shared);
+// loads are medians of repeated runs with the file in the page cache.
 //
 // usage: bench_place [SHARED_DIR] [SCRATCH_DIR]
 #include <vmap/features/orb.hpp>
@@ -25,6 +31,10 @@
 #include <vmap/place/bow.hpp>
 #include <vmap/place/database.hpp>
 #include <vmap/place/vocabulary.hpp>
+
+#ifdef VMAP_BASELINE_FBOW
+#include <fbow.h>
+#endif
 
 #include <opencv2/core.hpp>
 #include <opencv2/features2d.hpp>
@@ -136,125 +146,153 @@ int main(int argc, char** argv) {
   if (frames.size() > 1000) frames.resize(1000);
   const cv::Mat rtab_all = stack(rtab);
 
-  // ---------------------------------------------------------------- (a) 1M-word load
-  std::printf("## (a) loading a 1M-word binary vocabulary (k = 10, L = 6, 32-byte words)\n\n");
+  // ---------------------------------------------------------------- (a) load
   t = clock_type::now();
   auto big = generated_tree(rtab_all, 10, 6, 1);
   big.learn_idf(rtab);
   const double gen_ms = ms_since(t);
-  const cv::Mat big_words = big.words();
-  const auto voc_path = scratch / "voc_1m.vmapvoc";
-  const auto yml_path = scratch / "voc_1m_words.yml";
-  const auto b64_path = scratch / "voc_1m_words_base64.yml";
-  t = clock_type::now();
-  big.save(voc_path);
-  const double save_ms = ms_since(t);
-  t = clock_type::now();
-  {
-    cv::FileStorage fs(yml_path.string(), cv::FileStorage::WRITE);
-    fs << "words" << big_words;
-  }
-  const double yml_save_ms = ms_since(t);
-  t = clock_type::now();
-  {
-    cv::FileStorage fs(b64_path.string(), cv::FileStorage::WRITE | cv::FileStorage::WRITE_BASE64);
-    fs << "words" << big_words;
-  }
-  const double b64_save_ms = ms_since(t);
-
-  std::vector<double> ours, yml, b64;
-  for (int rep = 0; rep < 3; ++rep) {
-    t = clock_type::now();
-    const auto back = vmap::BinaryVocabularyTree::load(voc_path);
-    ours.push_back(ms_since(t));
-    if (back.size() != big.size()) return 1;
-    t = clock_type::now();
-    {
-      cv::FileStorage fs(b64_path.string(), cv::FileStorage::READ);
-      cv::Mat w;
-      fs["words"] >> w;
-      if (w.rows != big_words.rows) return 1;
-    }
-    b64.push_back(ms_since(t));
-    if (rep == 0) {  // the text form is slow: once
-      t = clock_type::now();
-      cv::FileStorage fs(yml_path.string(), cv::FileStorage::READ);
-      cv::Mat w;
-      fs["words"] >> w;
-      if (w.rows != big_words.rows || cv::norm(w, big_words, cv::NORM_L1) != 0.0) return 1;
-      yml.push_back(ms_since(t));
-    }
-  }
-  // where the vmap load time goes: reading the bytes, the CRC over them
-  t = clock_type::now();
-  const std::string voc_bytes = vmap::detail::read_whole_file(voc_path);
-  const double read_ms = ms_since(t);
-  t = clock_type::now();
-  const std::uint32_t crc = vmap::detail::crc32_fast(std::string_view(voc_bytes).substr(24));
-  const double crc_ms = ms_since(t);
-  t = clock_type::now();
-  const std::uint32_t crc_bytewise = vmap::detail::crc32(std::string_view(voc_bytes).substr(24));
-  const double crc_bytewise_ms = ms_since(t);
-  if (crc != crc_bytewise) return 1;
-  const auto mib = [](const std::filesystem::path& p) { return static_cast<double>(std::filesystem::file_size(p)) / (1024.0 * 1024.0); };
-  std::printf("generated in %.0f ms: %zu words, %zu nodes, %.1f MiB in memory\n\n", gen_ms, big.size(), big.nodes(),
-              static_cast<double>(big.memory_bytes()) / (1024.0 * 1024.0));
-  std::printf("| file | what it holds | size (MiB) | save (ms) | load (ms, median of %zu) | load vs vmap |\n", ours.size());
-  std::printf("|---|---|---|---|---|---|\n");
-  std::printf("| vmap (VMAPVOCB v1) | whole tree: %zu node centres, links, idf; CRC-checked | %.1f | %.0f | %.0f | 1.0x |\n",
-              big.nodes(), mib(voc_path), save_ms, median(ours));
-  std::printf("| cv::FileStorage YAML, base64 | the %zu leaf words only | %.1f | %.0f | %.0f | %.1fx slower |\n", big.size(),
-              mib(b64_path), b64_save_ms, median(b64), median(b64) / median(ours));
-  std::printf("| cv::FileStorage YAML text | the %zu leaf words only | %.1f | %.0f | %.0f (once) | %.1fx slower |\n",
-              big.size(), mib(yml_path), yml_save_ms, yml[0], yml[0] / median(ours));
-  std::printf("of the vmap load: reading the file %.0f ms, its CRC-32 %.0f ms (slicing-by-8; io/binary.hpp's byte-wise "
-              "crc32: %.0f ms)\n\n",
-              read_ms, crc_ms, crc_bytewise_ms);
-
-  // ---------------------------------------------------------------- (b) transform
-  std::printf("## (b) bag of words per image (ORB 1000, %zu rtabmap_loop frames)\n\n", rtab.size());
   t = clock_type::now();
   std::vector<cv::Mat> training = tum;
   training.insert(training.end(), kitti.begin(), kitti.end());
   const auto learned = vmap::BinaryVocabularyTree::learn(training, {.branching = 10, .depth = 4, .seed = 1});
   const double learn_ms = ms_since(t);
-  std::printf("learned tree (k = 10, L = 4) on %zu frames of tum_fr1_rpy + kitti07_160 (%zu descriptors, sample of 200,000): "
-              "%zu words in %.1f s\n\n",
-              training.size(), static_cast<std::size_t>(stack(training).rows), learned.size(), learn_ms / 1000.0);
-  std::printf("| vocabulary | words | tree transform (ms / image) | brute-force nearest word (ms / image) | ratio |\n");
-  std::printf("|---|---|---|---|---|\n");
-  for (const vmap::BinaryVocabularyTree* voc : {&learned, static_cast<const vmap::BinaryVocabularyTree*>(&big)}) {
+  std::printf("## (a) loading a vocabulary: vmap against FBoW on the same tree\n\n");
+  std::printf("generated 1M tree (k = 10, L = 6): %zu words, %zu nodes, %.1f MiB in memory, in %.0f ms; learned 10k tree "
+              "(k = 10, L = 4) on %zu frames of tum_fr1_rpy + kitti07_160: %zu words in %.1f s\n\n",
+              big.size(), big.nodes(), static_cast<double>(big.memory_bytes()) / (1024.0 * 1024.0), gen_ms, training.size(),
+              learned.size(), learn_ms / 1000.0);
+  const auto mib = [](const std::filesystem::path& p) { return static_cast<double>(std::filesystem::file_size(p)) / (1024.0 * 1024.0); };
+  const auto warm = [](const std::filesystem::path& p) { (void)vmap::detail::read_whole_file(p); };  // into the page cache
+  struct Voc {
+    const char* name;
+    const vmap::BinaryVocabularyTree* tree;
+    std::string stem;
+  };
+  std::printf("| vocabulary | loader | file | size (MiB) | load (ms, median) | vs FBoW's load |\n|---|---|---|---|---|---|\n");
+  for (const Voc& voc : {Voc{"generated 1M", &big, "voc_1m"}, Voc{"learned 10k", &learned, "voc_10k"}}) {
+    const auto vmap_path = scratch / (voc.stem + ".vmapvoc");
+    const auto fbow_path = scratch / (voc.stem + ".fbow");
+    const auto text_path = scratch / (voc.stem + "_orbvoc.txt");
+    voc.tree->save(vmap_path);
+    vmap::write_file_atomically(fbow_path, vmap::fbow_bytes(*voc.tree));
+    vmap::write_file_atomically(text_path, vmap::orbslam_text(*voc.tree));
+    const int reps = voc.tree->size() > 100000 ? 7 : 21;
+    std::vector<double> ours, theirs, imported_fbow, imported_text;
+    for (int rep = 0; rep < reps; ++rep) {
+      warm(vmap_path);
+      t = clock_type::now();
+      const auto back = vmap::BinaryVocabularyTree::load(vmap_path);
+      ours.push_back(ms_since(t));
+      if (back.size() != voc.tree->size()) return 1;
+#ifdef VMAP_BASELINE_FBOW
+      warm(fbow_path);
+      t = clock_type::now();
+      fbow::Vocabulary fv;
+      fv.readFromFile(fbow_path.string());
+      theirs.push_back(ms_since(t));
+      if (!fv.isValid()) return 1;
+#endif
+      if (rep < 3) {
+        warm(fbow_path);
+        t = clock_type::now();
+        const auto f = vmap::AnyVocabulary::load(fbow_path);
+        imported_fbow.push_back(ms_since(t));
+        if (f.size() != voc.tree->size()) return 1;
+      }
+      if (rep < (voc.tree->size() > 100000 ? 1 : 3)) {
+        warm(text_path);
+        t = clock_type::now();
+        const auto x = vmap::AnyVocabulary::load(text_path);
+        imported_text.push_back(ms_since(t));
+        if (x.size() != voc.tree->size()) return 1;
+      }
+    }
+    const double base = theirs.empty() ? 0.0 : median(theirs);
+    auto row = [&](const char* loader, const std::filesystem::path& p, const std::vector<double>& ms) {
+      const double m = median(ms);
+      std::printf("| %s | %s | %s | %.1f | %.1f | %s |\n", voc.name, loader, p.filename().c_str(), mib(p), m,
+                  base > 0.0 ? (std::to_string(m / base).substr(0, 5) + "x").c_str() : "(FBoW not built)");
+    };
+    if (!theirs.empty()) row("FBoW readFromFile (baseline)", fbow_path, theirs);
+    row("vmap load (format 2, CRC-32C checked)", vmap_path, ours);
+    row("vmap AnyVocabulary::load of FBoW's file", fbow_path, imported_fbow);
+    row("vmap AnyVocabulary::load of ORBvoc.txt text", text_path, imported_text);
+  }
+  {
+    const std::string bytes = vmap::detail::read_whole_file(scratch / "voc_1m.vmapvoc");
+    const std::string_view payload = std::string_view(bytes).substr(24);
     t = clock_type::now();
-    std::size_t entries = 0;
-    for (const auto& d : rtab) entries += voc->transform(d).size();
-    const double tree_ms = ms_since(t) / static_cast<double>(rtab.size());
+    const std::uint32_t c1 = vmap::detail::crc32c(payload);
+    const double hw = ms_since(t);
+    t = clock_type::now();
+    const std::uint32_t c2 = vmap::detail::crc32c(payload, true);
+    const double portable = ms_since(t);
+    t = clock_type::now();
+    const std::uint32_t c3 = vmap::detail::crc32_fast(payload);
+    const double old_crc = ms_since(t);
+    if (c1 != c2 || c3 == 0) return 1;
+    std::printf("\nchecksum of the 1M file's %.1f MiB: CRC-32C %.1f ms (%s), portable CRC-32C %.1f ms, format 1's CRC-32 "
+                "(slicing-by-8) %.1f ms\n\n",
+                static_cast<double>(payload.size()) / (1024.0 * 1024.0), hw,
+                vmap::detail::crc32c_hardware_available() ? "SSE 4.2 instruction" : "no hardware CRC: portable", portable, old_crc);
+  }
+
+  // ---------------------------------------------------------------- (b) transform
+  std::printf("## (b) bag of words per image (ORB 1000, %zu rtabmap_loop frames)\n\n", rtab.size());
+  std::printf("| vocabulary | words | vmap transform (ms / image) | FBoW transform (ms / image) | vmap vs FBoW | same words as FBoW | "
+              "vmap on FBoW's file = FBoW's vectors | brute-force nearest word (ms / image) |\n|---|---|---|---|---|---|---|---|\n");
+  for (const Voc& voc : {Voc{"learned 10k", &learned, "voc_10k"}, Voc{"generated 1M", &big, "voc_1m"}}) {
+    const auto& tree = *voc.tree;
+    std::vector<double> ours, theirs;
+    std::size_t same_words = 0, same_vectors = 0, total_rows = 0;
+    const auto from_fbow = vmap::AnyVocabulary::load(scratch / (voc.stem + ".fbow"));
+#ifdef VMAP_BASELINE_FBOW
+    fbow::Vocabulary fv;
+    fv.readFromFile((scratch / (voc.stem + ".fbow")).string());
+#endif
+    for (int rep = 0; rep < 3; ++rep) {
+      std::size_t entries = 0;
+      t = clock_type::now();
+      for (const auto& d : rtab) entries += tree.transform(d).size();
+      ours.push_back(ms_since(t) / static_cast<double>(rtab.size()));
+#ifdef VMAP_BASELINE_FBOW
+      std::size_t their_entries = 0;
+      t = clock_type::now();
+      for (const auto& d : rtab) their_entries += fv.transform(d).size();
+      theirs.push_back(ms_since(t) / static_cast<double>(rtab.size()));
+      if (their_entries == 0) return 1;
+#endif
+      if (entries == 0) return 1;
+    }
+#ifdef VMAP_BASELINE_FBOW
+    for (const auto& d : rtab) {
+      const vmap::BowVector mine = tree.transform(d);
+      const fbow::fBow theirs_bow = fv.transform(d);
+      bool words_equal = mine.size() == theirs_bow.size();
+      vmap::BowVector as_vmap;
+      for (const auto& [word, weight] : theirs_bow) as_vmap.entries.push_back({word, static_cast<float>(weight)});
+      for (std::size_t i = 0; words_equal && i < mine.size(); ++i) words_equal = mine.entries[i].word == as_vmap.entries[i].word;
+      same_words += words_equal;
+      same_vectors += from_fbow.transform(d) == as_vmap;
+      ++total_rows;
+    }
+#endif
     // brute force over all words: a few images (it is slow for 1M words)
-    const cv::Mat words = voc->words();
-    const std::size_t bf_images = voc->size() > 100000 ? 2 : 20;
+    const cv::Mat words = tree.words();
+    const std::size_t bf_images = tree.size() > 100000 ? 2 : 20;
     t = clock_type::now();
-    std::size_t agree = 0, total = 0;
-    for (std::size_t i = 0; i < bf_images; ++i) {
-      const auto tw = voc->assign(rtab[i]);
+    for (std::size_t i = 0; i < bf_images; ++i)
       for (int r = 0; r < rtab[i].rows; ++r) {
         const uchar* d = rtab[i].ptr<uchar>(r);
         std::uint32_t best = ~0U;
-        int arg = 0;
-        for (int w = 0; w < words.rows; ++w) {
-          const std::uint32_t h = vmap::HammingTraits::distance(d, words.ptr<uchar>(w), 32);
-          if (h < best) {
-            best = h;
-            arg = w;
-          }
-        }
-        agree += tw[static_cast<std::size_t>(r)] == static_cast<std::uint32_t>(arg);
+        for (int w = 0; w < words.rows; ++w) best = std::min(best, vmap::HammingTraits::distance(d, words.ptr<uchar>(w), 32));
+        if (best > 256) return 1;
       }
-      total += static_cast<std::size_t>(rtab[i].rows);
-    }
     const double bf_ms = ms_since(t) / static_cast<double>(bf_images);
-    std::printf("| %s | %zu | %.2f | %.1f | %.0fx faster (tree word = nearest word for %.0f %% of descriptors) |\n",
-                voc == &big ? "generated 1M" : "learned 10k", voc->size(), tree_ms, bf_ms, bf_ms / tree_ms,
-                100.0 * static_cast<double>(agree) / static_cast<double>(std::max<std::size_t>(1, total)));
-    (void)entries;
+    const double m = median(ours);
+    const double f = theirs.empty() ? 0.0 : median(theirs);
+    std::printf("| %s | %zu | %.3f | %.3f | %.2fx | %zu / %zu images | %zu / %zu images | %.1f |\n", voc.name, tree.size(), m, f,
+                f > 0.0 ? m / f : 0.0, same_words, total_rows, same_vectors, total_rows, bf_ms);
   }
   std::printf("\n");
 

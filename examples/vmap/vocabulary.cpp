@@ -3,12 +3,21 @@
 //
 //   vmap vocabulary ../shared/data/tum_fr1_rpy/rgb.txt --words 1000 --depth 3 --out voc.bin
 //
+// `vmap vocabulary convert IN OUT` converts a vocabulary file of any format vmap reads
+// (vmap, ORB-SLAM2/3 ORBvoc.txt, DBoW2 YAML .yml / .yml.gz, FBoW binary) to vmap's
+// format, or to ORBvoc text (OUT ending in .txt) or FBoW binary (OUT ending in .fbow).
+//
 // Binary descriptors (orb, akaze) give a k-majority tree on Hamming distance, float ones
 // (sift, xfeat) a k-means tree on L2. Progress goes to stderr.
+#include "common/cli_support.hpp"
 #include "common/lcd_run.hpp"
 #include "vmap/cli.hpp"
 
+#include <vmap/io/atomic_file.hpp>
+#include <vmap/place/vocabulary.hpp>
+
 #include <chrono>
+#include <filesystem>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -18,11 +27,36 @@ namespace {
 struct VocabularyArgs {
   std::string input;
   std::string out;
+  std::string convert_in;
+  std::string convert_out;
   vmap::examples::DescriptorChoice descriptor;
   vmap::examples::VocabularyChoice vocabulary;
 };
 
+int convert(const VocabularyArgs& a) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const vmap::AnyVocabulary v = vmap::AnyVocabulary::load(a.convert_in);
+  const double load_s = vmap::examples::seconds_since(t0);
+  const std::filesystem::path out = a.convert_out;
+  const std::string ext = out.extension().string();
+  const char* format = "vmap";
+  if (ext == ".txt" || ext == ".fbow") {
+    if (v.binary() == nullptr) throw vmap::examples::UsageError(a.convert_in + " is a float vocabulary; " + ext + " files hold binary ones");
+    vmap::write_file_atomically(out, ext == ".txt" ? vmap::orbslam_text(*v.binary()) : vmap::fbow_bytes(*v.binary()));
+    format = ext == ".txt" ? "ORB-SLAM2 text" : "FBoW binary";
+  } else {
+    v.save(out);
+  }
+  static const char* const weightings[] = {"tf_idf_l1", "tf_idf_l2", "idf_l1", "idf_l2", "fbow"};
+  std::printf("%s: %zu words (branching %d, depth %d, weighting %s), %s, from %s (read in %.3f s)\n", a.convert_out.c_str(),
+              v.size(), v.branching(), v.depth(), weightings[static_cast<int>(v.weighting())], format,
+              a.convert_in.c_str(), load_s);
+  return 0;
+}
+
 int run(const VocabularyArgs& a) {
+  if (a.input.empty() || a.out.empty())
+    throw vmap::examples::UsageError("learning needs FRAMES and --out (converting: vmap vocabulary convert IN OUT)");
   const int branching = a.vocabulary.branching();
   const auto features = vmap::examples::extract_features(a.input, a.descriptor, [](std::size_t done, std::size_t n) {
     if (done == n || done % 10 == 0) std::fprintf(stderr, "\rfeatures: frame %zu/%zu", done, n);
@@ -45,8 +79,8 @@ int run(const VocabularyArgs& a) {
 
 std::function<int()> setup(CLI::App& app) {
   auto a = std::make_shared<VocabularyArgs>();
-  app.add_option("FRAMES", a->input, "Frames: image folder, list file, video or TUM rgb.txt")->required();
-  app.add_option("--out", a->out, "The vocabulary file to write")->required();
+  app.add_option("FRAMES", a->input, "Frames: image folder, list file, video or TUM rgb.txt");
+  app.add_option("--out", a->out, "The vocabulary file to write");
   app.add_option("--words", a->vocabulary.words, "At most this many words (branching k: smallest with k^depth >= words)")
       ->capture_default_str();
   app.add_option("--depth", a->vocabulary.depth, "Depth L of the tree")->capture_default_str();
@@ -55,10 +89,14 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--nfeatures", a->descriptor.features, "Keypoint budget per image (ORB, SIFT; top-k for XFeat)")
       ->capture_default_str();
   app.add_option("--model", a->descriptor.model, "--features xfeat: the XFeat ONNX model");
-  return [a] { return run(*a); };
+  auto* c = app.add_subcommand("convert", "Convert a vocabulary file (vmap, ORBvoc.txt, DBoW2 .yml/.yml.gz, FBoW) to vmap's "
+                                          "format, or to ORBvoc text (OUT *.txt) or FBoW (OUT *.fbow)");
+  c->add_option("IN", a->convert_in, "Vocabulary file of any format vmap reads")->required()->check(CLI::ExistingFile);
+  c->add_option("OUT", a->convert_out, "File written (its extension chooses the format)")->required();
+  return [a, c] { return c->parsed() ? convert(*a) : run(*a); };
 }
 
 const bool registered =
-    vmap::cli::add_command({"vocabulary", "Learn a bag-of-words vocabulary tree from frames (for vmap loops)", setup});
+    vmap::cli::add_command({"vocabulary", "Learn a bag-of-words vocabulary tree from frames (for vmap loops), or convert one", setup});
 
 }  // namespace

@@ -19,6 +19,7 @@
 #include <vmap/memory/visual_memory.hpp>
 #include <vmap/place/database.hpp>
 #include <vmap/place/vocabulary.hpp>
+#include <vmap/place/vocabulary_import.hpp>
 #include <vmap/som/gcs.hpp>
 
 #include <cstddef>
@@ -40,6 +41,9 @@ VMAP_FUZZ_LOADER(ground_truth, { (void)vmap::LoopGroundTruth::parse(bytes, "fuzz
 VMAP_FUZZ_LOADER(class_names, { (void)vmap::parse_class_names(bytes, "fuzz"); })
 VMAP_FUZZ_LOADER(image_header, { (void)vmap::image_header_size(bytes); })
 VMAP_FUZZ_LOADER(vocabulary, { (void)vmap::BinaryVocabularyTree::deserialize(bytes, "fuzz"); (void)vmap::FloatVocabularyTree::deserialize(bytes, "fuzz"); })
+VMAP_FUZZ_LOADER(vocabulary_orbslam_text, { (void)vmap::import_orbslam_text(bytes, "fuzz"); })
+VMAP_FUZZ_LOADER(vocabulary_dbow2_yaml, { (void)vmap::import_dbow2_yaml(bytes, "fuzz"); })
+VMAP_FUZZ_LOADER(vocabulary_fbow, { (void)vmap::import_fbow(bytes, "fuzz"); })
 VMAP_FUZZ_LOADER(place_database, { (void)vmap::PlaceDatabase<std::uint32_t>::deserialize(bytes, "fuzz"); })
 // A memory file that loads is written back by the loaded memory into bytes that load
 // again (whatever it accepted is a state it can save); anything else is a bug: abort.

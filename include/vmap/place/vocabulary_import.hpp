@@ -36,7 +36,9 @@
 #include <opencv2/core.hpp>
 
 #include <algorithm>
+#include <bit>
 #include <charconv>
+#include <cstdio>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -487,6 +489,123 @@ inline BinaryVocabularyTree import_fbow(std::string_view bytes, const std::strin
     t.weight[word] = w;
   }
   return detail::to_vmap_tree(t, source);
+}
+
+/// The vocabulary in ORB-SLAM2/3's text format (what ORBvoc.txt holds), readable by
+/// ORB-SLAM2's TemplatedVocabulary::loadFromTextFile and by import_orbslam_text. Words
+/// are numbered there by line, so the lines follow the tree in the order that keeps the
+/// vocabulary's word ids: breadth-first (vmap's numbering) or DBoW2's (a node's children,
+/// then each child's subtree in turn; a vocabulary read from DBoW2 or ORB-SLAM). Weights
+/// get 6 significant digits, as ORB-SLAM2 writes them.
+inline std::string orbslam_text(const BinaryVocabularyTree& v) {
+  detail::check(!v.empty(), "orbslam_text: the vocabulary is empty");
+  const BowWeighting w = v.weighting();
+  detail::check(w != BowWeighting::fbow, "orbslam_text: an FBoW-weighted vocabulary has no DBoW2 scoring to write");
+  const int scoring = w == BowWeighting::tf_idf_l1 || w == BowWeighting::idf_l1 ? 0 : 1;
+  const int weighting = w == BowWeighting::tf_idf_l1 || w == BowWeighting::tf_idf_l2 ? 0 : 2;
+  // node order: DBoW2's if it numbers the words as they are (then a vocabulary read
+  // from ORBvoc.txt is written back line for line), else breadth-first
+  std::vector<std::uint32_t> order{0};
+  order.reserve(v.nodes());
+  std::vector<std::uint32_t> stack{0};  // nodes whose children are still to be written
+  while (!stack.empty()) {
+    const std::uint32_t n = stack.back();
+    stack.pop_back();
+    const std::uint32_t first = v.first_child_or_word(n);
+    for (std::uint32_t c = 0; c < v.child_count(n); ++c) order.push_back(first + c);
+    for (std::uint32_t c = v.child_count(n); c-- > 0;)
+      if (v.child_count(first + c) > 0) stack.push_back(first + c);
+  }
+  auto numbers_words = [&] {
+    std::uint32_t next = 0;
+    for (std::uint32_t n : order)
+      if (v.child_count(n) == 0 && v.first_child_or_word(n) != next++) return false;
+    return true;
+  };
+  if (!numbers_words()) {
+    for (std::uint32_t i = 0; i < v.nodes(); ++i) order[i] = i;
+    if (!numbers_words()) detail::fail("orbslam_text: the vocabulary's word ids follow neither DBoW2's nor breadth-first node order");
+  }
+  std::vector<std::uint32_t> line_of(v.nodes(), 0), parent(v.nodes(), 0);
+  for (std::uint32_t i = 0; i < order.size(); ++i) line_of[order[i]] = i;
+  for (std::uint32_t n = 0; n < v.nodes(); ++n)
+    for (std::uint32_t c = 0; c < v.child_count(n); ++c) parent[v.first_child_or_word(n) + c] = n;
+  std::string out = std::to_string(v.branching()) + " " + std::to_string(v.depth()) + "  " + std::to_string(scoring) + " " +
+                    std::to_string(weighting) + "\n";
+  out.reserve(out.size() + v.nodes() * static_cast<std::size_t>(4 * v.descriptor_cols() + 16));
+  char buf[32];
+  for (std::size_t i = 1; i < order.size(); ++i) {
+    const std::uint32_t n = order[i];
+    const bool leaf = v.child_count(n) == 0;
+    out += std::to_string(line_of[parent[n]]);
+    out += leaf ? " 1 " : " 0 ";
+    const std::uint8_t* d = v.centre(n);
+    for (int b = 0; b < v.descriptor_cols(); ++b) {
+      out += std::to_string(d[b]);
+      out += ' ';
+    }
+    out += ' ';
+    const double weight = leaf ? static_cast<double>(v.idf()[v.first_child_or_word(n)]) : 0.0;
+    std::snprintf(buf, sizeof buf, "%g", weight);  // ostream's default: 6 significant digits
+    out += buf;
+    out += '\n';
+  }
+  return out;
+}
+
+/// The vocabulary in FBoW's binary format (fbow::Vocabulary::readFromFile reads it):
+/// one block per inner node in breadth-first order, 8-byte alignment as FBoW's own
+/// files; leaf entries carry the word id and its weight. FBoW's transform sums the
+/// weights and L2-normalises whatever the vocabulary's own weighting.
+inline std::string fbow_bytes(const BinaryVocabularyTree& v) {
+  detail::check(!v.empty(), "fbow_bytes: the vocabulary is empty");
+  const std::uint64_t k = static_cast<std::uint64_t>(v.branching());
+  const std::uint64_t slot = (static_cast<std::uint64_t>(v.descriptor_cols()) + 7) / 8 * 8;
+  const std::uint64_t feature_off = 8, child_off = feature_off + k * slot;
+  const std::uint64_t block = (child_off + 8 * k + 7) / 8 * 8;
+  std::vector<std::uint32_t> block_of(v.nodes(), 0);
+  std::uint32_t blocks = 0;
+  for (std::uint32_t n = 0; n < v.nodes(); ++n)
+    if (v.child_count(n) > 0) block_of[n] = blocks++;
+  detail::BinaryWriter w;
+  w.u64(55824124U);
+  std::string name(52, '\0');
+  name.replace(0, 3, "orb");
+  w.bytes(name);
+  w.u32(8);
+  w.u32(blocks);
+  w.u32(0);
+  w.u64(slot);
+  w.u64(block);
+  w.u64(feature_off);
+  w.u64(child_off);
+  w.u64(block * blocks);
+  w.i32(CV_8UC1);
+  w.i32(v.descriptor_cols());
+  w.u32(static_cast<std::uint32_t>(k));
+  w.u32(0);
+  std::string data(static_cast<std::size_t>(block * blocks), '\0');
+  auto put32 = [&](std::uint64_t at, std::uint32_t x) {
+    for (int i = 0; i < 4; ++i) data[static_cast<std::size_t>(at) + static_cast<std::size_t>(i)] = static_cast<char>((x >> (8 * i)) & 0xFFU);
+  };
+  std::vector<std::uint32_t> parent(v.nodes(), 0);
+  for (std::uint32_t n = 0; n < v.nodes(); ++n) {
+    const std::uint32_t count = v.child_count(n);
+    if (count == 0) continue;
+    const std::uint64_t base = static_cast<std::uint64_t>(block_of[n]) * block;
+    put32(base, count | (1U << 16));  // N, and the flag FBoW always writes as 1
+    put32(base + 4, parent[n]);
+    const std::uint32_t first = v.first_child_or_word(n);
+    for (std::uint32_t c = 0; c < count; ++c) {
+      const std::uint32_t child = first + c;
+      parent[child] = n;
+      std::memcpy(data.data() + base + feature_off + c * slot, v.centre(child), static_cast<std::size_t>(v.descriptor_cols()));
+      const bool leaf = v.child_count(child) == 0;
+      put32(base + child_off + 8ULL * c, leaf ? (v.first_child_or_word(child) | 0x80000000U) : block_of[child]);
+      put32(base + child_off + 8ULL * c + 4, leaf ? std::bit_cast<std::uint32_t>(v.idf()[v.first_child_or_word(child)]) : 0U);
+    }
+  }
+  return std::move(w).take() + data;
 }
 
 /// The format of a vocabulary file, from its first bytes (`head`, at least the first 128

@@ -391,6 +391,13 @@ class VocabularyTree {
   /// Nodes of the tree, the root included.
   [[nodiscard]] std::size_t nodes() const noexcept { return nodes_.size(); }
 
+  /// Node i (breadth-first; 0 the root): its number of children, 0 for a word.
+  [[nodiscard]] std::uint32_t child_count(std::size_t i) const noexcept { return nodes_[i].count; }
+  /// The first child of inner node i (its children are consecutive), or leaf i's word id.
+  [[nodiscard]] std::uint32_t first_child_or_word(std::size_t i) const noexcept { return nodes_[i].first; }
+  /// The centre of node i (descriptor_cols() values; the root's is zeros).
+  [[nodiscard]] const value_type* centre(std::size_t i) const { return centres_.ptr<value_type>(static_cast<int>(i)); }
+
   /// The words' centres, row w for word w.
   [[nodiscard]] cv::Mat words() const {
     cv::Mat out(static_cast<int>(size()), cols_, Traits::descriptor_type);

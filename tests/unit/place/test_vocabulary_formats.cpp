@@ -159,6 +159,26 @@ TEST_CASE("the dispatched nearest-row Hamming kernel equals the portable one") {
   }
 }
 
+TEST_CASE("the fuzz seeds of the three foreign formats are valid vocabularies of the same tree") {
+  const auto dir = vmap::test::source_dir() / "tests/fuzz/corpus";
+  const auto text = vmap::import_orbslam_text(file_bytes(dir / "vocabulary_orbslam_text/k3L2.txt"), "t");
+  const auto yml = vmap::import_dbow2_yaml(std::string_view(file_bytes(dir / "vocabulary_dbow2_yaml/k3L2.yml")), "y");
+  const auto fbow = vmap::import_fbow(file_bytes(dir / "vocabulary_fbow/k3L2.fbow"), "f");
+  CHECK(text.size() == 9);
+  CHECK(text.nodes() == 13);
+  CHECK(text.depth() == 2);
+  CHECK(cv::norm(text.words(), yml.words(), cv::NORM_L1) == 0.0);
+  CHECK(cv::norm(text.words(), fbow.words(), cv::NORM_L1) == 0.0);
+  CHECK(text.idf() == yml.idf());
+  CHECK(fbow.idf() == std::vector<float>(9, 1.0f));
+  // the writers give files the readers take back unchanged
+  const auto text_again = vmap::import_orbslam_text(vmap::orbslam_text(text), "t2");
+  CHECK(cv::norm(text_again.words(), text.words(), cv::NORM_L1) == 0.0);
+  CHECK(text_again.idf() == text.idf());
+  const auto fbow_again = vmap::import_fbow(vmap::fbow_bytes(fbow), "f2");
+  CHECK(fbow_again.serialize() == fbow.serialize());
+}
+
 TEST_SUITE("data") {
   TEST_CASE("ORB-SLAM2, DBoW2 and FBoW vocabularies give their libraries' bags of words") {
     const auto dir = vmap::test::data_path("vocabularies");
