@@ -210,7 +210,7 @@ int main(int argc, char** argv) {
     const double base = theirs.empty() ? 0.0 : median(theirs);
     auto row = [&](const char* loader, const std::filesystem::path& p, const std::vector<double>& ms) {
       const double m = median(ms);
-      std::printf("| %s | %s | %s | %.1f | %.1f | %s |\n", voc.name, loader, p.filename().c_str(), mib(p), m,
+      std::printf("| %s | %s | %s | %.1f | %.2f | %s |\n", voc.name, loader, p.filename().c_str(), mib(p), m,
                   base > 0.0 ? (std::to_string(m / base).substr(0, 5) + "x").c_str() : "(FBoW not built)");
     };
     if (!theirs.empty()) row("FBoW readFromFile (baseline)", fbow_path, theirs);
@@ -238,7 +238,11 @@ int main(int argc, char** argv) {
   }
 
   // ---------------------------------------------------------------- (b) transform
-  std::printf("## (b) bag of words per image (ORB 1000, %zu rtabmap_loop frames)\n\n", rtab.size());
+  std::vector<cv::Mat> images;  // FBoW's transform refuses an image without descriptors
+  for (const auto& d : rtab)
+    if (!d.empty()) images.push_back(d);
+  std::printf("## (b) bag of words per image (ORB 1000, the %zu of %zu rtabmap_loop frames with descriptors)\n\n", images.size(),
+              rtab.size());
   std::printf("| vocabulary | words | vmap transform (ms / image) | FBoW transform (ms / image) | vmap vs FBoW | same words as FBoW | "
               "vmap on FBoW's file = FBoW's vectors | brute-force nearest word (ms / image) |\n|---|---|---|---|---|---|---|---|\n");
   for (const Voc& voc : {Voc{"learned 10k", &learned, "voc_10k"}, Voc{"generated 1M", &big, "voc_1m"}}) {
@@ -253,19 +257,19 @@ int main(int argc, char** argv) {
     for (int rep = 0; rep < 3; ++rep) {
       std::size_t entries = 0;
       t = clock_type::now();
-      for (const auto& d : rtab) entries += tree.transform(d).size();
-      ours.push_back(ms_since(t) / static_cast<double>(rtab.size()));
+      for (const auto& d : images) entries += tree.transform(d).size();
+      ours.push_back(ms_since(t) / static_cast<double>(images.size()));
 #ifdef VMAP_BASELINE_FBOW
       std::size_t their_entries = 0;
       t = clock_type::now();
-      for (const auto& d : rtab) their_entries += fv.transform(d).size();
-      theirs.push_back(ms_since(t) / static_cast<double>(rtab.size()));
+      for (const auto& d : images) their_entries += fv.transform(d).size();
+      theirs.push_back(ms_since(t) / static_cast<double>(images.size()));
       if (their_entries == 0) return 1;
 #endif
       if (entries == 0) return 1;
     }
 #ifdef VMAP_BASELINE_FBOW
-    for (const auto& d : rtab) {
+    for (const auto& d : images) {
       const vmap::BowVector mine = tree.transform(d);
       const fbow::fBow theirs_bow = fv.transform(d);
       bool words_equal = mine.size() == theirs_bow.size();
@@ -282,8 +286,8 @@ int main(int argc, char** argv) {
     const std::size_t bf_images = tree.size() > 100000 ? 2 : 20;
     t = clock_type::now();
     for (std::size_t i = 0; i < bf_images; ++i)
-      for (int r = 0; r < rtab[i].rows; ++r) {
-        const uchar* d = rtab[i].ptr<uchar>(r);
+      for (int r = 0; r < images[i].rows; ++r) {
+        const uchar* d = images[i].ptr<uchar>(r);
         std::uint32_t best = ~0U;
         for (int w = 0; w < words.rows; ++w) best = std::min(best, vmap::HammingTraits::distance(d, words.ptr<uchar>(w), 32));
         if (best > 256) return 1;

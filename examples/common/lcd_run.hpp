@@ -174,7 +174,9 @@ inline LoopRun run_loops(const LoopRunConfig& config, const SequenceFeatures& fe
     // The features come pre-extracted (LoopDetector::add); the descriptor is the one
     // that made them, so a caller could push further images through the detector.
     LoopDetector detector(run.schema, std::move(descriptor), BruteForceMatcher{}, FundamentalEstimator(config.estimator),
-                          config.detector, PlaceRanker(vocabulary));
+                          config.detector,
+                          // the score that goes with the vocabulary's weighting (an FBoW file: L2)
+                          PlaceRanker(vocabulary, vocabulary ? vocabulary->scoring() : BowScoring::l1));
     if (distractors) {
       for (const Features& f : *distractors) (void)detector.add(f, {});
       run.distractors = distractors->size();

@@ -56,6 +56,7 @@
 #include <vmap/place/bow.hpp>
 #include <vmap/place/detail/format.hpp>
 #include <vmap/place/detail/hamming_rows.hpp>
+#include <vmap/place/detail/large_array.hpp>
 
 #include <opencv2/core.hpp>
 #include <opencv2/core/hal/hal.hpp>
@@ -276,9 +277,9 @@ class VocabularyTree {
     v.branching_ = branching;
     v.depth_ = depth;
     v.weighting_ = weighting;
-    if (const std::string problem = tree_problem(child_count.size(), [&](std::size_t i) { return child_count[i]; }, branching, depth);
-        !problem.empty())
-      detail::fail("VocabularyTree::from_tree: " + problem);
+    v.nodes_.resize_for_overwrite(child_count.size());
+    for (std::size_t i = 0; i < child_count.size(); ++i) v.nodes_[i].count = child_count[i];
+    if (const std::string problem = v.link(); !problem.empty()) detail::fail("VocabularyTree::from_tree: " + problem);
     detail::check(centres.type() == Traits::descriptor_type &&
                       static_cast<std::size_t>(centres.rows) == child_count.size() && centres.cols >= 1 &&
                       centres.cols <= max_cols,
@@ -290,7 +291,6 @@ class VocabularyTree {
       detail::check(cv::checkRange(centres), "VocabularyTree::from_tree: a centre value is not finite");
     v.cols_ = centres.cols;
     v.centres_ = centres.clone();
-    v.index(child_count);
     if (!word_ids.empty())
       if (const std::string problem = v.renumber(word_ids); !problem.empty()) detail::fail("VocabularyTree::from_tree: " + problem);
     v.set_idf(std::move(idf));
@@ -408,7 +408,7 @@ class VocabularyTree {
 
   /// Heap bytes held (centres, tree links, idf).
   [[nodiscard]] std::size_t memory_bytes() const noexcept {
-    return centres_.total() * centres_.elemSize() + nodes_.capacity() * sizeof(Node) + idf_.capacity() * sizeof(float);
+    return centres_.total() * centres_.elemSize() + nodes_.size() * sizeof(Node) + idf_.capacity() * sizeof(float);
   }
 
   /// The file's bytes (format at the top of this header, version 2).
@@ -541,7 +541,7 @@ class VocabularyTree {
     if (n < 1 || n > std::numeric_limits<std::uint32_t>::max() / 2) r.corrupt("node count " + std::to_string(n) + " is invalid");
     std::vector<unsigned char> raw(static_cast<std::size_t>(n * count_bytes));
     r.read(raw.data(), raw.size(), "child counts");
-    v.nodes_.resize(static_cast<std::size_t>(n));
+    v.nodes_.resize_for_overwrite(static_cast<std::size_t>(n));
     std::uint64_t leaves = 0;
     for (std::size_t i = 0; i < n; ++i) {
       const unsigned char* p = raw.data() + i * count_bytes;
@@ -551,7 +551,8 @@ class VocabularyTree {
       leaves += c == 0;
     }
     raw = {};
-    v.centres_.create(static_cast<int>(n), v.cols_, Traits::descriptor_type);
+    v.centre_storage_.resize_for_overwrite(static_cast<std::size_t>(n * row_bytes));
+    v.centres_ = cv::Mat(static_cast<int>(n), v.cols_, Traits::descriptor_type, v.centre_storage_.data());
     r.read(v.centres_.data, n * row_bytes, "centres");  // a new Mat is continuous
     const std::uint64_t words = r.u64("word count");
     r.require_items(words, 4, "word count");
@@ -573,11 +574,8 @@ class VocabularyTree {
     detail::f32_from_little_endian(v.idf_.data(), v.idf_.size());
     if constexpr (std::is_same_v<value_type, float>)
       detail::f32_from_little_endian(v.centres_.template ptr<float>(0), v.centres_.total());
-    if (const std::string problem = tree_problem(v.nodes_.size(), [&](std::size_t i) { return v.nodes_[i].count; }, v.branching_, v.depth_);
-        !problem.empty())
-      r.corrupt(problem);
+    if (const std::string problem = v.link(); !problem.empty()) r.corrupt(problem);
     if (words != leaves) r.corrupt("word count " + std::to_string(words) + " differs from the tree's " + std::to_string(leaves) + " leaves");
-    v.link();
     if (!ids.empty())
       if (const std::string problem = v.renumber(ids); !problem.empty()) r.corrupt(problem);
     if constexpr (std::is_same_v<value_type, float>)
@@ -743,24 +741,10 @@ class VocabularyTree {
 
   /// nodes_ from child counts (a valid breadth-first tree).
   void index(const std::vector<std::uint32_t>& counts) {
-    nodes_.resize(counts.size());
+    nodes_.resize_for_overwrite(counts.size());
     for (std::size_t i = 0; i < counts.size(); ++i) nodes_[i].count = counts[i];
-    link();
-  }
-
-  /// Sets each node's `first` from the counts: the first child of an inner node, the
-  /// word id of a leaf.
-  void link() noexcept {
-    std::uint32_t next = 1;
-    leaves_ = 0;
-    for (auto& node : nodes_) {
-      if (node.count == 0) {
-        node.first = leaves_++;
-      } else {
-        node.first = next;
-        next += node.count;
-      }
-    }
+    const std::string problem = link();
+    detail::check(problem.empty(), [&] { return "VocabularyTree: built an invalid tree: " + problem; });
   }
 
   /// Gives the j-th leaf (in node order) word id ids[j]; what is wrong with `ids` (not
@@ -780,25 +764,39 @@ class VocabularyTree {
     return {};
   }
 
-  /// What makes the counts (count(i) for nodes 0..n-1) not one breadth-first tree of at
-  /// most `depth` levels with at most `branching` children a node (each node's children
-  /// come after it, every node but the root has exactly one parent, the root has
-  /// children); empty if nothing.
-  template <class Count>
-  [[nodiscard]] static std::string tree_problem(std::size_t n, Count count, int branching, int depth) {
-    if (n == 0 || count(0) == 0) return "the root has no children";
-    std::uint64_t next = 1;
-    std::vector<std::uint8_t> level(n, 0);
+  /// Sets each node's `first` from the counts (the first child of an inner node, the
+  /// word id of a leaf, leaves numbered in node order), checking in the same pass that
+  /// the counts form one breadth-first tree of at most depth_ levels with at most
+  /// branching_ children a node (each node's children come after it, every node but the
+  /// root has exactly one parent, the root has children). Returns what is wrong, or
+  /// empty. Levels need no array: in breadth-first order the nodes of level l + 1 are
+  /// exactly those claimed by the nodes of level l, so a level ends where the claims of
+  /// the one before it ended.
+  [[nodiscard]] std::string link() {
+    const std::size_t n = nodes_.size();
+    if (n == 0 || nodes_[0].count == 0) return "the root has no children";
+    const auto k = static_cast<std::uint32_t>(branching_);
+    std::uint64_t next = 1, level_end = 1;
+    int level = 0;
+    leaves_ = 0;
     for (std::size_t i = 0; i < n; ++i) {
-      const std::uint32_t c = count(i);
-      if (c == 0) continue;
-      if (c > static_cast<std::uint32_t>(branching))
+      Node& node = nodes_[i];
+      if (i >= level_end) {
+        if (next <= i) return "node " + std::to_string(i) + " is nobody's child (the counts do not form a tree)";
+        level_end = next;
+        ++level;
+      }
+      const std::uint32_t c = node.count;
+      if (c == 0) {
+        node.first = leaves_++;
+        continue;
+      }
+      if (c > k)
         return "node " + std::to_string(i) + " has " + std::to_string(c) + " children, more than the branching " +
-               std::to_string(branching);
-      if (next <= i) return "node " + std::to_string(i) + " is nobody's child (the counts do not form a tree)";
+               std::to_string(branching_);
       if (next + c > n) return "the child counts claim more nodes than the " + std::to_string(n) + " stored";
-      if (level[i] + 1 > depth) return "the tree is deeper than its depth " + std::to_string(depth);
-      std::memset(level.data() + next, level[i] + 1, c);
+      if (level + 1 > depth_) return "the tree is deeper than its depth " + std::to_string(depth_);
+      node.first = static_cast<std::uint32_t>(next);
       next += c;
     }
     if (next != n) return "the child counts claim " + std::to_string(next) + " nodes, " + std::to_string(n) + " are stored";
@@ -892,7 +890,8 @@ class VocabularyTree {
   int cols_ = 0;
   BowWeighting weighting_ = BowWeighting::tf_idf_l1;
   cv::Mat centres_;          ///< one row per node (row 0: the root, unused); siblings are consecutive rows
-  std::vector<Node> nodes_;  ///< breadth-first
+  detail::LargeArray<std::uint8_t> centre_storage_;  ///< what centres_ points into, when loaded from a file
+  detail::LargeArray<Node> nodes_;  ///< breadth-first
   std::uint32_t leaves_ = 0;
   std::vector<float> idf_;   ///< per word
 };
