@@ -246,7 +246,9 @@ int main(int argc, char** argv) {
   std::printf("| vocabulary | words | vmap transform (ms / image) | FBoW transform (ms / image) | vmap vs FBoW | same words as FBoW | "
               "vmap on FBoW's file = FBoW's vectors | brute-force nearest word (ms / image) |\n|---|---|---|---|---|---|---|---|\n");
   for (const Voc& voc : {Voc{"learned 10k", &learned, "voc_10k"}, Voc{"generated 1M", &big, "voc_1m"}}) {
-    const auto& tree = *voc.tree;
+    // each library's tree as loaded from its file, as a user has it
+    const auto loaded = vmap::BinaryVocabularyTree::load(scratch / (voc.stem + ".vmapvoc"));
+    const auto& tree = loaded;
     std::vector<double> ours, theirs;
     std::size_t same_words = 0, same_vectors = 0, total_rows = 0;
     const auto from_fbow = vmap::AnyVocabulary::load(scratch / (voc.stem + ".fbow"));

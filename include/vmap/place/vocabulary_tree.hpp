@@ -290,7 +290,7 @@ class VocabularyTree {
     if constexpr (std::is_same_v<value_type, float>)
       detail::check(cv::checkRange(centres), "VocabularyTree::from_tree: a centre value is not finite");
     v.cols_ = centres.cols;
-    v.centres_ = centres.clone();
+    v.adopt_centres(centres);
     if (!word_ids.empty())
       if (const std::string problem = v.renumber(word_ids); !problem.empty()) detail::fail("VocabularyTree::from_tree: " + problem);
     v.set_idf(std::move(idf));
@@ -734,9 +734,16 @@ class VocabularyTree {
         queue.push_back({id, p.level + 1, std::move(groups[g])});
       }
     }
-    centres_.create(static_cast<int>(counts.size()), cols_, Traits::descriptor_type);
-    std::memcpy(centres_.data, centre_values.data(), centre_values.size() * sizeof(value_type));
+    adopt_centres(cv::Mat(static_cast<int>(counts.size()), cols_, Traits::descriptor_type, centre_values.data()));
     index(counts);
+  }
+
+  /// centres_ = a copy of `m` (one row per node) in centre_storage_.
+  void adopt_centres(const cv::Mat& m) {
+    const std::size_t row_bytes = static_cast<std::size_t>(m.cols) * m.elemSize();
+    centre_storage_.resize_for_overwrite(static_cast<std::size_t>(m.rows) * row_bytes);
+    centres_ = cv::Mat(m.rows, m.cols, m.type(), centre_storage_.data());
+    for (int r = 0; r < m.rows; ++r) std::memcpy(centres_.ptr(r), m.ptr(r), row_bytes);
   }
 
   /// nodes_ from child counts (a valid breadth-first tree).
@@ -890,7 +897,7 @@ class VocabularyTree {
   int cols_ = 0;
   BowWeighting weighting_ = BowWeighting::tf_idf_l1;
   cv::Mat centres_;          ///< one row per node (row 0: the root, unused); siblings are consecutive rows
-  detail::LargeArray<std::uint8_t> centre_storage_;  ///< what centres_ points into, when loaded from a file
+  detail::LargeArray<std::uint8_t> centre_storage_;  ///< what centres_ points into (but for from_words)
   detail::LargeArray<Node> nodes_;  ///< breadth-first
   std::uint32_t leaves_ = 0;
   std::vector<float> idf_;   ///< per word
