@@ -3,9 +3,9 @@
 //
 //   vmap vocabulary ../shared/data/tum_fr1_rpy/rgb.txt --words 1000 --depth 3 --out voc.bin
 //
-// `vmap vocabulary convert IN OUT` converts a vocabulary file of any format vmap reads
+// `vmap vocabulary convert INPUT OUTPUT` converts a vocabulary file of any format vmap reads
 // (vmap, ORB-SLAM2/3 ORBvoc.txt, DBoW2 YAML .yml / .yml.gz, FBoW binary) to vmap's
-// format, or to ORBvoc text (OUT ending in .txt) or FBoW binary (OUT ending in .fbow).
+// format, or to ORBvoc text (OUTPUT ending in .txt) or FBoW binary (OUTPUT ending in .fbow).
 //
 // Binary descriptors (orb, akaze) give a k-majority tree on Hamming distance, float ones
 // (sift, xfeat) a k-means tree on L2. Progress goes to stderr.
@@ -56,7 +56,7 @@ int convert(const VocabularyArgs& a) {
 
 int run(const VocabularyArgs& a) {
   if (a.input.empty() || a.out.empty())
-    throw vmap::examples::UsageError("learning needs FRAMES and --out (converting: vmap vocabulary convert IN OUT)");
+    throw vmap::examples::UsageError("learning needs FRAMES and --out (converting: vmap vocabulary convert INPUT OUTPUT)");
   const int branching = a.vocabulary.branching();
   const auto features = vmap::examples::extract_features(a.input, a.descriptor, [](std::size_t done, std::size_t n) {
     if (done == n || done % 10 == 0) std::fprintf(stderr, "\rfeatures: frame %zu/%zu", done, n);
@@ -90,9 +90,9 @@ std::function<int()> setup(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--model", a->descriptor.model, "--features xfeat: the XFeat ONNX model");
   auto* c = app.add_subcommand("convert", "Convert a vocabulary file (vmap, ORBvoc.txt, DBoW2 .yml/.yml.gz, FBoW) to vmap's "
-                                          "format, or to ORBvoc text (OUT *.txt) or FBoW (OUT *.fbow)");
-  c->add_option("IN", a->convert_in, "Vocabulary file of any format vmap reads")->required()->check(CLI::ExistingFile);
-  c->add_option("OUT", a->convert_out, "File written (its extension chooses the format)")->required();
+                                          "format, or to ORBvoc text (OUTPUT *.txt) or FBoW (OUTPUT *.fbow)");
+  c->add_option("INPUT", a->convert_in, "Vocabulary file of any format vmap reads")->required()->check(CLI::ExistingFile);
+  c->add_option("OUTPUT", a->convert_out, "File written (its extension chooses the format)")->required();
   return [a, c] { return c->parsed() ? convert(*a) : run(*a); };
 }
 

@@ -5,6 +5,8 @@
 
 #include "support/shared_data.hpp"
 
+#include <vmap/place/vocabulary.hpp>
+
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
 
@@ -544,7 +546,42 @@ TEST_CASE("cli: memory build / info share the memory code: a folder means DIR/me
               "--resume: no memory file");
 }
 
+TEST_CASE("cli: vocabulary without frames or convert without files are usage errors") {
+  usage_error({"vocabulary"}, "learning needs FRAMES and --out");
+  usage_error({"vocabulary", "convert", (work_dir() / "missing.txt").string(), "x.vmapvoc"}, "INPUT");
+  usage_error({"vocabulary", "convert"}, "INPUT");
+  const fs::path folder = work_dir();
+  const Run r = run_vmap({"vocabulary", "convert", folder.string(), (folder / "x.vmapvoc").string()});
+  CHECK(r.code != 0);
+}
+
 TEST_SUITE("data") {
+  TEST_CASE("cli: vocabulary convert reads ORB-SLAM2, DBoW2 and FBoW files and writes each format back") {
+    const fs::path dir = work_dir();
+    for (const char* name : {"orbslam2_k10L3.txt", "dbow2_k10L3.yml.gz", "fbow_k10L3.fbow"}) {
+      const std::string in = vmap::test::data_path(std::string("vocabularies/") + name).string();
+      const fs::path out = dir / (std::string(name) + ".vmapvoc");
+      const Run r = run_vmap({"vocabulary", "convert", in, out.string()});
+      INFO(name << ": " << r.err);
+      REQUIRE(r.code == 0);
+      CHECK(r.out.find("1000 words (branching 10, depth 3") != std::string::npos);
+      const auto v = vmap::AnyVocabulary::load(out);
+      CHECK(v.size() == 1000);
+    }
+    // vmap's file to ORBvoc text: DBoW2's node order, so the shared file comes back line
+    // for line but for the weights' last digit (6 significant digits both ways)
+    const Run t = run_vmap({"vocabulary", "convert", (dir / "orbslam2_k10L3.txt.vmapvoc").string(), (dir / "again.txt").string()});
+    REQUIRE(t.code == 0);
+    const auto a = vmap::AnyVocabulary::load(dir / "again.txt");
+    const auto b = vmap::AnyVocabulary::load(dir / "orbslam2_k10L3.txt.vmapvoc");
+    CHECK(cv::norm(a.binary()->words(), b.binary()->words(), cv::NORM_L1) == 0.0);
+    CHECK(a.binary()->idf() == b.binary()->idf());
+    const Run f = run_vmap({"vocabulary", "convert", (dir / "fbow_k10L3.fbow.vmapvoc").string(), (dir / "again.fbow").string()});
+    REQUIRE(f.code == 0);
+    CHECK(vmap::AnyVocabulary::load(dir / "again.fbow").binary()->serialize() ==
+          vmap::AnyVocabulary::load(dir / "fbow_k10L3.fbow.vmapvoc").binary()->serialize());
+  }
+
   TEST_CASE("cli: build --memory --poses keeps each key image's pose; localize --memory answers it") {
     const std::string gt = vmap::test::data_path("tum_fr1_rpy/groundtruth.txt").string();
     const fs::path file = work_dir() / "memory_poses.vmem";

@@ -43,6 +43,7 @@
 #include <cstdint>
 #include <cstring>
 #include <deque>
+#include <exception>
 #include <filesystem>
 #include <limits>
 #include <string>
@@ -184,7 +185,7 @@ inline BinaryVocabularyTree import_orbslam_text(std::string_view text, const std
     while (at < text.size()) {
       const std::size_t end = std::min(text.find('\n', at), text.size());
       line = text.substr(at, end - at);
-      at = end + 1;
+      at = std::min(end + 1, text.size());
       ++line_no;
       if (!detail::only_blanks(line, 0)) return true;
     }
@@ -393,12 +394,18 @@ inline BinaryVocabularyTree import_dbow2_yaml(std::string_view text, const std::
     fs.open(std::string(text), cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
   } catch (const cv::Exception& e) {
     detail::bad_vocabulary(source, std::string("not YAML OpenCV can read: ") + e.err);
+  } catch (const std::exception& e) {  // OpenCV's parser lets std::length_error and the like out
+    detail::bad_vocabulary(source, std::string("not YAML OpenCV can read (") + e.what() + ")");
   }
   if (!fs.isOpened()) detail::bad_vocabulary(source, "not YAML OpenCV can read");
   try {
     return import_dbow2_yaml(fs, name);
   } catch (const cv::Exception& e) {
     detail::bad_vocabulary(source, std::string("unexpected YAML content: ") + e.err);
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    detail::bad_vocabulary(source, std::string("unexpected YAML content (") + e.what() + ")");
   }
 }
 
@@ -662,12 +669,18 @@ inline BinaryVocabularyTree import_binary_vocabulary(const std::filesystem::path
     fs.open(path.string(), cv::FileStorage::READ);
   } catch (const cv::Exception& e) {
     detail::bad_vocabulary(source, std::string("not YAML OpenCV can read: ") + e.err);
+  } catch (const std::exception& e) {  // OpenCV's parser lets std::length_error and the like out
+    detail::bad_vocabulary(source, std::string("not YAML OpenCV can read (") + e.what() + ")");
   }
   if (!fs.isOpened()) detail::bad_vocabulary(source, "not YAML OpenCV can read");
   try {
     return import_dbow2_yaml(fs, path.string());
   } catch (const cv::Exception& e) {
     detail::bad_vocabulary(source, std::string("unexpected YAML content: ") + e.err);
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    detail::bad_vocabulary(source, std::string("unexpected YAML content (") + e.what() + ")");
   }
 }
 

@@ -845,10 +845,24 @@ class VocabularyTree {
 #endif
   }
 
-  /// The words of all rows. The descents of a batch of descriptors are interleaved
-  /// level by level, each prefetching its next node's children: in a large tree every
-  /// level is a cache miss, and the batch overlaps them.
+  /// The words of all rows. For binary descriptors on a CPU with POPCNT the whole
+  /// descent is compiled for it (the distance kernel inlined, no call per node).
   void assign_rows(const cv::Mat& d, std::uint32_t* out) const {
+#ifdef VMAP_HAMMING_POPCNT
+    if constexpr (std::is_same_v<Traits, HammingTraits>)
+      if (detail::popcnt_available()) return assign_rows_popcnt(d, out);
+#endif
+    descend(d, out);
+  }
+
+#ifdef VMAP_HAMMING_POPCNT
+  __attribute__((target("popcnt"))) void assign_rows_popcnt(const cv::Mat& d, std::uint32_t* out) const { descend(d, out); }
+#endif
+
+  /// The descents of a batch of descriptors are interleaved level by level, each
+  /// prefetching its next node's children: in a large tree every level is a cache miss,
+  /// and the batch overlaps them.
+  [[gnu::always_inline]] void descend(const cv::Mat& d, std::uint32_t* out) const {
     constexpr int batch = 16;
     for (int start = 0; start < d.rows; start += batch) {
       const int m = std::min(batch, d.rows - start);
@@ -858,7 +872,13 @@ class VocabularyTree {
         for (int i = 0; i < m; ++i) {
           const Node& node = nodes_[at[i]];
           if (node.count == 0) continue;
-          at[i] = nearest_child(d.ptr<value_type>(start + i), node);
+          const value_type* q = d.ptr<value_type>(start + i);
+          if constexpr (std::is_same_v<Traits, HammingTraits>) {
+            at[i] = node.first + detail::nearest_row_inline(q, centres_.ptr<value_type>(static_cast<int>(node.first)), node.count,
+                                                            static_cast<std::size_t>(cols_), static_cast<std::size_t>(cols_));
+          } else {
+            at[i] = nearest_child(q, node);
+          }
           const Node& next = nodes_[at[i]];
           if (next.count != 0) prefetch(next);
           moving = true;

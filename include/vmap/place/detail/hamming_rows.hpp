@@ -57,26 +57,41 @@ using NearestRowFn = std::uint32_t (*)(const std::uint8_t* q, const std::uint8_t
   }                                                                                                \
   return best;
 
+/// The kernel, inlined into its caller so that it follows the caller's instruction set
+/// (a caller compiled for POPCNT gets the instruction).
+[[gnu::always_inline]] inline std::uint32_t nearest_row_inline(const std::uint8_t* q, const std::uint8_t* rows,
+                                                                std::uint32_t count, std::size_t cols,
+                                                                std::size_t stride) noexcept {
+  VMAP_NEAREST_ROW_BODY
+}
+
+#undef VMAP_NEAREST_ROW_BODY
+
 inline std::uint32_t nearest_row_portable(const std::uint8_t* q, const std::uint8_t* rows, std::uint32_t count,
                                           std::size_t cols, std::size_t stride) noexcept {
-  VMAP_NEAREST_ROW_BODY
+  return nearest_row_inline(q, rows, count, cols, stride);
 }
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define VMAP_HAMMING_POPCNT 1
 __attribute__((target("popcnt"))) inline std::uint32_t nearest_row_popcnt(const std::uint8_t* q, const std::uint8_t* rows,
                                                                             std::uint32_t count, std::size_t cols,
                                                                             std::size_t stride) noexcept {
-  VMAP_NEAREST_ROW_BODY
+  return nearest_row_inline(q, rows, count, cols, stride);
 }
-#endif
 
-#undef VMAP_NEAREST_ROW_BODY
+inline bool popcnt_available() noexcept {
+  static const bool yes = __builtin_cpu_supports("popcnt");
+  return yes;
+}
+#else
+inline bool popcnt_available() noexcept { return false; }
+#endif
 
 /// The fastest kernel this CPU runs; `portable_only` forces the portable one.
 inline NearestRowFn nearest_row_kernel(bool portable_only = false) noexcept {
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-  static const bool popcnt = __builtin_cpu_supports("popcnt");
-  if (popcnt && !portable_only) return nearest_row_popcnt;
+  if (popcnt_available() && !portable_only) return nearest_row_popcnt;
 #endif
   (void)portable_only;
   return nearest_row_portable;
