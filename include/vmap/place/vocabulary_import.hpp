@@ -145,28 +145,19 @@ inline BowWeighting dbow2_weighting(long weighting, long scoring, const std::str
   return once ? BowWeighting::idf_l2 : BowWeighting::tf_idf_l2;
 }
 
-/// Parses one unsigned decimal integer (after blanks) from s at pos; false if none.
-inline bool next_uint(std::string_view s, std::size_t& pos, std::uint64_t& out) {
+/// Parses one number of type T (after blanks) from s at pos, moving pos past it; false
+/// if there is none.
+template <class T>
+bool next_number(std::string_view s, std::size_t& pos, T& out) {
   while (pos < s.size() && (s[pos] == ' ' || s[pos] == '\t' || s[pos] == '\r')) ++pos;
   const auto r = std::from_chars(s.data() + pos, s.data() + s.size(), out);
   if (r.ec != std::errc{} || r.ptr == s.data() + pos) return false;
   pos = static_cast<std::size_t>(r.ptr - s.data());
   return true;
 }
-inline bool next_int(std::string_view s, std::size_t& pos, long& out) {
-  while (pos < s.size() && (s[pos] == ' ' || s[pos] == '\t' || s[pos] == '\r')) ++pos;
-  const auto r = std::from_chars(s.data() + pos, s.data() + s.size(), out);
-  if (r.ec != std::errc{} || r.ptr == s.data() + pos) return false;
-  pos = static_cast<std::size_t>(r.ptr - s.data());
-  return true;
-}
-inline bool next_double(std::string_view s, std::size_t& pos, double& out) {
-  while (pos < s.size() && (s[pos] == ' ' || s[pos] == '\t' || s[pos] == '\r')) ++pos;
-  const auto r = std::from_chars(s.data() + pos, s.data() + s.size(), out);
-  if (r.ec != std::errc{} || r.ptr == s.data() + pos) return false;
-  pos = static_cast<std::size_t>(r.ptr - s.data());
-  return true;
-}
+inline bool next_uint(std::string_view s, std::size_t& pos, std::uint64_t& out) { return next_number(s, pos, out); }
+inline bool next_int(std::string_view s, std::size_t& pos, long& out) { return next_number(s, pos, out); }
+inline bool next_double(std::string_view s, std::size_t& pos, double& out) { return next_number(s, pos, out); }
 inline bool only_blanks(std::string_view s, std::size_t pos) {
   for (; pos < s.size(); ++pos)
     if (s[pos] != ' ' && s[pos] != '\t' && s[pos] != '\r') return false;
@@ -385,13 +376,17 @@ inline void check_yaml_nesting(std::string_view text, const std::string& source,
 
 }  // namespace detail
 
-/// Reads DBoW2's YAML vocabulary from text (not gzipped).
-inline BinaryVocabularyTree import_dbow2_yaml(std::string_view text, const std::string& name = "<memory>") {
+namespace detail {
+
+/// Opens a FileStorage with `open` and reads the DBoW2 vocabulary in it; whatever OpenCV
+/// throws (cv::Exception, or std::length_error and the like from its parser) becomes an
+/// Error naming the file.
+template <class Open>
+BinaryVocabularyTree read_dbow2_storage(Open open, const std::string& name) {
   const std::string source = "DBoW2 YAML vocabulary '" + name + "'";
-  detail::check_yaml_nesting(text, source);
   cv::FileStorage fs;
   try {
-    fs.open(std::string(text), cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
+    open(fs);
   } catch (const cv::Exception& e) {
     detail::bad_vocabulary(source, std::string("not YAML OpenCV can read: ") + e.err);
   } catch (const std::exception& e) {  // OpenCV's parser lets std::length_error and the like out
@@ -407,6 +402,19 @@ inline BinaryVocabularyTree import_dbow2_yaml(std::string_view text, const std::
   } catch (const std::exception& e) {
     detail::bad_vocabulary(source, std::string("unexpected YAML content (") + e.what() + ")");
   }
+}
+
+}  // namespace detail
+
+/// Reads DBoW2's YAML vocabulary from text (not gzipped).
+inline BinaryVocabularyTree import_dbow2_yaml(std::string_view text, const std::string& name = "<memory>") {
+  const std::string source = "DBoW2 YAML vocabulary '" + name + "'";
+  detail::check_yaml_nesting(text, source);
+  return detail::read_dbow2_storage(
+      [&](cv::FileStorage& fs) {
+        fs.open(std::string(text), cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
+      },
+      name);
 }
 
 /// Reads FBoW's binary vocabulary (fbow::Vocabulary::saveToFile; binary descriptors).
@@ -664,24 +672,7 @@ inline BinaryVocabularyTree import_binary_vocabulary(const std::filesystem::path
   std::uint32_t isize = 0;
   for (int i = 0; i < 4; ++i) isize |= static_cast<std::uint32_t>(static_cast<unsigned char>(all[all.size() - 4 + static_cast<std::size_t>(i)])) << (8 * i);
   if (isize > (1U << 30)) detail::bad_vocabulary(source, "decompresses to " + std::to_string(isize) + " bytes (limit 1 GiB)");
-  cv::FileStorage fs;
-  try {
-    fs.open(path.string(), cv::FileStorage::READ);
-  } catch (const cv::Exception& e) {
-    detail::bad_vocabulary(source, std::string("not YAML OpenCV can read: ") + e.err);
-  } catch (const std::exception& e) {  // OpenCV's parser lets std::length_error and the like out
-    detail::bad_vocabulary(source, std::string("not YAML OpenCV can read (") + e.what() + ")");
-  }
-  if (!fs.isOpened()) detail::bad_vocabulary(source, "not YAML OpenCV can read");
-  try {
-    return import_dbow2_yaml(fs, path.string());
-  } catch (const cv::Exception& e) {
-    detail::bad_vocabulary(source, std::string("unexpected YAML content: ") + e.err);
-  } catch (const Error&) {
-    throw;
-  } catch (const std::exception& e) {
-    detail::bad_vocabulary(source, std::string("unexpected YAML content (") + e.what() + ")");
-  }
+  return detail::read_dbow2_storage([&](cv::FileStorage& fs) { fs.open(path.string(), cv::FileStorage::READ); }, path.string());
 }
 
 }  // namespace vmap

@@ -27,11 +27,14 @@ namespace vmap::detail {
 
 inline constexpr std::uint32_t crc32c_polynomial = 0x82F63B78U;
 
-inline constexpr std::array<std::array<std::uint32_t, 256>, 8> crc32c_slices = [] {
+/// Slicing-by-8 tables of the reflected CRC of polynomial `Poly` (table k advances a
+/// byte that is followed by k more; Intel's slicing-by-8).
+template <std::uint32_t Poly>
+inline constexpr std::array<std::array<std::uint32_t, 256>, 8> crc_slices = [] {
   std::array<std::array<std::uint32_t, 256>, 8> t{};
   for (std::uint32_t i = 0; i < 256; ++i) {
     std::uint32_t c = i;
-    for (int k = 0; k < 8; ++k) c = (c & 1U) ? crc32c_polynomial ^ (c >> 1) : c >> 1;
+    for (int k = 0; k < 8; ++k) c = (c & 1U) ? Poly ^ (c >> 1) : c >> 1;
     t[0][i] = c;
   }
   for (std::size_t i = 0; i < 256; ++i)
@@ -39,9 +42,11 @@ inline constexpr std::array<std::array<std::uint32_t, 256>, 8> crc32c_slices = [
   return t;
 }();
 
-/// Raw CRC-32C update (no initial or final inversion), portable: eight bytes a step.
-inline std::uint32_t crc32c_update_portable(std::uint32_t c, const unsigned char* p, std::size_t n) noexcept {
-  const auto& t = crc32c_slices;
+/// Raw update (no initial or final inversion) of the reflected CRC of polynomial `Poly`,
+/// eight bytes a step.
+template <std::uint32_t Poly>
+inline std::uint32_t crc_update_sliced(std::uint32_t c, const unsigned char* p, std::size_t n) noexcept {
+  const auto& t = crc_slices<Poly>;
   while (n >= 8) {
     const std::uint32_t lo = c ^ (static_cast<std::uint32_t>(p[0]) | static_cast<std::uint32_t>(p[1]) << 8 |
                                   static_cast<std::uint32_t>(p[2]) << 16 | static_cast<std::uint32_t>(p[3]) << 24);
@@ -54,6 +59,11 @@ inline std::uint32_t crc32c_update_portable(std::uint32_t c, const unsigned char
   }
   while (n-- > 0) c = t[0][(c ^ *p++) & 0xFFU] ^ (c >> 8);
   return c;
+}
+
+/// Raw CRC-32C update, portable.
+inline std::uint32_t crc32c_update_portable(std::uint32_t c, const unsigned char* p, std::size_t n) noexcept {
+  return crc_update_sliced<crc32c_polynomial>(c, p, n);
 }
 
 #ifdef VMAP_CRC32C_HARDWARE
