@@ -1,6 +1,8 @@
 // Key-image selection throughput: vmap against ../shared/baselines/keyframes_opencv.cpp
 // in the same run (ORB 1000 + mutual NN + MAGSAC 1 px 0.99, S = inliers / max, eq. 6,
-// tau 0.3), where vmap's time goes, and a 9-threshold sweep against one build. Then the
+// tau 0.3), where vmap's time goes, and a 9-threshold sweep against one build. vmap runs
+// as run_selector's default (two threads decode + extract, the calling thread scores),
+// with one preparing thread, on one thread, and on one thread without the bound skip. Then the
 // learned configurations of issue 12 against ORB, time per frame on one core and on two
 // (cv::setNumThreads): XFeat native (any-size model at the image's resolution, top-k
 // 1000) and the detector-free XFeat dense front end (PairKeyframeSelector).

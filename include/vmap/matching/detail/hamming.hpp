@@ -329,6 +329,10 @@ __attribute__((target("avx2"))) void two_nearest_avx2(const std::uint64_t* a, in
 }
 
 // ---- AVX-512 VPOPCNTDQ: 16 train descriptors a block -------------------------------------
+// The same loops as the AVX2 ones with 16 lanes and mask registers. They are written
+// out per level because GCC cannot share one template body between them: a target
+// attribute cannot depend on a template parameter, and a function without the
+// attribute may not inline the level's intrinsics.
 
 // GCC 12's unmasked _mm512_min_epi32 and _mm512_slli_epi64 start from an "undefined"
 // register that -Wmaybe-uninitialized reports once inlined; the zero-masked forms with
