@@ -1,6 +1,8 @@
 // Key-image selection throughput: vmap against ../shared/baselines/keyframes_opencv.cpp
 // in the same run (ORB 1000 + mutual NN + MAGSAC 1 px 0.99, S = inliers / max, eq. 6,
-// tau 0.3), where vmap's time goes, and a 9-threshold sweep against one build. Then the
+// tau 0.3), where vmap's time goes, and a 9-threshold sweep against one build. vmap runs
+// as run_selector's default (two threads decode + extract, the calling thread scores),
+// with one preparing thread, on one thread, and on one thread without the bound skip. Then the
 // learned configurations of issue 12 against ORB, time per frame on one core and on two
 // (cv::setNumThreads): XFeat native (any-size model at the image's resolution, top-k
 // 1000) and the detector-free XFeat dense front end (PairKeyframeSelector).
@@ -102,13 +104,14 @@ struct VmapRun {
   vmap::VisualMap map;
 };
 
-VmapRun run_vmap(const std::filesystem::path& input, double tau, bool pipelined, bool skip) {
+VmapRun run_vmap(const std::filesystem::path& input, double tau, bool pipelined, bool skip,
+                 std::size_t prepare_threads = 2) {
   const auto t0 = Clock::now();
   const double c0 = cpu_seconds(RUSAGE_SELF);
   auto src = vmap::FrameSource::open(input, {.grey = true});
   vmap::OrbMagsacSelector sel(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, vmap::FundamentalEstimator(kMagsac),
                               vmap::InlierRatio{}, {.tau = tau, .skip_by_upper_bound = skip});
-  vmap::run_selector(src, sel, {.pipelined = pipelined});
+  vmap::run_selector(src, sel, {.pipelined = pipelined, .prepare_threads = prepare_threads});
   VmapRun r;
   r.seconds = since(t0);
   r.cpu = cpu_seconds(RUSAGE_SELF) - c0;
@@ -180,8 +183,8 @@ void bench_dataset(const std::string& label, const std::filesystem::path& input,
   vmap::write_file_atomically(list, list_text);
 
   BaselineRun base;
-  VmapRun two, one, noskip;
-  base.seconds = two.seconds = one.seconds = noskip.seconds = 1e30;
+  VmapRun two, two_one, one, noskip;
+  base.seconds = two.seconds = two_one.seconds = one.seconds = noskip.seconds = 1e30;
   for (int r = 0; r < repeats; ++r) {
     const auto b = run_baseline(list, tau);
     if (!b.ok) {
@@ -191,6 +194,8 @@ void bench_dataset(const std::string& label, const std::filesystem::path& input,
     if (b.seconds < base.seconds) base = b;
     auto v2 = run_vmap(input, tau, true, true);
     if (v2.seconds < two.seconds) two = std::move(v2);
+    auto v21 = run_vmap(input, tau, true, true, 1);
+    if (v21.seconds < two_one.seconds) two_one = std::move(v21);
     auto v1 = run_vmap(input, tau, false, true);
     if (v1.seconds < one.seconds) one = std::move(v1);
     auto v0 = run_vmap(input, tau, false, false);
@@ -210,6 +215,7 @@ void bench_dataset(const std::string& label, const std::filesystem::path& input,
                 static_cast<double>(s.frames) / r.seconds, r.cpu, base.seconds / r.seconds);
   };
   row("vmap (2 threads, bound skip)", two);
+  row("vmap (2 thr, 1 preparing)", two_one);
   row("vmap (1 thread, bound skip)", one);
   row("vmap (1 thread, no skip)", noskip);
   std::printf("  key images: vmap %zu, baseline %d -> %s\n", st.key_images, base.keys,
@@ -217,6 +223,7 @@ void bench_dataset(const std::string& label, const std::filesystem::path& input,
                   ? "same count and same inlier min/max"
                   : "DIFFERENT");
   const bool same_modes = two.map.key_indices() == one.map.key_indices() &&
+                          two_one.map.key_indices() == one.map.key_indices() &&
                           one.map.key_indices() == noskip.map.key_indices();
   std::printf("  vmap key images identical across threads/skip modes: %s\n", same_modes ? "yes" : "NO");
   std::printf("  fps ratio vmap/baseline: %.2fx (2 threads), %.2fx (1 thread); CPU-time ratio baseline/vmap: %.2fx "

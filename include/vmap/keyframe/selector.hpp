@@ -127,10 +127,27 @@ class BasicKeyframeSelector {
   [[nodiscard]] Prepared prepare(const Frame& frame)
     requires PreparesFrames<F>
   {
-    check_frame(frame);
-    Prepared p{front_.prepare(frame.image), frame.index, frame.name, frame.timestamp, {}};
-    if (options_.keep_images) p.image = frame.image;
-    return p;
+    return prepare_with(front_, options_.keep_images, frame);
+  }
+
+  /// Prepares frames exactly as prepare() does, with its own copy of the front end (its
+  /// own Descriptor), so that another thread can prepare frames at the same time
+  /// (run_selector's extra preparing threads).
+  class Preparer {
+   public:
+    [[nodiscard]] Prepared prepare(const Frame& frame) { return prepare_with(front_, keep_images_, frame); }
+
+   private:
+    friend class BasicKeyframeSelector;
+    Preparer(F front, bool keep_images) : front_(std::move(front)), keep_images_(keep_images) {}
+    F front_;
+    bool keep_images_;
+  };
+
+  [[nodiscard]] Preparer preparer() const
+    requires PreparesFrames<F> && std::copy_constructible<F>
+  {
+    return Preparer(front_, options_.keep_images);
   }
 
   FrameResult push(const Frame& frame)
@@ -294,7 +311,14 @@ class BasicKeyframeSelector {
       out = front_.score(key_->item, item, 0.0);
   }
 
-  void check_frame(const Frame& frame) const {
+  static Prepared prepare_with(F& front, bool keep_images, const Frame& frame) {
+    check_frame(frame);
+    Prepared p{front.prepare(frame.image), frame.index, frame.name, frame.timestamp, {}};
+    if (keep_images) p.image = frame.image;
+    return p;
+  }
+
+  static void check_frame(const Frame& frame) {
     detail::check(!frame.image.empty(), [&] {
       return "key-image selector: frame " + std::to_string(frame.index) + " ('" + frame.name + "') is an empty image";
     });

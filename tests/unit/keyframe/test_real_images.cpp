@@ -13,6 +13,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -106,6 +107,46 @@ TEST_CASE("sweep: invalid thresholds are Errors") {
                                                     vmap::FundamentalEstimator{}, vmap::InlierRatio{},
                                                     {.taus = {0.3, 1.2}}),
                        doctest::Contains("(0, 1]"), vmap::Error);
+}
+
+TEST_CASE("sample frames: any number of preparing threads gives the same map, frames in order") {
+  const auto plain = select(sample_list(), {.tau = 0.3}, {.pipelined = false});
+  for (const std::size_t threads : {1, 2, 3}) {
+    CAPTURE(threads);
+    auto src = vmap::FrameSource::open(sample_list(), {.grey = true});
+    auto sel = orb_selector({.tau = 0.3});
+    std::vector<std::size_t> order;
+    vmap::run_selector(src, sel, {.pipelined = true, .prepare_threads = threads, .queue_capacity = 4},
+                       [&](const vmap::FrameResult& r) { order.push_back(r.frame_index); });
+    REQUIRE(order.size() == 60);
+    for (std::size_t k = 0; k < order.size(); ++k) CHECK(order[k] == k);
+    const auto m = sel.take_map();
+    CHECK(m.key_indices() == plain.key_indices());
+    REQUIRE(m.pairs.size() == plain.pairs.size());
+    for (std::size_t k = 0; k < m.pairs.size(); ++k) CHECK(m.pairs[k].inliers == plain.pairs[k].inliers);
+  }
+  auto src = vmap::FrameSource::open(sample_list(), {.grey = true});
+  auto sel = orb_selector({});
+  CHECK_THROWS_WITH_AS(vmap::run_selector(src, sel, {.prepare_threads = 0}), doctest::Contains("prepare_threads"),
+                       vmap::Error);
+  CHECK_THROWS_WITH_AS(vmap::run_selector(src, sel, {.prepare_threads = 3, .queue_capacity = 2}),
+                       doctest::Contains("queue_capacity"), vmap::Error);
+}
+
+TEST_CASE("pipeline: a failure while preparing frame k reaches the caller after frames 0..k-1") {
+  for (const std::size_t threads : {1, 2, 3}) {
+    CAPTURE(threads);
+    auto src = vmap::FrameSource::open(sample_list(), {.end = 20, .grey = true});
+    std::vector<std::function<std::size_t(const vmap::Frame&)>> prepares(threads, [](const vmap::Frame& f) {
+      if (f.index == 7) throw vmap::Error("frame 7 refused");
+      return f.index;
+    });
+    std::vector<std::size_t> consumed;
+    CHECK_THROWS_WITH_AS(
+        vmap::detail::run_pipelined_on<std::size_t>(src, 4, prepares, [&](std::size_t i) { consumed.push_back(i); }),
+        "frame 7 refused", vmap::Error);
+    CHECK(consumed == std::vector<std::size_t>{0, 1, 2, 3, 4, 5, 6});
+  }
 }
 
 TEST_CASE("sample frames: a corrupt frame in the middle is skipped, the run goes on") {
