@@ -173,8 +173,12 @@ inline LoopRun run_loops(const LoopRunConfig& config, const SequenceFeatures& fe
   with_descriptor(config.descriptor, [&](auto descriptor) {
     // The features come pre-extracted (LoopDetector::add); the descriptor is the one
     // that made them, so a caller could push further images through the detector.
-    LoopDetector detector(run.schema, std::move(descriptor), BruteForceMatcher{}, FundamentalEstimator(config.estimator),
-                          config.detector, PlaceRanker(vocabulary));
+    // The matcher and estimator that go with the descriptor: XFeat's dense grid is
+    // matched by blocked mutual NN, and xfeat-star refines each verified pair (XFeat*).
+    auto matcher = matcher_for(descriptor);
+    auto estimator = estimator_for(descriptor, config.descriptor, FundamentalEstimator(config.estimator));
+    LoopDetector detector(run.schema, std::move(descriptor), std::move(matcher), std::move(estimator), config.detector,
+                          PlaceRanker(vocabulary));
     if (distractors) {
       for (const Features& f : *distractors) (void)detector.add(f, {});
       run.distractors = distractors->size();
