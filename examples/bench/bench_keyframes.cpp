@@ -8,7 +8,8 @@
 // refinement per pair for 1000 and 5000 coarse matches, next to the pair's other stages
 // and ORB's per-frame cost in the same run.
 //
-// usage: bench_keyframes [REPEATS=2] [SHARED_DIR] [PART=all|orb|learned|refine]
+// usage: bench_keyframes [REPEATS=2] [SHARED_DIR] [PART=all|orb|learned|refine] [FRAMES=60]
+// (FRAMES: frames of each sequence in the learned part)
 // Each timing is the best of REPEATS runs; vmap and the baseline alternate, so both see
 // the same machine load. Ratios are what counts on a shared machine.
 #include <vmap/core/concepts.hpp>
@@ -379,28 +380,21 @@ void bench_refine(const std::filesystem::path& shared, int repeats) {
       ob = orb.extract(b);
       (void)magsac.verify(oa, ob, bf.match(oa, ob));
     }) / 2.0;  // two extractions per call: one per frame, as a selector does
-    std::printf("
-== XFeat* refinement per pair (tum_fr1_rpy frames 0 and 5, %d OpenCV thread%s, median of %d) ==
-",
+    std::printf("\n== XFeat* refinement per pair (tum_fr1_rpy frames 0 and 5, %d OpenCV thread%s, median of %d) ==\n",
                 threads, threads == 1 ? "" : "s", reps);
-    std::printf("  ORB 1000 per frame (extract, match, MAGSAC)   %8.2f ms
-", orb_frame);
-    std::printf("  XFeat forward pass (640x480, 4800 cells)      %8.2f ms  %6.2fx ORB frame
-", forward,
+    std::printf("  ORB 1000 per frame (extract, match, MAGSAC)   %8.2f ms\n", orb_frame);
+    std::printf("  XFeat forward pass (640x480, 4800 cells)      %8.2f ms  %6.2fx ORB frame\n", forward,
                 forward / orb_frame);
-    std::printf("  coarse mutual NN, 4800 x 4800 cells           %8.2f ms  %6.2fx  (%zu matches)
-", nn,
+    std::printf("  coarse mutual NN, 4800 x 4800 cells           %8.2f ms  %6.2fx  (%zu matches)\n", nn,
                 nn / orb_frame, m.size());
-    std::printf("  MAGSAC++ on the %zu coarse matches           %8.2f ms  %6.2fx
-", m.size(), verify,
+    std::printf("  MAGSAC++ on the %zu coarse matches           %8.2f ms  %6.2fx\n", m.size(), verify,
                 verify / orb_frame);
     for (const std::size_t n : {std::size_t{1000}, std::size_t{5000}}) {
       vmap::Matches batch;
       for (std::size_t i = 0; i < n; ++i) batch.push_back(m[i % m.size()]);
       std::vector<vmap::FineOffset> offsets;
       const double ms = median_ms(reps, [&] { refiner.refine(fa.descriptors, fb.descriptors, batch, offsets); });
-      std::printf("  refinement of %4zu coarse matches             %8.2f ms  %6.2fx  (%.1f us a match)
-", n, ms,
+      std::printf("  refinement of %4zu coarse matches             %8.2f ms  %6.2fx  (%.1f us a match)\n", n, ms,
                   ms / orb_frame, 1e3 * ms / static_cast<double>(n));
     }
   }
@@ -413,6 +407,7 @@ int main(int argc, char** argv) {
   const int repeats = argc > 1 ? std::max(1, std::atoi(argv[1])) : 2;
   const std::filesystem::path shared = argc > 2 ? argv[2] : VMAP_SHARED_DIR;
   const std::string part = argc > 3 ? argv[3] : "all";
+  const std::size_t learned_frames = argc > 4 ? static_cast<std::size_t>(std::max(2, std::atoi(argv[4]))) : 60;
   if (part != "all" && part != "orb" && part != "learned" && part != "refine") {
     std::fprintf(stderr, "bench_keyframes: PART must be all, orb, learned or refine, got '%s'\n", part.c_str());
     return 2;
@@ -427,10 +422,10 @@ int main(int argc, char** argv) {
       bench_dataset("kitti07_160", shared / "data/kitti07_160/image_0", repeats);
     }
     if (part != "orb") {
-      // 60 frames each: the dense front end costs ~0.2-0.5 s a frame on this CPU.
+      // 60 frames each by default: the dense front end costs ~0.2-0.5 s a frame on this CPU.
       const auto model = shared / "models/xfeat_anysize.onnx", fine = shared / "models/xfeat_fine.onnx";
-      bench_learned("tum_fr1_rpy", shared / "data/tum_fr1_rpy/rgb.txt", model, fine, 60, repeats);
-      bench_learned("kitti07_160", shared / "data/kitti07_160/image_0", model, fine, 60, repeats);
+      bench_learned("tum_fr1_rpy", shared / "data/tum_fr1_rpy/rgb.txt", model, fine, learned_frames, repeats);
+      bench_learned("kitti07_160", shared / "data/kitti07_160/image_0", model, fine, learned_frames, repeats);
       bench_refine(shared, repeats);
     }
   } catch (const std::exception& e) {

@@ -23,6 +23,13 @@
 // stack and PairFrontEnd<XFeatDenseMatcher, Estimator> select the same key images (the
 // same points in the same order reach the estimator, and S = inliers / cells in both);
 // the threshold sweep runs the first, the streaming selector either.
+// XFeat* (hooks/xfeat_fine.hpp) refines the coarse matches to sub-pixel: the grid kept
+// raw at the cells' top-left pixels (XFeatGrid::refinable), the same mutual NN on unit
+// copies, then the refinement network once per pair, in XFeatRefined<Estimator> for
+// the first stack and in XFeatDenseMatcher (given XFeatFineOptions) for the second.
+// Eq. 5's denominator stays the number of coarse cells: a refined match is one cell
+// matched and placed to sub-pixel, and matches below the refinement's confidence count
+// as unverified, so S = verified refined matches / cells.
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
