@@ -56,6 +56,18 @@
 
 namespace vmap {
 
+namespace detail {
+
+/// Scales n floats to unit length (a zero vector stays zero).
+inline void make_unit(float* p, int n) noexcept {
+  float norm = 0.0f;
+  for (int c = 0; c < n; ++c) norm += p[c] * p[c];
+  const float inv = norm > 0.0f ? 1.0f / std::sqrt(norm) : 0.0f;
+  for (int c = 0; c < n; ++c) p[c] *= inv;
+}
+
+}  // namespace detail
+
 /// Where a cell's keypoint sits and what its descriptor is.
 enum class XFeatGrid {
   /// At the cell's best pixel (argmax of its 64 keypoint logits), unit descriptor: the
@@ -110,14 +122,8 @@ class XFeatDenseDescriptor {
         f.keypoints.emplace_back(m.to_image(x, y), size, -1.0f, prob[k]);
         const int cell = cy * m.w8 + cx;
         float* d = f.descriptors.ptr<float>(cell);
-        float norm = 0.0f;
-        for (int ch = 0; ch < 64; ++ch) {
-          d[ch] = m.dense[ch * plane + cell];
-          norm += d[ch] * d[ch];
-        }
-        if (refinable) continue;
-        const float inv = norm > 0.0f ? 1.0f / std::sqrt(norm) : 0.0f;
-        for (int ch = 0; ch < 64; ++ch) d[ch] *= inv;
+        for (int ch = 0; ch < 64; ++ch) d[ch] = m.dense[ch * plane + cell];
+        if (!refinable) detail::make_unit(d, 64);
       }
     return f;
   }
@@ -210,13 +216,7 @@ class DenseMutualMatcher {
   [[nodiscard]] cv::Mat unit(const cv::Mat& d) const {
     if (!options_.normalise) return d.isContinuous() ? d : d.clone();
     cv::Mat u = d.clone();
-    for (int r = 0; r < u.rows; ++r) {
-      float* p = u.ptr<float>(r);
-      float norm = 0.0f;
-      for (int c = 0; c < u.cols; ++c) norm += p[c] * p[c];
-      const float inv = norm > 0.0f ? 1.0f / std::sqrt(norm) : 0.0f;
-      for (int c = 0; c < u.cols; ++c) p[c] *= inv;
-    }
+    for (int r = 0; r < u.rows; ++r) detail::make_unit(u.ptr<float>(r), u.cols);
     return u;
   }
 
