@@ -3,11 +3,15 @@
 // tau 0.3), where vmap's time goes, and a 9-threshold sweep against one build. vmap runs
 // as run_selector's default (two threads decode + extract, the calling thread scores),
 // with one preparing thread, on one thread, and on one thread without the bound skip. Then the
-// learned configurations of issue 12 against ORB, time per frame on one core and on two
+// learned configurations against ORB, time per frame on one core and on two
 // (cv::setNumThreads): XFeat native (any-size model at the image's resolution, top-k
-// 1000) and the detector-free XFeat dense front end (PairKeyframeSelector).
+// 1000), the detector-free XFeat dense front end and XFeat* (the same with the
+// refinement network, both as PairKeyframeSelector). PART refine: the cost of XFeat*'s
+// refinement per pair for 1000 and 5000 coarse matches, next to the pair's other stages
+// and ORB's per-frame cost in the same run.
 //
-// usage: bench_keyframes [REPEATS=2] [SHARED_DIR] [PART=all|orb|learned]
+// usage: bench_keyframes [REPEATS=2] [SHARED_DIR] [PART=all|orb|learned|refine] [FRAMES=60]
+// (FRAMES: frames of each sequence in the learned part)
 // Each timing is the best of REPEATS runs; vmap and the baseline alternate, so both see
 // the same machine load. Ratios are what counts on a shared machine.
 #include <vmap/core/concepts.hpp>
@@ -16,6 +20,7 @@
 #include <vmap/geometry/similarity.hpp>
 #include <vmap/hooks/xfeat.hpp>
 #include <vmap/hooks/xfeat_dense.hpp>
+#include <vmap/hooks/xfeat_fine.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/keyframe/pipeline.hpp>
@@ -256,7 +261,7 @@ void bench_dataset(const std::string& label, const std::filesystem::path& input,
   std::filesystem::remove(list);
 }
 
-// ---- learned configurations against ORB (issue 12) ------------------------------------
+// ---- learned configurations against ORB --------------------------------------------
 
 struct ConfigRun {
   double seconds = 1e30;  // best wall time of the repeats
@@ -282,7 +287,7 @@ ConfigRun time_config(const std::vector<cv::Mat>& frames, int repeats, MakeSelec
 }
 
 void bench_learned(const std::string& label, const std::filesystem::path& input, const std::filesystem::path& model,
-                   std::size_t count, int repeats) {
+                   const std::filesystem::path& fine, std::size_t count, int repeats) {
   constexpr double tau = 0.3;
   std::vector<cv::Mat> frames;
   {
@@ -295,7 +300,7 @@ void bench_learned(const std::string& label, const std::filesystem::path& input,
               label.c_str(), frames.size(), tau, repeats);
   std::printf("  %-34s %7s %5s %7s %6s %11s %11s %9s\n", "", "threads", "keys", "mean", "Q", "ms/frame", "x ORB",
               "x 1 thr");
-  std::vector<double> one_core(3, 0.0);
+  std::vector<double> one_core(4, 0.0);
   for (const int threads : {1, 2}) {
     cv::setNumThreads(threads);
     const ConfigRun orb = time_config(frames, repeats, [&] {
@@ -311,9 +316,14 @@ void bench_learned(const std::string& label, const std::filesystem::path& input,
       return vmap::PairKeyframeSelector(vmap::XFeatDenseMatcher({.model = model}),
                                         vmap::FundamentalEstimator(kMagsac), so);
     });
-    const ConfigRun* runs[] = {&orb, &native, &dense};
-    const char* names[] = {"ORB 1000 + MAGSAC", "XFeat native top-1000 + MAGSAC", "XFeat dense (PairMatcher) + MAGSAC"};
-    for (std::size_t k = 0; k < 3; ++k) {
+    const ConfigRun star = time_config(frames, repeats, [&] {
+      return vmap::PairKeyframeSelector(vmap::XFeatDenseMatcher({.model = model}, vmap::XFeatFineOptions{.model = fine}),
+                                        vmap::FundamentalEstimator(kMagsac), so);
+    });
+    const ConfigRun* runs[] = {&orb, &native, &dense, &star};
+    const char* names[] = {"ORB 1000 + MAGSAC", "XFeat native top-1000 + MAGSAC", "XFeat dense (PairMatcher) + MAGSAC",
+                           "XFeat* (PairMatcher) + MAGSAC"};
+    for (std::size_t k = 0; k < 4; ++k) {
       const auto st = runs[k]->map.stats();
       const double ms = 1e3 * runs[k]->seconds / n;
       if (threads == 1) one_core[k] = ms;
@@ -324,26 +334,106 @@ void bench_learned(const std::string& label, const std::filesystem::path& input,
   cv::setNumThreads(-1);  // back to OpenCV's default
 }
 
+/// Median wall time of `repeats` calls of f, in ms.
+template <class F>
+double median_ms(int repeats, F&& f) {
+  std::vector<double> t;
+  for (int r = 0; r < repeats; ++r) {
+    const auto t0 = Clock::now();
+    f();
+    t.push_back(1e3 * since(t0));
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+/// XFeat*'s refinement per pair: one batched network call for N coarse matches (the
+/// matches of a TUM pair, repeated to reach N), next to the pair's coarse mutual NN, its
+/// MAGSAC++ and XFeat's forward pass, and ORB's whole per-frame cost (extract + match +
+/// verify), in the same run and with the same OpenCV thread setting.
+void bench_refine(const std::filesystem::path& shared, int repeats) {
+  const int reps = std::max(5, 3 * repeats);
+  std::vector<cv::Mat> frames;
+  {
+    auto src = vmap::FrameSource::open(shared / "data/tum_fr1_rpy/rgb.txt", {.end = 6, .grey = true});
+    while (auto f = src.next()) frames.push_back(f->image);
+  }
+  const cv::Mat& a = frames.front();
+  const cv::Mat& b = frames.back();
+  vmap::XFeatDenseDescriptor grid({.model = shared / "models/xfeat_anysize.onnx", .grid = vmap::XFeatGrid::refinable});
+  vmap::XFeatRefiner refiner({.model = shared / "models/xfeat_fine.onnx"});
+  const vmap::DenseMutualMatcher coarse({.normalise = true});
+  const vmap::FundamentalEstimator magsac(kMagsac);
+  vmap::OrbDescriptor orb;
+  const vmap::BruteForceMatcher bf;
+  for (const int threads : {1, 2}) {
+    cv::setNumThreads(threads);
+    vmap::Features fa, fb;
+    const double forward = median_ms(reps, [&] { fa = grid.extract(a); });
+    fb = grid.extract(b);
+    vmap::Matches m;
+    const double nn = median_ms(reps, [&] { m = coarse.match(fa, fb); });
+    vmap::Features pa, pb;
+    for (const cv::DMatch& d : m) {
+      pa.keypoints.push_back(fa.keypoints[static_cast<std::size_t>(d.queryIdx)]);
+      pb.keypoints.push_back(fb.keypoints[static_cast<std::size_t>(d.trainIdx)]);
+    }
+    vmap::Matches one_to_one;
+    for (int i = 0; i < static_cast<int>(m.size()); ++i) one_to_one.emplace_back(i, i, 0.0f);
+    const double verify = median_ms(reps, [&] { (void)magsac.verify(pa, pb, one_to_one); });
+    vmap::Features oa, ob;
+    const double orb_frame = median_ms(reps, [&] {
+      oa = orb.extract(a);
+      ob = orb.extract(b);
+      (void)magsac.verify(oa, ob, bf.match(oa, ob));
+    }) / 2.0;  // two extractions per call: one per frame, as a selector does
+    std::printf("\n== XFeat* refinement per pair (tum_fr1_rpy frames 0 and 5, %d OpenCV thread%s, median of %d) ==\n",
+                threads, threads == 1 ? "" : "s", reps);
+    std::printf("  ORB 1000 per frame (extract, match, MAGSAC)   %8.2f ms\n", orb_frame);
+    std::printf("  XFeat forward pass (640x480, 4800 cells)      %8.2f ms  %6.2fx ORB frame\n", forward,
+                forward / orb_frame);
+    std::printf("  coarse mutual NN, 4800 x 4800 cells           %8.2f ms  %6.2fx  (%zu matches)\n", nn,
+                nn / orb_frame, m.size());
+    std::printf("  MAGSAC++ on the %zu coarse matches           %8.2f ms  %6.2fx\n", m.size(), verify,
+                verify / orb_frame);
+    for (const std::size_t n : {std::size_t{1000}, std::size_t{5000}}) {
+      vmap::Matches batch;
+      for (std::size_t i = 0; i < n; ++i) batch.push_back(m[i % m.size()]);
+      std::vector<vmap::FineOffset> offsets;
+      const double ms = median_ms(reps, [&] { refiner.refine(fa.descriptors, fb.descriptors, batch, offsets); });
+      std::printf("  refinement of %4zu coarse matches             %8.2f ms  %6.2fx  (%.1f us a match)\n", n, ms,
+                  ms / orb_frame, 1e3 * ms / static_cast<double>(n));
+    }
+  }
+  cv::setNumThreads(-1);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const int repeats = argc > 1 ? std::max(1, std::atoi(argv[1])) : 2;
   const std::filesystem::path shared = argc > 2 ? argv[2] : VMAP_SHARED_DIR;
   const std::string part = argc > 3 ? argv[3] : "all";
-  if (part != "all" && part != "orb" && part != "learned") {
-    std::fprintf(stderr, "bench_keyframes: PART must be all, orb or learned, got '%s'\n", part.c_str());
+  const std::size_t learned_frames = argc > 4 ? static_cast<std::size_t>(std::max(2, std::atoi(argv[4]))) : 60;
+  if (part != "all" && part != "orb" && part != "learned" && part != "refine") {
+    std::fprintf(stderr, "bench_keyframes: PART must be all, orb, learned or refine, got '%s'\n", part.c_str());
     return 2;
   }
   try {
+    if (part == "refine") {
+      bench_refine(shared, repeats);
+      return 0;
+    }
     if (part != "learned") {
       bench_dataset("tum_fr1_rpy", shared / "data/tum_fr1_rpy/rgb.txt", repeats);
       bench_dataset("kitti07_160", shared / "data/kitti07_160/image_0", repeats);
     }
     if (part != "orb") {
-      // 60 frames each: the dense front end costs ~0.2-0.5 s a frame on this CPU.
-      const auto model = shared / "models/xfeat_anysize.onnx";
-      bench_learned("tum_fr1_rpy", shared / "data/tum_fr1_rpy/rgb.txt", model, 60, repeats);
-      bench_learned("kitti07_160", shared / "data/kitti07_160/image_0", model, 60, repeats);
+      // 60 frames each by default: the dense front end costs ~0.2-0.5 s a frame on this CPU.
+      const auto model = shared / "models/xfeat_anysize.onnx", fine = shared / "models/xfeat_fine.onnx";
+      bench_learned("tum_fr1_rpy", shared / "data/tum_fr1_rpy/rgb.txt", model, fine, learned_frames, repeats);
+      bench_learned("kitti07_160", shared / "data/kitti07_160/image_0", model, fine, learned_frames, repeats);
+      bench_refine(shared, repeats);
     }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_keyframes: %s\n", e.what());

@@ -29,6 +29,7 @@ struct KeyframeArgs {
   std::string input;
   std::string features = "orb";
   std::string model;
+  std::string refine_model;
   int nfeatures = 1000;
   std::string estimator = "magsac";
   std::string rule = "previous";
@@ -39,13 +40,18 @@ struct KeyframeArgs {
   std::string out;
   bool json = false;
 
-  [[nodiscard]] DescriptorChoice descriptor() const { return {features, nfeatures, model}; }
+  [[nodiscard]] DescriptorChoice descriptor() const { return {features, nfeatures, model, refine_model}; }
 };
 
 /// --features/--model/--nfeatures, shared by every subcommand that extracts features.
-inline void add_feature_options(CLI::App& app, std::string& features, std::string& model, int& nfeatures) {
-  app.add_option("--features", features, "Descriptor: orb, akaze, sift, xfeat or xfeat-dense (the last two need --model)");
-  app.add_option("--model", model, "Model file of a learned descriptor (xfeat, xfeat-dense)");
+inline void add_feature_options(CLI::App& app, std::string& features, std::string& model, int& nfeatures,
+                                std::string& refine_model) {
+  app.add_option("--features", features,
+                 "Descriptor: orb, akaze, sift, xfeat, xfeat-dense or xfeat-star (the last three need --model; "
+                 "xfeat-star also --refine-model)");
+  app.add_option("--model", model, "Model file of a learned descriptor (xfeat, xfeat-dense, xfeat-star)");
+  app.add_option("--refine-model", refine_model,
+                 "xfeat-star: XFeat*'s refinement network (xfeat_fine.onnx), run once per matched pair");
   app.add_option("--nfeatures", nfeatures,
                  "Keypoint budget per image (ORB, SIFT; top-k for XFeat), at most " + std::to_string(max_nfeatures))
       ->check(count_in(1, max_nfeatures));
@@ -53,7 +59,7 @@ inline void add_feature_options(CLI::App& app, std::string& features, std::strin
 
 inline void add_keyframe_options(CLI::App& app, KeyframeArgs& a) {
   app.add_option("input", a.input, "Video file, image folder, list of image paths, or TUM rgb.txt")->required();
-  add_feature_options(app, a.features, a.model, a.nfeatures);
+  add_feature_options(app, a.features, a.model, a.nfeatures, a.refine_model);
   app.add_option("--estimator", a.estimator, "F-matrix estimation: magsac, ransac, lmeds or 8point");
   app.add_option("--rule", a.rule, "New key image: previous (eq. 6) or current (Algorithm 1) frame");
   app.add_option("--start", a.start, "First frame index to read")->check(count_in(0, max_frame_index));

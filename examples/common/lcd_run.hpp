@@ -173,8 +173,11 @@ inline LoopRun run_loops(const LoopRunConfig& config, const SequenceFeatures& fe
   with_descriptor(config.descriptor, [&](auto descriptor) {
     // The features come pre-extracted (LoopDetector::add); the descriptor is the one
     // that made them, so a caller could push further images through the detector.
-    LoopDetector detector(run.schema, std::move(descriptor), BruteForceMatcher{}, FundamentalEstimator(config.estimator),
-                          config.detector,
+    // The matcher and estimator that go with the descriptor: XFeat's dense grid is
+    // matched by blocked mutual NN, and xfeat-star refines each verified pair (XFeat*).
+    auto matcher = matcher_for(descriptor);
+    auto estimator = estimator_for(descriptor, config.descriptor, FundamentalEstimator(config.estimator));
+    LoopDetector detector(run.schema, std::move(descriptor), std::move(matcher), std::move(estimator), config.detector,
                           // the score that goes with the vocabulary's weighting (an FBoW file: L2)
                           PlaceRanker(vocabulary, vocabulary ? vocabulary->scoring() : BowScoring::l1));
     if (distractors) {

@@ -13,8 +13,10 @@
 #include <vmap/geometry/fundamental.hpp>
 #include <vmap/hooks/xfeat.hpp>
 #include <vmap/hooks/xfeat_dense.hpp>
+#include <vmap/hooks/xfeat_fine.hpp>
 #include <vmap/matching/brute_force.hpp>
 
+#include <optional>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -31,9 +33,10 @@ inline RobustMethod parse_method(const std::string& name) {
 
 /// What the command line says about the descriptor to use.
 struct DescriptorChoice {
-  std::string name = "orb";  ///< orb, akaze, sift, xfeat, xfeat-dense
+  std::string name = "orb";  ///< orb, akaze, sift, xfeat, xfeat-dense, xfeat-star
   int features = 1000;       ///< keypoint budget (ORB, SIFT; XFeat's top-k)
   std::string model;         ///< model file, for learned descriptors
+  std::string refine_model;  ///< XFeat*'s refinement network (xfeat-star)
 };
 
 /// Calls f(descriptor) with the Descriptor the choice names; every branch instantiates
@@ -55,17 +58,41 @@ decltype(auto) with_descriptor(const DescriptorChoice& c, F&& f) {
       usage_error("--features xfeat-dense needs --model PATH (an XFeat ONNX export such as xfeat_anysize.onnx)");
     return std::forward<F>(f)(XFeatDenseDescriptor({.model = c.model}));
   }
-  usage_error("--features: unknown descriptor '" + c.name + "' (choose orb, akaze, sift, xfeat or xfeat-dense)");
+  if (c.name == "xfeat-star") {
+    // XFeat*: the dense grid, refined per pair by XFeat's fine network (estimator_for).
+    if (c.model.empty())
+      usage_error("--features xfeat-star needs --model PATH (an XFeat ONNX export such as xfeat_anysize.onnx)");
+    if (c.refine_model.empty())
+      usage_error("--features xfeat-star needs --refine-model PATH (XFeat*'s refinement network, xfeat_fine.onnx)");
+    return std::forward<F>(f)(XFeatDenseDescriptor({.model = c.model, .grid = XFeatGrid::refinable}));
+  }
+  usage_error("--features: unknown descriptor '" + c.name +
+              "' (choose orb, akaze, sift, xfeat, xfeat-dense or xfeat-star)");
 }
 
 /// The matcher that goes with a descriptor: mutual NN by brute force, or for XFeat's
-/// dense grid the same mutual NN by blocked matrix products (thousands of candidates).
+/// dense grid the same mutual NN by blocked matrix products (thousands of candidates),
+/// on unit copies of a refinable grid's raw descriptors.
 template <class D>
-auto matcher_for(const D&) {
+auto matcher_for(const D& d) {
   if constexpr (std::is_same_v<D, XFeatDenseDescriptor>)
-    return DenseMutualMatcher{};
+    return DenseMutualMatcher({.normalise = d.options().grid == XFeatGrid::refinable});
   else
     return BruteForceMatcher({.mode = MatchMode::mutual});
+}
+
+/// The estimator that goes with a descriptor: for XFeat's dense grid the estimator
+/// behind XFeat*'s refinement (XFeatRefined, which passes straight through without a
+/// refinement model, so xfeat-dense and xfeat-star share one instantiation), else the
+/// estimator itself.
+template <class D, class E>
+auto estimator_for(const D&, const DescriptorChoice& c, const E& estimator) {
+  if constexpr (std::is_same_v<D, XFeatDenseDescriptor>)
+    return XFeatRefined<E>(c.name == "xfeat-star" ? std::optional<XFeatFineOptions>(XFeatFineOptions{.model = c.refine_model})
+                                                  : std::nullopt,
+                           estimator);
+  else
+    return estimator;
 }
 
 }  // namespace vmap::examples

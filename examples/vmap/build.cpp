@@ -385,7 +385,8 @@ std::function<int()> setup(CLI::App& app) {
     const auto expected = expected_frames(src, source);
     return ex::with_descriptor(a.descriptor(), [&](auto descriptor) -> int {
       const auto matcher = ex::matcher_for(descriptor);
-      vmap::KeyframeSelector sel(std::move(descriptor), matcher, estimator, vmap::InlierRatio{}, so);
+      auto verifier = ex::estimator_for(descriptor, a.descriptor(), estimator);
+      vmap::KeyframeSelector sel(std::move(descriptor), matcher, std::move(verifier), vmap::InlierRatio{}, so);
       ex::Progress progress("vmap build", expected);
       vmap::run_selector(src, sel, {.pipelined = !args->single_thread}, [&](const vmap::FrameResult&) {
         progress.update(sel.map().frames, std::to_string(sel.map().keys.size()) + " key images");

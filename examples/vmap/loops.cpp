@@ -207,6 +207,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
   for (const auto& [file, option] : {std::pair{a.gt, "--gt"}, std::pair{a.gt_poses, "--gt-poses"},
                                      std::pair{a.model, "--model"}, std::pair{a.names, "--names"},
                                      std::pair{a.features_model, "--features-model"},
+                                     std::pair{c.descriptor.refine_model, "--refine-model"},
                                      std::pair{a.vocabulary.file.string(), "--vocabulary"}})
     if (!file.empty()) {
       ex::check_input_file(file, option);
@@ -470,8 +471,12 @@ std::function<int()> setup(CLI::App& app) {
       ->delimiter(',');
   app.add_option("--sample", a->config.sample, "Frames whose labels form the eq. 5 sample (0: all)")
       ->check(ex::count_in(0, ex::max_frame_index));
-  app.add_option("--features", a->config.descriptor.name, "orb, akaze, sift or xfeat (needs --features-model)");
-  app.add_option("--features-model", a->features_model, "Model file of a learned descriptor (xfeat)");
+  app.add_option("--features", a->config.descriptor.name,
+                 "orb, akaze, sift, xfeat, xfeat-dense or xfeat-star (the last three need --features-model; xfeat-star "
+                 "also --refine-model)");
+  app.add_option("--features-model", a->features_model, "Model file of a learned descriptor (xfeat, xfeat-dense, xfeat-star)");
+  app.add_option("--refine-model", a->config.descriptor.refine_model,
+                 "xfeat-star: XFeat*'s refinement network (xfeat_fine.onnx), run once per verified pair");
   app.add_option("--nfeatures", a->config.descriptor.features,
                  "Keypoint budget per image (ORB, SIFT; top-k for XFeat), at most " + std::to_string(ex::max_nfeatures))
       ->check(ex::count_in(1, ex::max_nfeatures));

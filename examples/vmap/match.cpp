@@ -58,15 +58,16 @@ int run(const MatchArgs& args, const CLI::App& app) {
   const vmap::Calibrated<vmap::FundamentalEstimator> estimator(
       camera ? std::optional<vmap::Camera>(camera->camera) : std::nullopt,
       vmap::FundamentalEstimator({.method = vmap::examples::parse_method(args.estimator), .threshold_px = args.epipolar_px}));
-  const vmap::BruteForceMatcher matcher;
   return vmap::examples::with_descriptor(args.descriptor, [&](auto descriptor) {
+    const auto matcher = ex::matcher_for(descriptor);
+    const auto verifier = ex::estimator_for(descriptor, args.descriptor, estimator);
     const auto t0 = clock::now();
     const vmap::Features a = descriptor.extract(a_img);
     const vmap::Features b = descriptor.extract(b_img);
     const auto t1 = clock::now();
     const vmap::Matches m = matcher.match(a, b);
     const auto t2 = clock::now();
-    const vmap::Verification v = estimator.verify(a, b, m);
+    const vmap::Verification v = verifier.verify(a, b, m);
     const auto t3 = clock::now();
     const double s = vmap::InlierRatio{}(a, b, v);
     auto ms = [](auto d) { return std::chrono::duration<double, std::milli>(d).count(); };
@@ -124,7 +125,8 @@ const bool registered = vmap::cli::add_command(
        auto args = std::make_shared<MatchArgs>();
        app.add_option("image_a", args->image_a, "First image")->required();
        app.add_option("image_b", args->image_b, "Second image")->required();
-       ex::add_feature_options(app, args->descriptor.name, args->descriptor.model, args->descriptor.features);
+       ex::add_feature_options(app, args->descriptor.name, args->descriptor.model, args->descriptor.features,
+                              args->descriptor.refine_model);
        app.add_option("--estimator", args->estimator, "magsac, ransac, lmeds or 8point");
        app.add_option("--epipolar-px", args->epipolar_px, "Epipolar distance threshold in pixels")
            ->check(ex::real_in(0.0, 1000.0, true));

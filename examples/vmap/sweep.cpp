@@ -65,7 +65,8 @@ std::function<int()> setup(CLI::App& app) {
                                 .on_frame = [&progress](std::size_t done) { progress.update(done); }};
     const vmap::SweepResult r = ex::with_descriptor(a.descriptor(), [&](auto descriptor) {
       const auto matcher = ex::matcher_for(descriptor);
-      return vmap::sweep_thresholds(src, std::move(descriptor), matcher, estimator,
+      auto verifier = ex::estimator_for(descriptor, a.descriptor(), estimator);
+      return vmap::sweep_thresholds(src, std::move(descriptor), matcher, std::move(verifier),
                                     vmap::InlierRatio{}, so);
     });
     const double seconds = progress.seconds();

@@ -23,12 +23,20 @@
 // stack and PairFrontEnd<XFeatDenseMatcher, Estimator> select the same key images (the
 // same points in the same order reach the estimator, and S = inliers / cells in both);
 // the threshold sweep runs the first, the streaming selector either.
+// XFeat* (hooks/xfeat_fine.hpp) refines the coarse matches to sub-pixel: the grid kept
+// raw at the cells' top-left pixels (XFeatGrid::refinable), the same mutual NN on unit
+// copies, then the refinement network once per pair, in XFeatRefined<Estimator> for
+// the first stack and in XFeatDenseMatcher (given XFeatFineOptions) for the second.
+// Eq. 5's denominator stays the number of coarse cells: a refined match is one cell
+// matched and placed to sub-pixel, and matches below the refinement's confidence count
+// as unverified, so S = verified refined matches / cells.
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
 #include <vmap/hooks/pair_matcher.hpp>
 #include <vmap/hooks/xfeat.hpp>
+#include <vmap/hooks/xfeat_fine.hpp>
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
@@ -41,11 +49,35 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
 
 namespace vmap {
+
+namespace detail {
+
+/// Scales n floats to unit length (a zero vector stays zero).
+inline void make_unit(float* p, int n) noexcept {
+  float norm = 0.0f;
+  for (int c = 0; c < n; ++c) norm += p[c] * p[c];
+  const float inv = norm > 0.0f ? 1.0f / std::sqrt(norm) : 0.0f;
+  for (int c = 0; c < n; ++c) p[c] *= inv;
+}
+
+}  // namespace detail
+
+/// Where a cell's keypoint sits and what its descriptor is.
+enum class XFeatGrid {
+  /// At the cell's best pixel (argmax of its 64 keypoint logits), unit descriptor: the
+  /// coarse front end, matched by DenseMutualMatcher.
+  best_pixel,
+  /// At the cell's top-left pixel, raw descriptor (not normalised): what XFeat*'s
+  /// refinement reads (XFeatRefined, XFeatDenseMatcher with a refinement model);
+  /// matched by DenseMutualMatcher with `normalise`.
+  refinable,
+};
 
 struct XFeatDenseOptions {
   std::filesystem::path model;  ///< XFeat ONNX export, fixed-size or any-size (required)
@@ -53,11 +85,13 @@ struct XFeatDenseOptions {
   /// own size, or the image's own resolution (centred multiple-of-32 crop) for an
   /// any-size model.
   cv::Size input_size{};
+  XFeatGrid grid = XFeatGrid::best_pixel;
 };
 
-/// Every cell of XFeat's 1/8 grid as a keypoint (its best pixel) with the cell's 64-d
-/// descriptor (NORM_L2, unit length). Keypoints are in row-major cell order; response
-/// is the softmax probability of the chosen pixel.
+/// Every cell of XFeat's 1/8 grid as a keypoint with the cell's 64-d descriptor
+/// (NORM_L2): by default at the cell's best pixel with a unit descriptor, with
+/// XFeatGrid::refinable at its top-left pixel with the raw one. Keypoints are in
+/// row-major cell order; response is the softmax probability of the best pixel.
 /// Deep copy: a copy parses the model again (from the bytes kept in memory, not the
 /// file) into its own cv::dnn::Net with its own buffers, so per-thread copies run in
 /// parallel with results equal to one object's; a copy costs a model parse and the two
@@ -77,22 +111,19 @@ class XFeatDenseDescriptor {
     f.keypoints.reserve(static_cast<std::size_t>(plane));
     f.descriptors.create(plane, 64, CV_32F);
     const float size = 8.0f * std::max(m.scale.x, m.scale.y);
+    const bool refinable = options_.grid == XFeatGrid::refinable;
     float prob[64];
     for (int cy = 0; cy < m.h8; ++cy)
       for (int cx = 0; cx < m.w8; ++cx) {
         detail::cell_softmax(m, cx, cy, prob);
         const int k = static_cast<int>(std::max_element(prob, prob + 64) - prob);  // first of equals
-        const float x = static_cast<float>(cx * 8 + k % 8), y = static_cast<float>(cy * 8 + k / 8);
+        const int at = refinable ? 0 : k;
+        const float x = static_cast<float>(cx * 8 + at % 8), y = static_cast<float>(cy * 8 + at / 8);
         f.keypoints.emplace_back(m.to_image(x, y), size, -1.0f, prob[k]);
         const int cell = cy * m.w8 + cx;
         float* d = f.descriptors.ptr<float>(cell);
-        float norm = 0.0f;
-        for (int ch = 0; ch < 64; ++ch) {
-          d[ch] = m.dense[ch * plane + cell];
-          norm += d[ch] * d[ch];
-        }
-        const float inv = norm > 0.0f ? 1.0f / std::sqrt(norm) : 0.0f;
-        for (int ch = 0; ch < 64; ++ch) d[ch] *= inv;
+        for (int ch = 0; ch < 64; ++ch) d[ch] = m.dense[ch * plane + cell];
+        if (!refinable) detail::make_unit(d, 64);
       }
     return f;
   }
@@ -109,12 +140,21 @@ class XFeatDenseDescriptor {
 
 static_assert(Descriptor<XFeatDenseDescriptor>);
 
+struct DenseMutualOptions {
+  /// Match unit-length copies of the descriptors (for raw ones, XFeatGrid::refinable);
+  /// otherwise the descriptors must already have unit length.
+  bool normalise = false;
+};
+
 /// Mutual nearest neighbours of unit-length float descriptors (NORM_L2), by the largest
 /// dot product, which for unit vectors is the smallest L2 distance. DMatch::distance is
-/// that L2 distance. Ties go to the lower index. Holds nothing: `match` is const and
-/// safe to call from several threads at once.
+/// that L2 distance. Ties go to the lower index. Holds only options: `match` is const
+/// and safe to call from several threads at once.
 class DenseMutualMatcher {
  public:
+  DenseMutualMatcher() = default;
+  explicit DenseMutualMatcher(DenseMutualOptions options) : options_(options) {}
+
   [[nodiscard]] Matches match(const Features& a, const Features& b) const {
     Matches out;
     if (a.descriptors.empty() || b.descriptors.empty()) return out;
@@ -124,8 +164,7 @@ class DenseMutualMatcher {
                   "DenseMutualMatcher: descriptors differ in length (" + std::to_string(a.descriptors.cols) + " vs " +
                       std::to_string(b.descriptors.cols) + ")");
     using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-    const cv::Mat da = a.descriptors.isContinuous() ? a.descriptors : a.descriptors.clone();
-    const cv::Mat db = b.descriptors.isContinuous() ? b.descriptors : b.descriptors.clone();
+    const cv::Mat da = unit(a.descriptors), db = unit(b.descriptors);
     const int na = da.rows, nb = db.rows, dim = da.cols;
     const Eigen::Map<const RowMajor> A(da.ptr<float>(), na, dim), B(db.ptr<float>(), nb, dim);
     std::vector<float> row_best(static_cast<std::size_t>(na)), col_best(static_cast<std::size_t>(nb),
@@ -170,7 +209,17 @@ class DenseMutualMatcher {
     return out;
   }
 
+  [[nodiscard]] const DenseMutualOptions& options() const noexcept { return options_; }
+
  private:
+  /// Continuous rows, of unit length when the options say to normalise.
+  [[nodiscard]] cv::Mat unit(const cv::Mat& d) const {
+    if (!options_.normalise) return d.isContinuous() ? d : d.clone();
+    cv::Mat u = d.clone();
+    for (int r = 0; r < u.rows; ++r) detail::make_unit(u.ptr<float>(r), u.cols);
+    return u;
+  }
+
   static void check(const Features& f) {
     if (f.descriptors.type() != CV_32F || f.norm != cv::NORM_L2)
       detail::fail("DenseMutualMatcher: needs CV_32F descriptors compared with NORM_L2 (unit vectors), got " +
@@ -178,23 +227,38 @@ class DenseMutualMatcher {
     if (f.descriptors.rows != static_cast<int>(f.keypoints.size()))
       detail::fail("DenseMutualMatcher: descriptor rows and keypoint count differ");
   }
+
+  DenseMutualOptions options_;
 };
 
 static_assert(Matcher<DenseMutualMatcher>);
 
 /// The dense front end as a PairMatcher: grids of both images (each image through the
 /// network once while it is among the last three seen), mutual NN, and
-/// Correspondences::cells = the larger grid (eq. 5's denominator).
-/// Deep copy: the copy has its own network (as XFeatDenseDescriptor) and its own copy
-/// of the cache of the last three images (pixels and features cloned, nothing shared
-/// with the original), so it answers exactly as the original would and continues its
-/// network_runs count. One object serves one thread at a time.
+/// Correspondences::cells = the larger grid (eq. 5's denominator). With refinement
+/// options it is XFeat*: the grids are refinable (XFeatGrid::refinable, whatever the
+/// options' grid says), each pair's coarse matches go through the refinement network
+/// once (detail::refine_matches, as XFeatRefined), those below the confidence are
+/// dropped, image a's points are refined, and the confidence is the refinement's peak
+/// probability; `cells` stays the coarse grid.
+/// Deep copy: the copy has its own networks (as XFeatDenseDescriptor, XFeatRefiner)
+/// and its own copy of the cache of the last three images (pixels and features cloned,
+/// nothing shared with the original), so it answers exactly as the original would and
+/// continues its network_runs count. One object serves one thread at a time.
 class XFeatDenseMatcher {
  public:
-  explicit XFeatDenseMatcher(XFeatDenseOptions options) : descriptor_(std::move(options)) {}
+  explicit XFeatDenseMatcher(XFeatDenseOptions options, std::optional<XFeatFineOptions> fine = std::nullopt)
+      : descriptor_(grid_for(std::move(options), fine.has_value())),
+        matcher_(DenseMutualOptions{.normalise = fine.has_value()}) {
+    if (fine) refiner_.emplace(std::move(*fine));
+  }
 
   XFeatDenseMatcher(const XFeatDenseMatcher& other)
-      : descriptor_(other.descriptor_), matcher_(other.matcher_), born_(other.born_), runs_(other.runs_) {
+      : descriptor_(other.descriptor_),
+        matcher_(other.matcher_),
+        refiner_(other.refiner_),
+        born_(other.born_),
+        runs_(other.runs_) {
     cache_.reserve(capacity);
     for (const Entry& e : other.cache_) {
       Features f = *e.features;
@@ -221,6 +285,14 @@ class XFeatDenseMatcher {
     const std::shared_ptr<const Features> fa = ea->features, fb = eb->features;
     const Matches m = matcher_.match(*fa, *fb);
     Correspondences c;
+    c.cells = static_cast<int>(std::max(fa->size(), fb->size()));
+    if (refiner_) {
+      detail::refine_matches(*refiner_, *fa, *fb, m, offsets_, refined_);
+      c.points_a = refined_.points_a;
+      c.points_b = refined_.points_b;
+      c.confidence = refined_.confidence;
+      return c;
+    }
     c.points_a.reserve(m.size());
     c.points_b.reserve(m.size());
     c.confidence.reserve(m.size());
@@ -230,7 +302,6 @@ class XFeatDenseMatcher {
       // The cosine of the two descriptors: 1 - |x - y|^2 / 2.
       c.confidence.push_back(std::clamp(1.0f - 0.5f * d.distance * d.distance, 0.0f, 1.0f));
     }
-    c.cells = static_cast<int>(std::max(fa->size(), fb->size()));
     return c;
   }
 
@@ -244,8 +315,14 @@ class XFeatDenseMatcher {
   /// Images run through the network so far (cache misses).
   [[nodiscard]] std::size_t network_runs() const noexcept { return runs_; }
   [[nodiscard]] const XFeatDenseDescriptor& descriptor() const noexcept { return descriptor_; }
+  [[nodiscard]] bool refines() const noexcept { return refiner_.has_value(); }
 
  private:
+  static XFeatDenseOptions grid_for(XFeatDenseOptions o, bool refine) {
+    if (refine) o.grid = XFeatGrid::refinable;
+    return o;
+  }
+
   struct Entry {
     cv::Mat image;  // a copy: the caller may reuse its buffer
     std::shared_ptr<const Features> features;
@@ -290,6 +367,9 @@ class XFeatDenseMatcher {
 
   XFeatDenseDescriptor descriptor_;
   DenseMutualMatcher matcher_;
+  std::optional<XFeatRefiner> refiner_;
+  std::vector<FineOffset> offsets_;  // scratch of the refinement
+  RefinedMatches refined_;
   std::vector<Entry> cache_;  // at most `capacity`, reserved: entry addresses stay valid
   std::uint64_t born_ = 0;
   std::size_t runs_ = 0;
