@@ -91,6 +91,9 @@ inline cv::FileStorage open_yaml_text(const std::string& text, const std::string
   try {
     cv::FileStorage fs(yaml, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
     if (!fs.isOpened()) fail(name + ": cannot be read as a YAML file");
+    // Keys are looked up at the top level: OpenCV asserts (throws) on a lookup in a
+    // list or a scalar.
+    if (!fs.root().isMap()) fail(name + ": not a YAML map of keys (a calibration file is one)");
     return fs;
   } catch (const cv::Exception& e) {
     fail(name + ": not a valid YAML file (" + e.err + ")");
@@ -113,6 +116,7 @@ inline double yaml_required_number(const cv::FileNode& node, const std::string& 
 inline std::vector<double> yaml_data(const cv::FileStorage& fs, const std::string& key, const std::string& name) {
   const cv::FileNode m = fs[key];
   if (m.empty() || m.isNone()) fail(name + ": missing key '" + key + "'");
+  if (!m.isMap()) fail(name + ": key '" + key + "' is not a map with 'data'");
   const cv::FileNode d = m["data"];
   if (!d.isSeq()) fail(name + ": key '" + key + ".data' is missing or not a list");
   std::vector<double> out;
@@ -351,11 +355,15 @@ inline std::vector<double> yaml_list(const cv::FileNode& node, const std::string
 /// The camera of calibration text of any of the formats of the header comment; the
 /// format is told from the content. `name` names the text in errors.
 [[nodiscard]] inline Camera parse_camera(const std::string& text, const std::string& name = "<calibration>") {
-  switch (guess_calibration_format(text, name)) {
-    case CalibrationFormat::orbslam: return parse_orbslam_camera(text, name);
-    case CalibrationFormat::ros: return parse_ros_camera(text, name);
-    case CalibrationFormat::kitti: return parse_kitti_camera(text, name);
-    case CalibrationFormat::kalibr: return parse_kalibr_camera(text, name);
+  try {
+    switch (guess_calibration_format(text, name)) {
+      case CalibrationFormat::orbslam: return parse_orbslam_camera(text, name);
+      case CalibrationFormat::ros: return parse_ros_camera(text, name);
+      case CalibrationFormat::kitti: return parse_kitti_camera(text, name);
+      case CalibrationFormat::kalibr: return parse_kalibr_camera(text, name);
+    }
+  } catch (const cv::Exception& e) {  // an OpenCV lookup on a node of an unexpected kind
+    detail::fail(name + ": not a calibration file vmap can read (" + e.err + ")");
   }
   detail::fail(name + ": unknown calibration format");
 }
