@@ -8,6 +8,8 @@
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/calibration.hpp>
+#include <vmap/io/image.hpp>
+#include <vmap/io/yaml_limits.hpp>
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -124,6 +126,14 @@ inline CLI::Validator real_in(double lo, double hi, bool open_low = false) {
       desc);
 }
 
+/// --time-offset SECONDS: added to every frame time (FrameSourceOptions::time_offset)
+/// before frames are matched to poses by time; a video's times start at 0.
+inline void add_time_offset_option(CLI::App& app, double& seconds) {
+  app.add_option("--time-offset", seconds,
+                 "Seconds added to every frame time before frames are matched to poses by time (a video starts at 0)")
+      ->check(real_in(-1e12, 1e12));
+}
+
 /// The largest keypoint budget accepted by --nfeatures (documented in the README): more
 /// than any image gives, small enough that the per-image buffers stay bounded.
 inline constexpr unsigned long long max_nfeatures = 100000;
@@ -160,6 +170,52 @@ inline std::optional<std::string> closest(const std::string& word, const std::ve
 }
 
 // ---------------------------------------------------------------------------------------
+// "--name" arguments checked before CLI11 parses them, so that a misspelt option gets
+// "unknown option '--treshold'; did you mean '--threshold'?" and an option of another
+// subcommand says which subcommands take it (CLI11 would say "The following arguments
+// were not expected" and list them in reverse).
+
+namespace cli_detail {
+
+/// Long option names of `app` and of its nested subcommands (`vmap memory build`).
+inline void long_names(const CLI::App& app, std::vector<std::string>& out) {
+  for (const CLI::Option* o : app.get_options())
+    for (const auto& n : o->get_lnames()) out.push_back(n);
+  for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; })) long_names(*sub, out);
+}
+
+}  // namespace cli_detail
+
+/// Fails (usage error) on the first "--name" of argv[1..argc) that is neither an option of
+/// `sub` nor of the main program `main` ("--" ends the options).
+inline void check_option_names(const CLI::App& main, const CLI::App& sub, int argc, char** argv) {
+  std::vector<std::string> known;
+  cli_detail::long_names(sub, known);
+  for (const CLI::Option* o : main.get_options())
+    for (const auto& n : o->get_lnames()) known.push_back(n);
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--") break;
+    if (a.size() <= 2 || a.rfind("--", 0) != 0) continue;
+    const std::string name = a.substr(2, a.find('=') == std::string::npos ? std::string::npos : a.find('=') - 2);
+    if (std::find(known.begin(), known.end(), name) != known.end()) continue;
+    std::string owners;
+    for (const CLI::App* other : main.get_subcommands([](const CLI::App*) { return true; })) {
+      std::vector<std::string> theirs;
+      cli_detail::long_names(*other, theirs);
+      if (std::find(theirs.begin(), theirs.end(), name) != theirs.end())
+        owners += (owners.empty() ? "" : ", ") + other->get_name();
+    }
+    const std::string where = "vmap " + sub.get_name();
+    if (!owners.empty())
+      usage_error("option '--" + name + "' is not an option of '" + where + "'; it belongs to: " + owners);
+    if (const auto near = closest(name, known))
+      usage_error("unknown option '--" + name + "'; did you mean '--" + *near + "'?");
+    usage_error("unknown option '--" + name + "' (see " + where + " --help)");
+  }
+}
+
+// ---------------------------------------------------------------------------------------
 // --config FILE: a YAML cv::FileStorage file whose keys are the long option names
 // ("features: akaze", "nfeatures: 500", "taus: [0.2, 0.3]", "json: 1", "input: rgb.txt").
 // Keys may be at the top level or under a section named after the subcommand; "-" and
@@ -168,15 +224,26 @@ inline std::optional<std::string> closest(const std::string& word, const std::ve
 
 class YamlConfig : public CLI::Config {
  public:
-  explicit YamlConfig(std::string subcommand) : subcommand_(std::move(subcommand)) {}
+  /// `subcommands`: every subcommand's name, the only keys whose value may be a map
+  /// (that subcommand's section); a map under any other key is an error, not ignored.
+  explicit YamlConfig(std::string subcommand, std::vector<std::string> subcommands = {})
+      : subcommand_(std::move(subcommand)), subcommands_(std::move(subcommands)) {}
 
   std::string to_config(const CLI::App*, bool, bool, std::string) const override { return {}; }
 
   std::vector<CLI::ConfigItem> from_config(std::istream& in) const override {
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::string text(max_yaml_bytes + 1, '\0');
+    in.read(text.data(), static_cast<std::streamsize>(text.size()));
+    text.resize(static_cast<std::size_t>(in.gcount()));
+    try {
+      check_yaml_limits(text, "--config");
+    } catch (const vmap::Error& e) {
+      throw CLI::ConfigError(e.what());
+    }
     cv::FileStorage fs;
     try {
-      fs.open(text.rfind("%YAML", 0) == 0 ? text : "%YAML:1.0\n" + text,
+      const std::string yaml = vmap::detail::indent_block_sequences(text);  // PyYAML's lists
+      fs.open(yaml.rfind("%YAML", 0) == 0 ? yaml : "%YAML:1.0\n" + yaml,
               cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
     } catch (const cv::Exception& e) {
       throw CLI::ConfigError("--config: not a YAML file OpenCV can read (" + std::string(e.err) + ")");
@@ -186,9 +253,15 @@ class YamlConfig : public CLI::Config {
     if (!root.isMap()) throw CLI::ConfigError("--config: the file must be a YAML map of option names to values");
     const cv::FileNode section = root[subcommand_];
     std::vector<CLI::ConfigItem> found;
-    auto add = [&](const cv::FileNode& map) {
+    auto add = [&](const cv::FileNode& map, bool top) {
       for (const auto& node : map) {
-        if (node.isMap()) continue;  // another subcommand's section
+        if (node.isMap()) {
+          if (top && std::find(subcommands_.begin(), subcommands_.end(), node.name()) != subcommands_.end())
+            continue;  // a subcommand's section
+          throw CLI::ConfigError("--config: the value of '" + node.name() +
+                                 "' is a map; an option takes a number, a string or a list of them" +
+                                 (top ? " (a map is allowed only as a section named after a subcommand)" : ""));
+        }
         CLI::ConfigItem item;
         if (!subcommand_.empty()) item.parents = {subcommand_};
         item.name = node.name();
@@ -201,8 +274,8 @@ class YamlConfig : public CLI::Config {
         found.push_back(std::move(item));
       }
     };
-    add(root);
-    if (section.isMap()) add(section);
+    add(root, true);
+    if (section.isMap()) add(section, false);
     return found;
   }
 
@@ -218,7 +291,45 @@ class YamlConfig : public CLI::Config {
     throw CLI::ConfigError("--config: the value of '" + key + "' must be a number, a string or a list of them");
   }
   std::string subcommand_;
+  std::vector<std::string> subcommands_;
 };
+
+/// The --config FILE of the command line (CLI11 reads it later, with no limit): it must
+/// be a regular file of at most `max_yaml_bytes`, so /dev/zero or a FIFO is refused
+/// before anything is read. An empty name is a usage error.
+inline void check_config_argument(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    std::optional<std::string> file;
+    if (a == "--config" && i + 1 < argc) file = argv[++i];
+    else if (a.rfind("--config=", 0) == 0) file = a.substr(9);
+    if (!file) continue;
+    if (file->empty()) usage_error("--config: the file name is empty");
+    struct stat st {};
+    if (::stat(file->c_str(), &st) != 0)
+      usage_error("--config: '" + *file + "' does not exist");
+    if (S_ISDIR(st.st_mode)) usage_error("--config: '" + *file + "' is a folder, not a file");
+    if (!S_ISREG(st.st_mode))
+      usage_error("--config: '" + *file + "' is not a regular file (a device, FIFO or socket cannot be read as one)");
+    if (static_cast<std::uintmax_t>(st.st_size) > max_yaml_bytes)
+      usage_error("--config: '" + *file + "' is " + std::to_string(st.st_size) + " bytes, more than the " +
+                  std::to_string(max_yaml_bytes) + " a settings file may have");
+  }
+}
+
+/// Refuses an empty value ("", from the command line or --config) of any option or
+/// positional input of `app`: an empty path would otherwise mean "no file" silently
+/// (`--memory ""` running with no memory).
+inline void check_no_empty_values(const CLI::App& app) {
+  for (const CLI::Option* opt : app.get_options()) {
+    if (opt->get_expected_max() == 0) continue;  // a flag
+    for (const auto& v : opt->results())
+      if (v.empty()) {
+        const std::string name = opt->get_lnames().empty() ? opt->get_name() : "--" + opt->get_lnames().front();
+        usage_error(name + ": the value is empty");
+      }
+  }
+}
 
 // ---------------------------------------------------------------------------------------
 // JSON.
@@ -320,6 +431,13 @@ inline bool inside(const std::filesystem::path& a, const std::filesystem::path& 
   return true;
 }
 
+/// Folders created for outputs by this process, deepest first: removed again when they
+/// are still empty after a refused or failed run (remove_unused_output_folders).
+inline std::vector<std::filesystem::path>& created_folders() {
+  static std::vector<std::filesystem::path> folders;
+  return folders;
+}
+
 /// The folder an input's frames live in when it is a folder, else nothing.
 inline bool is_folder(const std::filesystem::path& p) {
   std::error_code ec;
@@ -369,8 +487,16 @@ inline std::filesystem::path prepare_output_dir(const std::filesystem::path& dir
   if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
     usage_error(option + ": '" + dir.string() + "' exists and is not a folder");
   if (!fs::exists(dir, ec)) {
+    std::vector<fs::path> missing;  // dir and its missing parents, deepest first
+    for (fs::path p = fs::absolute(dir, ec).lexically_normal(); !p.empty() && !fs::exists(p, ec); p = p.parent_path()) {
+      if (p.filename().empty()) continue;  // "out/" names the same folder as "out"
+      missing.push_back(p);
+      if (p == p.parent_path()) break;
+    }
     fs::create_directories(dir, ec);
     if (ec) vmap::detail::fail(option + ": cannot create the folder '" + dir.string() + "': " + ec.message());
+    auto& created = cli_detail::created_folders();
+    created.insert(created.begin(), missing.begin(), missing.end());
   }
   for (const auto& f : files) check_output_file(dir / f, option, inputs);
   // Writable: create and remove a file, as the atomic writes will.
@@ -382,6 +508,13 @@ inline std::filesystem::path prepare_output_dir(const std::filesystem::path& dir
   ::close(fd);
   ::unlink(probe.c_str());
   return dir;
+}
+
+/// After a refused or failed run: removes the output folders this process created that
+/// are still empty (rmdir removes nothing else), so no empty folder is left behind.
+inline void remove_unused_output_folders() noexcept {
+  for (const auto& d : cli_detail::created_folders()) (void)::rmdir(d.c_str());
+  cli_detail::created_folders().clear();
 }
 
 /// The --out folder of a command that writes several files (build, loops, detect): the
@@ -404,6 +537,8 @@ class OutputFolder {
   /// Where to write the file `name` of the set until commit().
   [[nodiscard]] std::filesystem::path operator/(const std::string& name) const { return set_->path() / name; }
   [[nodiscard]] const std::filesystem::path& dir() const noexcept { return dir_; }
+  /// The temporary folder the set is written into until commit().
+  [[nodiscard]] const std::filesystem::path& path() const noexcept { return set_->path(); }
   void commit() { set_->commit(); }
 
  private:

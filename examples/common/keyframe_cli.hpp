@@ -37,6 +37,7 @@ struct KeyframeArgs {
   std::size_t end = 0;  // 0: to the end
   std::size_t stride = 1;
   std::string camera;  // calibration file; empty: raw pixels
+  double time_offset = 0.0;
   std::string out;
   bool json = false;
 
@@ -67,7 +68,9 @@ inline void add_keyframe_options(CLI::App& app, KeyframeArgs& a) {
       ->check(count_in(0, max_frame_index));
   app.add_option("--stride", a.stride, "Read every stride-th frame")->check(count_in(1, max_frame_index));
   app.add_option("--camera", a.camera,
-                 "Calibration (ORB-SLAM YAML, ROS camera_info, KITTI calib.txt): undistort keypoints before the F-matrix");
+                 "Calibration (ORB-SLAM YAML, ROS camera_info, Kalibr camchain, EuRoC sensor.yaml, KITTI calib.txt): "
+                 "undistort keypoints before the F-matrix");
+  add_time_offset_option(app, a.time_offset);
   app.add_flag("--json", a.json, "Print one JSON object on stdout (the table goes to stderr)");
 }
 
@@ -83,7 +86,8 @@ inline KeyRule parse_rule(const std::string& name) {
 inline Calibrated<FundamentalEstimator> make_estimator(const std::string& method,
                                                       const std::optional<CameraOption>& camera = std::nullopt) {
   return {camera ? std::optional<Camera>(camera->camera) : std::nullopt,
-          FundamentalEstimator({.method = parse_method(method), .check_degeneracy = false})};
+          FundamentalEstimator({.method = parse_method(method), .check_degeneracy = false}),
+          camera ? "--camera " + camera->file.string() : std::string("camera")};
 }
 
 /// Frame range and decoding; each skipped frame is reported on stderr (the count is in
@@ -94,6 +98,7 @@ inline FrameSourceOptions source_options(const KeyframeArgs& a, bool grey) {
   if (a.end > 0) o.end = a.end;
   o.stride = a.stride;
   o.grey = grey;
+  o.time_offset = a.time_offset;
   o.on_skip = [](const SkippedFrame& s) {
     std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", s.index, s.name.c_str(), s.reason.c_str());
   };

@@ -56,8 +56,14 @@ inline std::filesystem::path memory_file(const std::string& arg) {
 inline void prepare_memory_output(const std::filesystem::path& file, const std::string& option,
                                   const std::vector<std::filesystem::path>& inputs) {
   const std::filesystem::path dir = file.has_parent_path() ? file.parent_path() : std::filesystem::path(".");
-  prepare_output_dir(dir, option, inputs, {file.filename().string()});
   std::error_code ec;
+  // An --out folder is replaced as a whole by the next --out run: a memory kept there
+  // would be deleted with it.
+  if (std::filesystem::exists(dir / vmap::detail::output_marker, ec))
+    usage_error(option + ": '" + dir.string() +
+                "' is an --out folder of vmap, which the next --out run replaces as a whole; keep the memory in "
+                "another folder");
+  prepare_output_dir(dir, option, inputs, {file.filename().string()});
   if (std::filesystem::exists(file, ec)) {
     std::ifstream f(file, std::ios::binary);
     char magic[8] = {};
@@ -257,6 +263,10 @@ inline nlohmann::json loop_json(const CliMemory& mem, const LoopEdge& e) {
           {"to", e.link.key},
           {"query", mem.map().keys[e.from].frame_index},
           {"match", mem.map().keys[e.link.key].frame_index},
+          {"query_name", mem.map().keys[e.from].name},
+          {"match_name", mem.map().keys[e.link.key].name},
+          {"query_time", mem.map().keys[e.from].timestamp},
+          {"match_time", mem.map().keys[e.link.key].timestamp},
           {"inliers", e.link.inliers},
           {"matches", e.link.matches},
           {"bow_score", e.link.bow_score},
@@ -276,8 +286,13 @@ inline std::vector<MemoryQuery> localize_images(CliMemory& mem, const std::vecto
   std::vector<MemoryQuery> out;
   for (const auto& path : images) {
     current_inputs() = {path};
-    const cv::Mat img = cv::imread(path, cv::IMREAD_GRAYSCALE);
-    if (img.empty()) vmap::detail::fail("cannot read the query image '" + path + "'");
+    // Bounded like frame sources: a regular file, its pixels checked before decoding.
+    cv::Mat img;
+    try {
+      img = vmap::read_image(path, {.flags = cv::IMREAD_GRAYSCALE});
+    } catch (const vmap::Error& e) {
+      vmap::detail::fail("query " + std::string(e.what()));  // "query image 'x': reason"
+    }
     const auto t0 = std::chrono::steady_clock::now();
     MemoryQuery q{path, mem.localize(img), 0.0};
     q.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -346,12 +361,30 @@ inline int localize_from_memory(const std::filesystem::path& file, const std::st
   return 0;
 }
 
-/// One line per loop edge, in the style of `vmap loops`.
-inline void print_loop_edges(const CliMemory& mem) {
-  for (const auto& e : mem.loops())
-    std::printf("  key %4u (frame %4zu) -> key %4u (frame %4zu)  inliers %4d  bow score %.3f\n", e.from,
-                mem.map().keys[e.from].frame_index, e.link.key, mem.map().keys[e.link.key].frame_index,
-                e.link.inliers, e.link.bow_score);
+/// The loop edges: with `all`, one line per edge in the style of `vmap loops` (frame
+/// names and times); otherwise a summary (how many, key images involved, inliers) and
+/// the five strongest edges, so a long memory does not flood the terminal.
+inline void print_loop_edges(const CliMemory& mem, bool all = false) {
+  const auto& keys = mem.map().keys;
+  const auto line = [&](const LoopEdge& e) {
+    std::printf("  key %4u (frame %4zu, %s, %.6f s) -> key %4u (frame %4zu, %s, %.6f s)  inliers %4d  bow score %.3f\n",
+                e.from, keys[e.from].frame_index, keys[e.from].name.c_str(), keys[e.from].timestamp, e.link.key,
+                keys[e.link.key].frame_index, keys[e.link.key].name.c_str(), keys[e.link.key].timestamp, e.link.inliers,
+                e.link.bow_score);
+  };
+  std::vector<LoopEdge> edges = mem.loops();
+  if (all || edges.size() <= 5) {
+    for (const auto& e : edges) line(e);
+    return;
+  }
+  std::vector<std::uint32_t> queries;
+  for (const auto& e : edges) queries.push_back(e.from);
+  std::sort(queries.begin(), queries.end());
+  queries.erase(std::unique(queries.begin(), queries.end()), queries.end());
+  std::sort(edges.begin(), edges.end(), [](const LoopEdge& a, const LoopEdge& b) { return a.link.inliers > b.link.inliers; });
+  std::printf("  %zu edges from %zu key images, inliers %d .. %d; the 5 strongest (--edges lists all):\n", edges.size(),
+              queries.size(), edges.back().link.inliers, edges.front().link.inliers);
+  for (std::size_t k = 0; k < 5; ++k) line(edges[k]);
 }
 
 /// Refuses every option of `app` given on the command line (or in --config) that is not

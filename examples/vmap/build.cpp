@@ -8,6 +8,7 @@
 #include "common/draw.hpp"
 #include "common/keyframe_cli.hpp"
 #include "common/memory_cli.hpp"
+#include "common/memory_export.hpp"
 #include "common/policies.hpp"
 #include "vmap/cli.hpp"
 
@@ -27,6 +28,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
@@ -136,9 +138,7 @@ std::vector<std::string> write_outputs(const ex::OutputFolder& dir, const vmap::
   std::vector<std::string> written;
   vmap::save_map(map, dir / "map.vmap");
   written.push_back("map.vmap");
-  std::string names;
-  for (const auto& k : map.keys) names += std::to_string(k.frame_index) + " " + k.name + "\n";
-  vmap::write_file_atomically(dir / "key_images.txt", names);
+  vmap::write_file_atomically(dir / "key_images.txt", vmap::key_images_text(map.keys));
   written.push_back("key_images.txt");
   std::vector<cv::Mat> images;
   std::vector<std::string> captions;
@@ -166,6 +166,8 @@ struct MemoryRun {
   std::size_t loops = 0;  ///< loop edges in the whole memory
   std::optional<std::size_t> last_frame;
   std::uintmax_t bytes = 0;
+  /// Writes the memory's exports (common/memory_export.hpp) into a folder.
+  std::function<std::vector<std::string>(const std::filesystem::path&)> write_exports;
 };
 
 /// The key images' outputs (--out), the JSON or the table, for a plain or a memory run.
@@ -187,6 +189,8 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
     else
       colour_key_images(coloured, src);
     written = write_outputs(*out_dir, coloured, sel);
+    if (memory && memory->write_exports)
+      for (auto& f : memory->write_exports(out_dir->path())) written.push_back(std::move(f));
     out_dir->commit();
   }
   nlohmann::json memory_json = nullptr;
@@ -293,8 +297,9 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
     if (ex::cli_detail::inside(ex::cli_detail::resolved(file), ex::cli_detail::resolved(a.out)))
       ex::usage_error("--memory: '" + file.string() + "' is inside the --out folder '" + a.out +
                       "', which is replaced as a whole (keep the memory elsewhere)");
-    out_dir.emplace(a.out, "--out", inputs,
-                    std::vector<std::string>{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"});
+    std::vector<std::string> files{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"};
+    files.insert(files.end(), ex::export_file_names().begin(), ex::export_file_names().end());
+    out_dir.emplace(a.out, "--out", inputs, files);
   }
   auto so = ex::source_options(a, true);
   if (args.resume)
@@ -313,7 +318,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   if (args.gcs && args.poses.empty()) ex::usage_error("--gcs needs --poses FILE (the GCS learns a pose per neuron)");
   if (!args.poses.empty()) poses.emplace(args.poses, src, args.gcs);
   ex::Progress progress("vmap build", expected_frames(src, so));
-  MemoryRun run{file, args.resume, {}, 0, std::nullopt, 0};
+  MemoryRun run{file, args.resume, {}, 0, std::nullopt, 0, {}};
   run.stream = ex::stream_into(*mem, src, file, args.save_every, poses, [&](const ex::CliMemory& m) {
     progress.update(src.delivered(), std::to_string(m.key_images()) + " key images");
   });
@@ -331,6 +336,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   run.loops = mem->loops().size();
   run.last_frame = mem->last_frame_index();
   run.bytes = fs::file_size(file);
+  run.write_exports = [&](const fs::path& dir) { return ex::export_memory(*mem, dir, false); };
   return report(args, app, mem->map(), mem->selector(), src, run.stream.pushed, run.stream.seconds, out_dir,
                 std::nullopt, run);
 }

@@ -128,8 +128,7 @@ int run_detect(const DetectArgs& a, const CLI::App& app) {
     }
     if (next_file >= files.size()) return std::nullopt;
     const auto& p = files[next_file];
-    cv::Mat img = cv::imread(p.string(), cv::IMREAD_COLOR);
-    if (img.empty()) vmap::detail::fail("cannot read the image '" + p.string() + "'");
+    cv::Mat img = vmap::read_image(p, {.flags = cv::IMREAD_COLOR});
     return Item{next_file++, p.string(), std::move(img)};
   };
 

@@ -63,6 +63,8 @@ struct LoopsArgs {
   bool verbose = false;
   std::string out;
   std::string memory;  // --memory M: the loop edges of a saved visual memory
+  double time_offset = 0.0;
+  bool edges = false;  // --memory: every loop edge instead of a summary
   vmap::examples::LoopRunConfig config;
 };
 
@@ -100,7 +102,7 @@ vmap::LoopGroundTruth key_ground_truth(const LoopsArgs& a, const ex::CliMemory& 
   if (!a.gt_poses.empty()) {
     std::vector<double> times;
     for (const auto& k : keys) times.push_back(k.timestamp);
-    const auto poses = vmap::poses_for_frames(vmap::load_tum_poses(a.gt_poses), times, a.gt_poses, 0.05, false);
+    const auto poses = vmap::poses_for_frames(vmap::load_camera_poses(a.gt_poses), times, a.gt_poses, 0.05, false);
     return vmap::ground_truth_from_poses(poses,
                                          {.max_distance = a.gt_distance, .max_angle_deg = a.gt_angle, .window = window});
   }
@@ -117,7 +119,7 @@ vmap::LoopGroundTruth key_ground_truth(const LoopsArgs& a, const ex::CliMemory& 
 
 /// `vmap loops --memory M [--gt MATRIX | --gt-poses POSES] [--json]`.
 int run_memory(const LoopsArgs& a, const CLI::App& app) {
-  ex::refuse_other_options(app, {"--memory", "--gt", "--gt-poses", "--gt-distance", "--gt-angle", "--json"}, "--memory");
+  ex::refuse_other_options(app, {"--memory", "--gt", "--gt-poses", "--gt-distance", "--gt-angle", "--json", "--edges"}, "--memory");
   if (!a.gt.empty() && !a.gt_poses.empty()) ex::usage_error("give at most one of --gt MATRIX and --gt-poses POSES");
   const auto file = ex::memory_file(a.memory);
   ex::current_inputs() = {file.string()};
@@ -140,7 +142,7 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
     }
     std::printf("memory %s: %zu frames, %zu key images\n", file.c_str(), mem.frames(), mem.key_images());
     std::printf("%zu loop edges (inliers >= %d):\n", mem.loops().size(), min_inliers);
-    ex::print_loop_edges(mem);
+    ex::print_loop_edges(mem, a.edges);
     return 0;
   }
   // Each key image proposes its edge with the most inliers, as each query frame proposes
@@ -175,7 +177,7 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
   std::printf("memory %s: %zu frames, %zu key images, %zu with a ground-truth loop to a key image %zu or more before\n",
               file.c_str(), mem.frames(), mem.key_images(), pr.positives, mem.options().exclude_recent + 1);
   std::printf("%zu loop edges (inliers >= %d), %zu true:\n", mem.loops().size(), min_inliers, true_edges);
-  ex::print_loop_edges(mem);
+  ex::print_loop_edges(mem, a.edges);
   std::printf("key images (best edge each): TP %zu, FP %zu, precision %.3f, recall %.3f; recall@100%%P %.3f\n",
               pr.true_positives, pr.false_positives, pr.precision, pr.recall, full.recall);
   return 0;
@@ -222,14 +224,14 @@ int run(LoopsArgs& a, const CLI::App& app) {
   const std::vector<std::string> names = a.names.empty() ? std::vector<std::string>{} : vmap::read_class_names(a.names);
 
   // The ground truth is checked against the sequence before any frame is processed.
-  const auto sequence = vmap::FrameSource::open(a.input);
+  const auto sequence = vmap::FrameSource::open(a.input, {.time_offset = a.time_offset});
   const std::size_t total = sequence.total().value_or(0);
   std::optional<vmap::LoopGroundTruth> gt;
   if (!a.gt_poses.empty()) {
     // One pose per frame: by order when the counts agree, else the nearest in time
     // (TUM's 100 Hz groundtruth.txt against rgb.txt at 30 Hz). 50 ms rather than
     // associate.py's 20 ms: fr1's ground truth has gaps of up to 49 ms (tum_fr1_rpy).
-    const auto poses = vmap::poses_for_frames(vmap::load_tum_poses(a.gt_poses), sequence.timestamps(), a.gt_poses, 0.05);
+    const auto poses = vmap::poses_for_frames(vmap::load_camera_poses(a.gt_poses), sequence.timestamps(), a.gt_poses, 0.05);
     gt = vmap::ground_truth_from_poses(
         poses, {.max_distance = a.gt_distance, .max_angle_deg = a.gt_angle, .window = c.detector.window});
   } else if (!a.gt.empty()) {
@@ -425,7 +427,8 @@ std::function<int()> setup(CLI::App& app) {
   auto& d = a->config.detector;
   app.add_option("input", a->input, "Frames: image folder, list file, video or TUM rgb.txt (or --memory M)");
   app.add_option("--gt", a->gt, "Ground-truth loop matrix (rows of 0/1, row = query frame)");
-  app.add_option("--gt-poses", a->gt_poses, "Derive the ground truth from TUM poses (timestamp tx ty tz qx qy qz qw; one a frame, or associated to rgb.txt times within 50 ms)");
+  app.add_option("--gt-poses", a->gt_poses, "Derive the ground truth from poses (TUM, KITTI or EuRoC data.csv; one a frame, or associated to the frames' times within 50 ms)");
+  ex::add_time_offset_option(app, a->time_offset);
   app.add_option("--gt-distance", a->gt_distance, "With --gt-poses: max. camera-centre distance, metres")
       ->check(ex::real_in(0.0, 1e6, true));
   app.add_option("--gt-angle", a->gt_angle, "With --gt-poses: max. angle between viewing directions, degrees")
@@ -486,6 +489,7 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--memory", a->memory,
                  "Instead of INPUT: the loop edges of a saved visual memory (vmap build --memory; a folder means "
                  "DIR/memory.vmem), evaluated over its key images with --gt / --gt-poses");
+  app.add_flag("--edges", a->edges, "With --memory: list every loop edge (default: a summary and the 5 strongest)");
   return [a, &app] {
     if (!a->memory.empty()) return run_memory(*a, app);
     if (a->input.empty()) ex::usage_error("give INPUT (the frames) or --memory M (a saved visual memory)");

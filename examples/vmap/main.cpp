@@ -41,7 +41,7 @@ std::string subcommand_of(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run_vmap(int argc, char** argv) {
   std::string where = "vmap";
   try {
     CLI::App app{"vmap: visual memory for robots (key images, loop closure, localization)", "vmap"};
@@ -67,8 +67,10 @@ int main(int argc, char** argv) {
                    near ? ("did you mean '" + *near + "'?").c_str() : ("choose one of: " + list).c_str());
       return ex::exit_usage;
     }
+    if (!sub_name.empty()) where = "vmap " + sub_name;
+    ex::check_config_argument(argc, argv);
     app.set_config("--config", "", "YAML file (OpenCV FileStorage) of option values; the command line wins");
-    app.config_formatter(std::make_shared<ex::YamlConfig>(sub_name));
+    app.config_formatter(std::make_shared<ex::YamlConfig>(sub_name, names));
 
     std::map<const CLI::App*, std::function<int()>> runners;
     for (const auto& c : cmds) {
@@ -77,7 +79,7 @@ int main(int argc, char** argv) {
       sub->footer(exit_codes_text);
       runners[sub] = c.setup(*sub);
     }
-    if (!sub_name.empty()) where = "vmap " + sub_name;
+    if (!sub_name.empty()) ex::check_option_names(app, *app.get_subcommand(sub_name), argc, argv);
     try {
       app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {
@@ -98,7 +100,10 @@ int main(int argc, char** argv) {
       return ex::exit_usage;
     }
     for (const auto& [sub, run] : runners)
-      if (sub->parsed()) return run();
+      if (sub->parsed()) {
+        ex::check_no_empty_values(*sub);
+        return run();
+      }
     return ex::exit_usage;
   } catch (const ex::UsageError& e) {
     std::fprintf(stderr, "%s: usage error: %s\n", where.c_str(), e.what());
@@ -120,4 +125,10 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "%s: error: unknown exception%s\n", where.c_str(), ex::input_note().c_str());
   }
   return ex::exit_failure;
+}
+
+int main(int argc, char** argv) {
+  const int code = run_vmap(argc, argv);
+  if (code != ex::exit_ok) ex::remove_unused_output_folders();
+  return code;
 }

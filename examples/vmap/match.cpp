@@ -39,22 +39,13 @@ struct MatchArgs {
   bool json = false;
 };
 
-cv::Mat read_image(const std::string& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) vmap::detail::fail("image '" + path + "' does not exist");
-  if (std::filesystem::is_directory(path, ec)) vmap::detail::fail("image '" + path + "' is a folder");
-  cv::Mat img = cv::imread(path, cv::IMREAD_UNCHANGED);
-  if (img.empty()) vmap::detail::fail("image '" + path + "' cannot be decoded");
-  return img;
-}
-
 int run(const MatchArgs& args, const CLI::App& app) {
   using clock = std::chrono::steady_clock;
   ex::current_inputs() = {args.image_a, args.image_b};
   const auto camera = ex::load_camera_option(args.camera);
   if (!args.out.empty()) ex::prepare_output_dir(args.out, "--out", {args.image_a, args.image_b}, {"matches.png"});
-  const cv::Mat a_img = read_image(args.image_a);
-  const cv::Mat b_img = read_image(args.image_b);
+  const cv::Mat a_img = vmap::read_image(args.image_a);
+  const cv::Mat b_img = vmap::read_image(args.image_b);
   const vmap::Calibrated<vmap::FundamentalEstimator> estimator(
       camera ? std::optional<vmap::Camera>(camera->camera) : std::nullopt,
       vmap::FundamentalEstimator({.method = vmap::examples::parse_method(args.estimator), .threshold_px = args.epipolar_px}));

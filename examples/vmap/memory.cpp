@@ -7,6 +7,7 @@
 // within the main subcommands; both share common/memory_cli.hpp.
 #include "common/cli_support.hpp"
 #include "common/memory_cli.hpp"
+#include "common/memory_export.hpp"
 #include "vmap/cli.hpp"
 
 #include <vmap/memory/visual_memory.hpp>
@@ -28,7 +29,8 @@ namespace ex = vmap::examples;
 struct MemoryArgs {
   std::string input, out, memory, vocabulary;
   std::vector<std::string> images;
-  bool resume = false, json = false;
+  bool resume = false, json = false, edges = false;
+  std::string export_out;
   double tau = 0.3;
   std::string storage = "none";
   std::size_t start = 0, end = 0, stride = 1, save_every = 0;
@@ -89,7 +91,27 @@ int info(const MemoryArgs& a) {
   }
   std::printf("%zu frames, %zu key images, %zu loop edges, vocabulary of %zu words, last frame %zu\n", mem.frames(),
               mem.key_images(), mem.loops().size(), mem.vocabulary().size(), mem.last_frame_index().value_or(0));
-  ex::print_loop_edges(mem);
+  ex::print_loop_edges(mem, a.edges);
+  return 0;
+}
+
+/// `memory export M --out DIR`: key images, trajectory and loop edges for other tools.
+int export_files(const MemoryArgs& a) {
+  const auto file = ex::memory_file(a.memory);
+  ex::current_inputs() = {file.string()};
+  ex::OutputFolder out(a.export_out, "--out", {file}, ex::export_file_names());
+  const auto mem = ex::load_memory(file, "memory");
+  const auto written = ex::export_memory(mem, out.path());
+  out.commit();
+  if (a.json) {
+    ex::print_json({{"memory", ex::path_string(file)}, {"out", a.export_out}, {"files", written},
+                    {"key_images", mem.key_images()}, {"loops", mem.loops().size()}});
+    return 0;
+  }
+  std::string list;
+  for (const auto& f : written) list += (list.empty() ? "" : ", ") + f;
+  std::printf("%zu key images, %zu loop edges: wrote %s/{%s}\n", mem.key_images(), mem.loops().size(),
+              a.export_out.c_str(), list.c_str());
   return 0;
 }
 
@@ -118,13 +140,19 @@ std::function<int()> setup(CLI::App& app) {
   auto* i = app.add_subcommand("info", "Key images and loop edges of a memory file");
   i->add_option("memory", a->memory, "Memory file")->required();
   i->add_flag("--json", a->json, "Print as JSON");
-  return [a, b, l]() {
+  i->add_flag("--edges", a->edges, "List every loop edge (default: a summary and the 5 strongest)");
+  auto* x = app.add_subcommand("export", "Key images (names, times, TUM trajectory) and loop edges (pairs, g2o) of a memory");
+  x->add_option("memory", a->memory, "Memory file")->required();
+  x->add_option("--out", a->export_out, "Folder for key_images.txt, key_images.tum, loops.txt, loops.g2o")->required();
+  x->add_flag("--json", a->json, "Print the files written as JSON");
+  return [a, b, l, x]() {
     if (b->parsed()) return build(*a, *b);
     if (l->parsed()) return ex::localize_from_memory(ex::memory_file(a->memory), "memory", a->images, a->json);
+    if (x->parsed()) return export_files(*a);
     return info(*a);
   };
 }
 
-const bool registered = vmap::cli::add_command({"memory", "A visual memory file: build, resume, localize, info", setup});
+const bool registered = vmap::cli::add_command({"memory", "A visual memory file: build, resume, localize, info, export", setup});
 
 }  // namespace

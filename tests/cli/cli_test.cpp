@@ -3,18 +3,22 @@
 // --config file must give the same JSON; every documented error exits with its documented
 // code (0 ok, 1 bad input or failed run, 2 usage) and never aborts (134).
 
+#include "support/euroc_layout.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/place/vocabulary.hpp>
+#include <vmap/io/poses.hpp>
 
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
 
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -378,7 +382,8 @@ TEST_CASE("cli: build --memory DIR/ writes DIR/memory.vmem; --resume continues i
   // --out keeps working beside the memory: the pictures of every key image.
   CHECK(fs::is_regular_file(out / "map.vmap"));
   CHECK(fs::is_regular_file(out / "contact_sheet.png"));
-  CHECK(j2["files"].size() == 4);
+  CHECK(j2["files"].size() == 5);  // the pictures, key_images.txt and the memory's loops.txt
+  CHECK(fs::is_regular_file(out / "loops.txt"));
   // Nothing left to read: a usage error, the memory unchanged.
   const std::string before = slurp(file);
   usage_error({"build", sample, "--memory", file.string(), "--resume", "--end", "60"}, "already holds every frame");
@@ -469,7 +474,7 @@ TEST_CASE("cli: localize --memory errors: mixed modes, no image, missing or non-
   CHECK(bad.err.find("memory file '" + sample + "': header") != std::string::npos);
   const Run img = run_vmap({"localize", "--memory", file.string(), sample});
   CHECK(img.code == 1);
-  CHECK(img.err.find("cannot read the query image '" + sample + "'") != std::string::npos);
+  CHECK(img.err.find("query image '" + sample + "': ") != std::string::npos);
 }
 
 TEST_CASE("cli: loops --memory prints the memory's loop edges; --gt evaluates them over the key images") {
@@ -514,9 +519,15 @@ TEST_CASE("cli: loops --memory prints the memory's loop edges; --gt evaluates th
   const Run text = run_vmap({"loops", "--memory", file.string()});
   REQUIRE(text.code == 0);
   CHECK(text.out.find(std::to_string(j["loops"].size()) + " loop edges (inliers >= ") != std::string::npos);
-  std::size_t lines = 0;
-  for (auto at = text.out.find(") -> key "); at != std::string::npos; at = text.out.find(") -> key ", at + 1)) ++lines;
-  CHECK(lines == j["loops"].size());
+  const auto edge_lines = [](const std::string& out) {
+    std::size_t lines = 0;
+    for (auto at = out.find(") -> key "); at != std::string::npos; at = out.find(") -> key ", at + 1)) ++lines;
+    return lines;
+  };
+  CHECK(edge_lines(text.out) == std::min<std::size_t>(j["loops"].size(), 5));  // a summary: the 5 strongest
+  const Run every = run_vmap({"loops", "--memory", file.string(), "--edges"});
+  REQUIRE(every.code == 0);
+  CHECK(edge_lines(every.out) == j["loops"].size());
   // Errors: the sequence mode's input and options, no input at all, a non-memory file.
   usage_error({"loops", sample, "--memory", file.string()}, "--memory and INPUT conflict");
   usage_error({"loops", "--memory", file.string(), "--rank", "all"}, "--memory and --rank conflict");
@@ -644,5 +655,297 @@ TEST_SUITE("data") {
               "names: " + names + "\nscore: 0.3\nout: " + out.string() + "\ndraw: 1\njson: 1\n", "detect");
     CHECK(fs::is_regular_file(out / "detections.txt"));
     CHECK(fs::is_regular_file(out / "1305031229.528748.png"));
+  }
+}
+
+namespace {
+
+/// The first bytes of a PNG file whose header claims `width` x `height` pixels (no
+/// pixel data: the size is refused from the header, before any decoding).
+std::string png_header(std::uint32_t width, std::uint32_t height) {
+  std::string b = "\x89PNG\r\n\x1a\n";
+  b += std::string("\0\0\0\x0d", 4) + "IHDR";
+  for (std::uint32_t v : {width, height})
+    for (int shift = 24; shift >= 0; shift -= 8) b += static_cast<char>((v >> shift) & 0xFF);
+  b += std::string("\x08\x02\0\0\0", 5) + std::string(4, '\0');
+  return b + std::string(64, '\0');
+}
+
+/// A fresh folder under the work folder.
+fs::path fresh_dir(const std::string& name) {
+  const fs::path d = work_dir() / name;
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+/// `vmap ARGS` exits with `code` and one line naming `message`, never a crash.
+Run fails_with(const std::vector<std::string>& args, int code, const std::string& message) {
+  const Run r = run_vmap(args);
+  INFO("stderr: " << r.err);
+  CHECK(r.code == code);
+  CHECK(r.err.find(message) != std::string::npos);
+  CHECK(std::count(r.err.begin(), r.err.end(), '\n') <= 2);  // the message (and the --help hint)
+  return r;
+}
+
+}  // namespace
+
+TEST_CASE("cli: YAML nested 40000 levels deep is refused before OpenCV parses it, as --config and --camera") {
+  const fs::path dir = fresh_dir("deep_yaml");
+  const std::string deep = std::string(40000, '[') + std::string(40000, ']');
+  write(dir / "config.yaml", "threshold: " + deep + "\n");
+  write(dir / "camera.yaml", "%YAML:1.0\nCamera.fx: " + deep + "\n");
+  write(dir / "dashes.yaml", "%YAML:1.0\nintrinsics:\n" + [] {
+    std::string s;
+    for (int i = 0; i < 40000; ++i) s += "- ";
+    return s + "1\n";
+  }());
+  fails_with({"build", sample, "--config", (dir / "config.yaml").string()}, 2,
+             "--config: YAML nested 40001 levels deep, more than the 32 accepted");
+  fails_with({"build", sample, "--camera", (dir / "camera.yaml").string()}, 1,
+             (dir / "camera.yaml").string() + ": YAML nested 40001 levels deep, more than the 32 accepted");
+  fails_with({"build", sample, "--camera", (dir / "dashes.yaml").string()}, 1, "levels deep, more than the 32 accepted");
+  write(dir / "big.yaml", "# " + std::string(std::size_t{2} << 20, 'x') + "\n");
+  fails_with({"build", sample, "--config", (dir / "big.yaml").string()}, 2, "more than the 1048576 a settings file may have");
+}
+
+TEST_CASE("cli: --config and query images that are devices, FIFOs or too many pixels are refused unread") {
+  const fs::path dir = fresh_dir("unbounded");
+  fails_with({"build", sample, "--config", "/dev/zero"}, 2, "--config: '/dev/zero' is not a regular file");
+  const fs::path fifo = dir / "fifo";
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  fails_with({"build", sample, "--config", fifo.string()}, 2, "--config: '" + fifo.string() + "' is not a regular file");
+  fails_with({"build", sample, "--config", ""}, 2, "--config: the file name is empty");
+  const std::string mem = sample_memory().first.string();
+  fails_with({"localize", "--memory", mem, fifo.string()}, 1, "query image '" + fifo.string() + "': is not a regular file");
+  write(dir / "huge.png", png_header(20000, 20000));
+  fails_with({"localize", "--memory", mem, (dir / "huge.png").string()}, 1,
+             "query image '" + (dir / "huge.png").string() + "': the image is 20000x20000 pixels, more than the limit");
+  write(dir / "huger.png", png_header(32000, 32000));
+  fails_with({"match", (dir / "huger.png").string(), frame_b}, 1, "image '" + (dir / "huger.png").string() + "': the image is 32000x32000 pixels, more than the limit");
+}
+
+TEST_CASE("cli: a YAML map where an option takes a value, and empty values, are usage errors") {
+  const fs::path dir = fresh_dir("silent");
+  write(dir / "map.yaml", "threshold: {value: 0.9}\n");
+  fails_with({"build", sample, "--config", (dir / "map.yaml").string()}, 2,
+             "--config: the value of 'threshold' is a map; an option takes a number, a string or a list of them");
+  write(dir / "section.yaml", "build:\n  threshold: {value: 0.9}\n");
+  fails_with({"build", sample, "--config", (dir / "section.yaml").string()}, 2, "the value of 'threshold' is a map");
+  write(dir / "other.yaml", "loops:\n  index: all\nbuild:\n  end: 8\n");  // another subcommand's section is fine
+  const Run ok = run_vmap({"build", sample, "--config", (dir / "other.yaml").string(), "--json"});
+  INFO(ok.err);
+  CHECK(ok.code == 0);
+  fails_with({"localize", "--memory", "", frame_a}, 2, "--memory: the value is empty");
+  fails_with({"build", sample, "--camera", ""}, 2, "--camera: the value is empty");
+  write(dir / "empty_value.yaml", "camera: \"\"\n");
+  fails_with({"build", sample, "--config", (dir / "empty_value.yaml").string()}, 2, "--camera: the value is empty");
+}
+
+TEST_CASE("cli: calibrations without physical sense are refused, naming the file and the value") {
+  const fs::path dir = fresh_dir("absurd_camera");
+  const std::string pinhole = "%YAML:1.0\nCamera.fy: 500\nCamera.cx: 320\nCamera.cy: 240\n";
+  write(dir / "fx.yaml", pinhole + "Camera.fx: 1e-300\n");
+  fails_with({"build", sample, "--camera", (dir / "fx.yaml").string()}, 1,
+             (dir / "fx.yaml").string() + ": focal lengths fx = 1e-300, fy = 500 pixels are outside [1, 1e+06]");
+  write(dir / "k1.yaml", pinhole + "Camera.fx: 500\nCamera.k1: 1e300\nCamera.k2: 0\nCamera.p1: 0\nCamera.p2: 0\n");
+  fails_with({"build", sample, "--camera", (dir / "k1.yaml").string()}, 1,
+             "distortion coefficient 0 = 1e+300 is outside [-1000, 1000]");
+  const std::string ros = "camera_matrix: {rows: 3, cols: 3, data: [500, 0, 320, 0, 500, 240, 0, 0, 1]}\n";
+  write(dir / "width.yaml", ros + "image_width: 2147483647\nimage_height: 480\n");
+  fails_with({"build", sample, "--camera", (dir / "width.yaml").string()}, 1,
+             "the image size 2147483647 x 480 exceeds 65536 pixels a side");
+  write(dir / "centre.yaml", ros + "image_width: 320\nimage_height: 200\n");
+  fails_with({"build", sample, "--camera", (dir / "centre.yaml").string()}, 1,
+             "the principal point (320, 240) lies outside the 320 x 200 image");
+  write(dir / "size.yaml", "camera_matrix: {rows: 3, cols: 3, data: [250, 0, 160, 0, 250, 120, 0, 0, 1]}\n"
+                           "image_width: 320\nimage_height: 240\n");
+  fails_with({"build", sample, "--end", "5", "--camera", (dir / "size.yaml").string()}, 1,
+             "--camera " + (dir / "size.yaml").string() +
+                 ": the calibration is for 320 x 240 images, the frames are 640 x 480");
+}
+
+TEST_CASE("cli: no memory is lost to --out, and a refused or failed run leaves no empty folder") {
+  const fs::path dir = fresh_dir("out_keeps_memory");
+  const fs::path maps = dir / "maps";
+  REQUIRE(run_vmap({"build", sample, "--end", "6", "--out", maps.string()}).code == 0);
+  // A memory is never placed in an --out folder (the next --out run replaces it whole).
+  fails_with({"build", sample, "--end", "6", "--memory", maps.string() + "/"}, 2,
+             "--memory: '" + maps.string() + "' is an --out folder of vmap");
+  CHECK(!fs::exists(maps / "memory.vmem"));
+  // An --out folder that gained a file vmap did not write there is not replaced.
+  write(maps / "notes.txt", "mine\n");
+  fails_with({"build", sample, "--end", "6", "--out", maps.string()}, 2,
+             "holds 'notes.txt', which is not one of the files vmap wrote there");
+  CHECK(slurp(maps / "notes.txt") == "mine\n");
+  // A folder marked by an older vmap (no list of files) that holds a memory: refused.
+  const fs::path old = dir / "old";
+  fs::create_directories(old);
+  write(old / ".vmap-output", "written by vmap; the folder is replaced as a whole\n");
+  fs::copy_file(sample_memory().first, old / "memory.vmem");
+  fails_with({"build", sample, "--end", "6", "--out", old.string()}, 2, "holds 'memory.vmem'");
+  CHECK(fs::file_size(old / "memory.vmem") == fs::file_size(sample_memory().first));
+  // Refused or failed runs remove the folders they created.
+  const fs::path fresh = dir / "new" / "deeper";
+  fails_with({"build", (dir / "missing.txt").string(), "--out", fresh.string()}, 1, "missing.txt");
+  CHECK(!fs::exists(dir / "new"));
+  write(dir / "bad.yaml", "%YAML:1.0\nCamera.fx: 1e-300\nCamera.fy: 500\nCamera.cx: 320\nCamera.cy: 240\n");
+  fails_with({"build", sample, "--out", fresh.string(), "--camera", (dir / "bad.yaml").string()}, 1, "focal lengths");
+  CHECK(!fs::exists(dir / "new"));
+  fails_with({"build", sample, "--memory", (dir / "memnew" / "m.vmem").string(), "--camera", (dir / "bad.yaml").string()},
+             2, "conflict");
+  CHECK(!fs::exists(dir / "memnew"));
+}
+
+TEST_CASE("cli: a misspelt option gets a suggestion; another subcommand's option names its subcommands") {
+  fails_with({"build", sample, "--treshold", "0.3"}, 2, "unknown option '--treshold'; did you mean '--threshold'?");
+  fails_with({"build", sample, "--treshold=0.3"}, 2, "unknown option '--treshold'; did you mean '--threshold'?");
+  fails_with({"loops", sample, "--camera", "x.yaml"}, 2,
+             "option '--camera' is not an option of 'vmap loops'; it belongs to: build, match, sweep");
+  fails_with({"localize", "--room", "--images", "2"}, 2,
+             "option '--images' is not an option of 'vmap localize'; it belongs to: build, memory");
+  fails_with({"build", sample, "--zzzzzzzzzz"}, 2, "unknown option '--zzzzzzzzzz' (see vmap build --help)");
+}
+
+TEST_CASE("cli: memory info and loops --memory summarise the loop edges; --edges lists each with names and times") {
+  const auto& [file, built] = sample_memory();
+  const Run j = run_vmap({"memory", "info", file.string(), "--json"});
+  REQUIRE(j.code == 0);
+  const auto info = nlohmann::json::parse(j.out);
+  const std::size_t edges = info["loops"].size();
+  for (const auto& l : info["loops"]) {
+    const auto& key = info["key_images"][l["from"].get<std::size_t>()];
+    CHECK(l["query_name"] == key["name"]);
+    CHECK(l["query_time"].is_number());
+  }
+  const Run all = run_vmap({"memory", "info", file.string(), "--edges"});
+  REQUIRE(all.code == 0);
+  CHECK(static_cast<std::size_t>(std::count(all.out.begin(), all.out.end(), '\n')) == 1 + edges);
+  const Run summary = run_vmap({"memory", "info", file.string()});
+  REQUIRE(summary.code == 0);
+  CHECK(static_cast<std::size_t>(std::count(summary.out.begin(), summary.out.end(), '\n')) ==
+        1 + (edges <= 5 ? edges : 6));
+  const Run loops = run_vmap({"loops", "--memory", file.string(), "--edges"});
+  REQUIRE(loops.code == 0);
+  CHECK(static_cast<std::size_t>(std::count(loops.out.begin(), loops.out.end(), '\n')) == 2 + edges);
+}
+
+TEST_CASE("cli: memory export writes key images with names and times, and loop edges as timestamp pairs") {
+  const auto& file = sample_memory().first;
+  const fs::path out = fresh_dir("memory_export") / "exported";
+  const Run r = run_vmap({"memory", "export", file.string(), "--out", out.string(), "--json"});
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto info = nlohmann::json::parse(run_vmap({"memory", "info", file.string(), "--json"}).out);
+  std::istringstream keys(slurp(out / "key_images.txt"));
+  std::string line;
+  std::getline(keys, line);
+  CHECK(line == "# frame_index name timestamp");
+  for (const auto& k : info["key_images"]) {
+    REQUIRE(std::getline(keys, line));
+    std::istringstream row(line);
+    std::size_t index = 0;
+    std::string name;
+    double t = -1;
+    row >> index >> name >> t;
+    CHECK(index == k["frame_index"].get<std::size_t>());
+    CHECK(name == k["name"].get<std::string>());
+    // The sample's names are their TUM times: 1305031229.528748.jpg is at 1305031229.528748 s.
+    CHECK(std::abs(t - std::stod(name.substr(0, name.size() - 4))) < 1e-6);
+  }
+  std::istringstream pairs(slurp(out / "loops.txt"));
+  std::getline(pairs, line);
+  CHECK(line == "# query_time match_time query_name match_name inliers");
+  for (const auto& l : info["loops"]) {
+    REQUIRE(std::getline(pairs, line));
+    std::istringstream row(line);
+    double tq = 0, tm = 0;
+    std::string nq, nm;
+    int inliers = 0;
+    row >> tq >> tm >> nq >> nm >> inliers;
+    CHECK(nq == l["query_name"].get<std::string>());
+    CHECK(nm == l["match_name"].get<std::string>());
+    CHECK(std::abs(tq - l["query_time"].get<double>()) < 1e-6);
+    CHECK(inliers == l["inliers"].get<int>());
+  }
+  CHECK(!fs::exists(out / "key_images.tum"));  // no poses in this memory
+  fails_with({"memory", "export", file.string()}, 2, "--out is required");
+}
+
+TEST_CASE("cli: key_images.txt of build --out gives each key image's name and time") {
+  const fs::path out = fresh_dir("keys_named") / "out";
+  REQUIRE(run_vmap({"build", sample, "--end", "10", "--out", out.string()}).code == 0);
+  std::istringstream keys(slurp(out / "key_images.txt"));
+  std::string line;
+  std::getline(keys, line);
+  CHECK(line == "# frame_index name timestamp");
+  REQUIRE(std::getline(keys, line));
+  CHECK(line == "0 1305031229.528748.jpg 1305031229.528748");
+}
+
+TEST_SUITE("data") {
+  TEST_CASE("cli: a EuRoC folder runs as it is: build with sensor.yaml, loops with EuRoC ground truth") {
+    const fs::path mav0 = vmap::test::make_euroc_layout(fresh_dir("euroc"), vmap::test::data_path("tum_fr1_rpy/rgb.txt"),
+                                                        120, vmap::test::data_path("tum_fr1_rpy/groundtruth.txt"));
+    const std::string cam0 = (mav0 / "cam0").string();
+    const Run b = run_vmap({"build", cam0, "--camera", cam0 + "/sensor.yaml", "--end", "30", "--json"});
+    INFO(b.err);
+    REQUIRE(b.code == 0);
+    const auto j = nlohmann::json::parse(b.out);
+    CHECK(j["frames"] == 30);
+    const Run csv = run_vmap({"build", cam0 + "/data.csv", "--end", "30", "--json"});
+    REQUIRE(csv.code == 0);
+    CHECK(without_times(nlohmann::json::parse(csv.out))["key_images"] == without_times(j)["key_images"]);
+    const std::string gt = (mav0 / "state_groundtruth_estimate0" / "data.csv").string();
+    const Run loops = run_vmap({"loops", cam0, "--gt-poses", gt, "--json"});
+    INFO(loops.err);
+    CHECK(loops.code == 0);
+    // The frames' clock shifted by an hour: the error names both time ranges.
+    fails_with({"loops", cam0, "--gt-poses", gt, "--time-offset", "3600"}, 1,
+               "no pose within 0.050000 s of frame 0 (time 1305034829.528748 s); the ");
+    // Poses and memory exports: key_images.tum is read back by vmap's TUM reader, and
+    // the g2o edges join key images with their relative pose.
+    const fs::path out = fresh_dir("euroc_memory");
+    const Run m = run_vmap({"build", cam0, "--memory", (out / "m.vmem").string(), "--poses", gt, "--vocabulary-after",
+                            "10", "--out", (out / "pictures").string(), "--json"});
+    INFO(m.err);
+    REQUIRE(m.code == 0);
+    const auto tum = vmap::load_tum_poses(out / "pictures" / "key_images.tum");
+    const auto info = nlohmann::json::parse(run_vmap({"memory", "info", (out / "m.vmem").string(), "--json"}).out);
+    REQUIRE(tum.size() == info["key_images"].size());
+    const auto truth = vmap::load_camera_poses(gt);
+    for (std::size_t k = 0; k < tum.size(); ++k) {
+      const auto se3 = info["key_images"][k]["pose"]["se3"].get<std::vector<double>>();
+      CHECK(tum[k].position[0] == doctest::Approx(se3[3]).epsilon(1e-9));
+      CHECK(tum[k].position[2] == doctest::Approx(se3[11]).epsilon(1e-9));
+      const auto near = vmap::associate_by_timestamp(truth, {tum[k].timestamp}, 0.05).front();
+      REQUIRE(near);
+      CHECK(cv::norm(truth[*near].position - tum[k].position) < 1e-9);
+    }
+    std::istringstream g2o(slurp(out / "pictures" / "loops.g2o"));
+    std::size_t vertices = 0, edges = 0;
+    for (std::string line; std::getline(g2o, line);) {
+      std::istringstream row(line);
+      std::vector<std::string> t;
+      for (std::string s; row >> s;) t.push_back(s);
+      if (t[0] == "VERTEX_SE3:QUAT") {
+        REQUIRE(t.size() == 9);
+        const auto& p = tum[vertices];
+        CHECK(std::stod(t[2]) == doctest::Approx(p.position[0]).epsilon(1e-9));
+        ++vertices;
+      } else {
+        REQUIRE(t[0] == "EDGE_SE3:QUAT");
+        REQUIRE(t.size() == 31);
+        const auto from = std::stoul(t[1]), to = std::stoul(t[2]);
+        const auto& a = tum[from];
+        const auto& b2 = tum[to];
+        const cv::Vec3d d = a.rotation.t() * (b2.position - a.position);
+        for (int k = 0; k < 3; ++k) CHECK(std::stod(t[3 + static_cast<std::size_t>(k)]) == doctest::Approx(d[k]).epsilon(1e-6));
+        ++edges;
+      }
+    }
+    CHECK(vertices == tum.size());
+    CHECK(edges == info["loops"].size());
   }
 }

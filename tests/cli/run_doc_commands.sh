@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Runs every `vmap` command shown in README.md and examples/*.md, as written, and fails
 # when one exits non-zero. A command is a line inside a fenced code block that starts
-# with `vmap `, `$ vmap ` or `build/{release,test}/examples/vmap ` (continued over lines ending
+# with `vmap `, `$ vmap ` or `build/release/examples/vmap ` (continued over lines ending
 # in a backslash); synopsis lines (with `[`, `INPUT` or `IMAGE...`) are not commands.
+# A program run from another build folder (`build/test/examples/...`) fails the test:
+# the README's set-up commands build only build/release, so it would not run as pasted.
 # The program is replaced by the built one; the commands run in a scratch folder laid
 # out like the repository (examples/ and ../shared reached through links), so their
 # outputs land there and relative paths resolve as in the docs.
@@ -30,11 +32,12 @@ extract() {
       mark = ""
       if (line ~ /#[ \t]*by hand/) mark = "HAND:"
       else if (line ~ /#[ \t]*fails/) mark = "FAILS:"
-      if (line !~ /^[ \t]*(vmap|build\/(release|test)\/examples\/vmap) (build|sweep|match|detect|loops|localize|vocabulary|memory) /) next
+      if (line ~ /^[ \t]*build\/[a-z]+\/examples\// && line !~ /^[ \t]*build\/release\//) { print FILENAME "\tWRONGDIR:" line; next }
+      if (line !~ /^[ \t]*(vmap|build\/release\/examples\/vmap) (build|sweep|match|detect|loops|localize|vocabulary|memory) /) next
       if (line ~ /\[|INPUT|IMAGE\.\.\./) next
       sub(/[ \t]+#.*$/, "", line)
       gsub(/[ \t]+/, " ", line)
-      sub(/^[ \t]*(vmap|build\/(release|test)\/examples\/vmap) /, "", line)
+      sub(/^[ \t]*(vmap|build\/release\/examples\/vmap) /, "", line)
       print FILENAME "\t" mark line
     }' "$@"
 }
@@ -49,10 +52,35 @@ ln -s "$src/examples" "$scratch/repo/examples"
 if [ -n "$shared" ] && [ -d "$shared" ]; then ln -s "$shared" "$scratch/shared"; fi
 cd "$scratch/repo" || exit 1
 
+# A stand-in for a user's EuRoC recording (README, "Your own data"): the sample TUM
+# frames in the EuRoC layout (data.csv with nanosecond times, data/ beside it, the
+# camera as sensor.yaml) and, when ../shared is there, TUM's ground truth written as
+# EuRoC's state_groundtruth_estimate0/data.csv (17 columns, the quaternion's w first).
+ns() { awk '{ split($1, t, "."); printf "%s%s", t[1], substr(t[2] "000000000", 1, 9) }' <<<"$1"; }
+mkdir -p mav0/cam0 mav0/state_groundtruth_estimate0
+ln -s "$src/examples/data/tum_fr1_rpy_60/rgb" mav0/cam0/data
+cp "$src/examples/data/tum_fr1_sensor.yaml" mav0/cam0/sensor.yaml
+{
+  echo "#timestamp [ns],filename"
+  grep -v '^#' "$src/examples/data/tum_fr1_rpy_60/rgb.txt" | while read -r t f; do echo "$(ns "$t"),${f#rgb/}"; done
+} >mav0/cam0/data.csv
+if [ -f "$shared/data/tum_fr1_rpy/groundtruth.txt" ]; then
+  {
+    echo "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []"
+    grep -v '^#' "$shared/data/tum_fr1_rpy/groundtruth.txt" |
+      awk '{ split($1, t, "."); printf "%s%s,%s,%s,%s,%s,%s,%s,%s,0,0,0,0,0,0,0,0,0\n", t[1], substr(t[2] "000000000", 1, 9), $2, $3, $4, $8, $5, $6, $7 }'
+  } >mav0/state_groundtruth_estimate0/data.csv
+fi
+
 passed=0 failed=0 skipped=0
 for entry in "${commands[@]}"; do
   file=${entry%%$'\t'*} cmd=${entry#*$'\t'}
   expect_fail=0
+  if [[ "$cmd" == WRONGDIR:* ]]; then
+    echo "FAIL ($file): '${cmd#WRONGDIR:}' uses a build folder the README does not build (use build/release)"
+    failed=$((failed + 1))
+    continue
+  fi
   if [[ "$cmd" == HAND:* ]]; then
     cmd=${cmd#HAND:}
     if [ "${VMAP_DOC_ALL:-0}" != 1 ]; then
@@ -63,7 +91,8 @@ for entry in "${commands[@]}"; do
   elif [[ "$cmd" == FAILS:* ]]; then
     cmd=${cmd#FAILS:} expect_fail=1
   fi
-  if [[ "$cmd" == *../shared/* ]] && [ ! -d ../shared ]; then
+  if { [[ "$cmd" == *../shared/* ]] && [ ! -d ../shared ]; } ||
+     { [[ "$cmd" == *state_groundtruth_estimate0* ]] && [ ! -f mav0/state_groundtruth_estimate0/data.csv ]; }; then
     echo "skip ($file, needs ../shared): vmap $cmd"
     skipped=$((skipped + 1))
     continue

@@ -11,6 +11,7 @@
 
 #include <vmap/hooks/class_names.hpp>
 #include <vmap/hooks/precomputed_detections.hpp>
+#include <vmap/io/calibration.hpp>
 #include <vmap/io/image.hpp>
 #include <vmap/io/poses.hpp>
 #include <vmap/keyframe/map_io.hpp>
@@ -22,9 +23,12 @@
 #include <vmap/place/vocabulary_import.hpp>
 #include <vmap/som/gcs.hpp>
 
+#include "common/cli_support.hpp"  // the --config reader of the command line
+
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
+#include <sstream>
 #include <string>
 #include <string_view>
 
@@ -44,6 +48,16 @@ VMAP_FUZZ_LOADER(vocabulary, { (void)vmap::BinaryVocabularyTree::deserialize(byt
 VMAP_FUZZ_LOADER(vocabulary_orbslam_text, { (void)vmap::import_orbslam_text(bytes, "fuzz"); })
 VMAP_FUZZ_LOADER(vocabulary_dbow2_yaml, { (void)vmap::import_dbow2_yaml(bytes, "fuzz"); })
 VMAP_FUZZ_LOADER(vocabulary_fbow, { (void)vmap::import_fbow(bytes, "fuzz"); })
+// Calibration files of every format (ORB-SLAM, ROS, Kalibr, EuRoC YAML and KITTI text).
+VMAP_FUZZ_LOADER(calibration, { (void)vmap::parse_camera(std::string(bytes), "fuzz"); })
+// The command line's --config reader: a bad file is CLI11's ConfigError (exit 2).
+VMAP_FUZZ_LOADER(config, {
+  std::istringstream in{std::string(bytes)};
+  try {
+    (void)vmap::examples::YamlConfig("build", {"build", "loops"}).from_config(in);
+  } catch (const CLI::ConfigError&) {
+  }
+})
 VMAP_FUZZ_LOADER(place_database, { (void)vmap::PlaceDatabase<std::uint32_t>::deserialize(bytes, "fuzz"); })
 // A memory file that loads is written back by the loaded memory into bytes that load
 // again (whatever it accepted is a state it can save); anything else is a bug: abort.

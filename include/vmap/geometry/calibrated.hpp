@@ -22,6 +22,7 @@
 #include <concepts>
 #include <cstddef>
 #include <optional>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -43,11 +44,17 @@ namespace vmap {
 template <Estimator E>
 class Calibrated {
  public:
-  Calibrated(std::optional<Camera> camera, E estimator) : camera_(std::move(camera)), estimator_(std::move(estimator)) {
-    if (camera_) camera_->validate("Calibrated: camera");
+  /// `source` names the camera in errors (its calibration file).
+  Calibrated(std::optional<Camera> camera, E estimator, std::string source = "Calibrated: camera")
+      : camera_(std::move(camera)), estimator_(std::move(estimator)), source_(std::move(source)) {
+    if (camera_) camera_->validate(source_);
   }
 
   [[nodiscard]] Verification verify(const Features& a, const Features& b, const Matches& matches) const {
+    if (camera_) {
+      camera_->check_frame_size(a.image_size, source_);
+      camera_->check_frame_size(b.image_size, source_);
+    }
     if (!camera_ || camera_->ideal()) return estimator_.verify(a, b, matches);
     std::vector<cv::Point2f> pa, pb;
     std::vector<int> order;
@@ -188,6 +195,7 @@ class Calibrated {
 
   std::optional<Camera> camera_;
   E estimator_;
+  std::string source_;
 };
 
 static_assert(Estimator<Calibrated<FundamentalEstimator>>);

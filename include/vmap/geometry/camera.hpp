@@ -19,12 +19,24 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
 #include <limits>
 #include <string>
 #include <string_view>
 #include <vector>
 
 namespace vmap {
+
+namespace detail {
+
+/// A number for a message, as printf's %g writes it ("1e-300", "500", "0.25").
+inline std::string short_number(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+}  // namespace detail
 
 /// The lens model of a Camera.
 enum class LensModel : std::uint8_t {
@@ -89,6 +101,49 @@ struct Camera {
     detail::check(
         image_size.width >= 0 && image_size.height >= 0 && (image_size.width == 0) == (image_size.height == 0),
         [&] { return where + "the image size must be positive or unknown (0 x 0)"; });
+    // Physical sense: a value outside these bounds is a unit or typing mistake (metres
+    // for pixels, a lost decimal point), which would otherwise run and give nothing.
+    detail::check(fx >= min_focal_px && fx <= max_focal_px && fy >= min_focal_px && fy <= max_focal_px, [&] {
+      return where + "focal lengths fx = " + detail::short_number(fx) + ", fy = " + detail::short_number(fy) +
+             " pixels are outside [" + detail::short_number(min_focal_px) + ", " + detail::short_number(max_focal_px) + "]";
+    });
+    detail::check(image_size.width <= max_image_side && image_size.height <= max_image_side, [&] {
+      return where + "the image size " + std::to_string(image_size.width) + " x " + std::to_string(image_size.height) +
+             " exceeds " + std::to_string(max_image_side) + " pixels a side";
+    });
+    if (image_size.width > 0)
+      detail::check(cx >= 0 && cx <= image_size.width && cy >= 0 && cy <= image_size.height, [&] {
+        return where + "the principal point (" + detail::short_number(cx) + ", " + detail::short_number(cy) +
+               ") lies outside the " + std::to_string(image_size.width) + " x " + std::to_string(image_size.height) +
+               " image";
+      });
+    for (std::size_t k = 0; k < distortion.size(); ++k) {
+      // Tangential terms (p1, p2: indices 2, 3 of a pinhole) are fractions of a pixel
+      // ray; radial ones of real lenses stay within tens (rational model) or units.
+      const bool tangential = lens == LensModel::pinhole && (k == 2 || k == 3);
+      const double bound = tangential ? max_tangential : max_radial;
+      detail::check(std::abs(distortion[k]) <= bound, [&] {
+        return where + "distortion coefficient " + std::to_string(k) + " = " + detail::short_number(distortion[k]) +
+               " is outside [-" + detail::short_number(bound) + ", " + detail::short_number(bound) + "]";
+      });
+    }
+  }
+
+  /// Bounds of `validate`'s physical check.
+  static constexpr double min_focal_px = 1.0;
+  static constexpr double max_focal_px = 1e6;
+  static constexpr int max_image_side = 65536;
+  static constexpr double max_radial = 1000.0;
+  static constexpr double max_tangential = 1.0;
+
+  /// Fails when the camera states an image size and `frames` (the size of the images it
+  /// is applied to) is another one: its K and distortion would be applied to the wrong
+  /// pixels. `frames` of (0, 0) (unknown) passes.
+  void check_frame_size(cv::Size frames, const std::string& source = "camera") const {
+    if (image_size.width == 0 || frames.width == 0 || frames == image_size) return;
+    detail::fail(source + ": the calibration is for " + std::to_string(image_size.width) + " x " +
+                 std::to_string(image_size.height) + " images, the frames are " + std::to_string(frames.width) + " x " +
+                 std::to_string(frames.height));
   }
 };
 

@@ -20,7 +20,11 @@
 // sees either the whole old set or the whole new set. Because the old folder is
 // deleted, an existing target folder is replaced only when it is empty or was itself
 // written by AtomicDirectory (it holds the marker file `.vmap-output`); any other
-// existing folder is refused, so `--out $HOME` can never delete a user's files.
+// existing folder is refused, so `--out $HOME` can never delete a user's files. The
+// marker lists the names the set was published with; a marked folder that has since
+// gained anything else (a memory file saved into it, a user's notes) is refused too, so
+// replacing an output never deletes what another command or a person put there. A
+// marker without a list (older vmap) still refuses a folder holding a memory (`*.vmem`).
 //
 // Symbolic links: a target file that is a symbolic link is followed on purpose: the
 // file the link points to is replaced (the temporary file is made in that file's
@@ -40,7 +44,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
@@ -232,7 +238,7 @@ class AtomicDirectory {
     }
     tmp_ = templ;
     ::chmod(tmp_.c_str(), 0755);  // mkdtemp makes 0700; an output folder is a normal folder
-    write_file_atomically(tmp_ / detail::output_marker, "written by vmap; the folder is replaced as a whole\n");
+    write_file_atomically(tmp_ / detail::output_marker, std::string(marker_header) + "\n");
   }
 
   AtomicDirectory(AtomicDirectory&& o) noexcept : target_(std::move(o.target_)), tmp_(std::exchange(o.tmp_, {})) {}
@@ -249,6 +255,7 @@ class AtomicDirectory {
   /// Publishes the set: the temporary folder becomes the target folder in one rename.
   void commit() {
     detail::check(!tmp_.empty(), "AtomicDirectory::commit: '" + target_.string() + "' is already committed");
+    write_marker();
     detail::sync_folder(tmp_);
     // First try: the target does not exist (RENAME_NOREPLACE never clobbers a folder
     // created meanwhile by someone else).
@@ -297,13 +304,57 @@ class AtomicDirectory {
       detail::fail("output folder '" + target_.string() +
                    "' is a symbolic link; give the folder it points to (vmap replaces output folders as a whole)");
     if (!std::filesystem::is_directory(ls)) detail::fail("output folder '" + target_.string() + "' exists and is not a folder");
-    if (std::filesystem::exists(target_ / detail::output_marker, ec)) return;
+    if (std::filesystem::exists(target_ / detail::output_marker, ec)) {
+      check_only_own_files();
+      return;
+    }
     const bool empty = std::filesystem::is_empty(target_, ec);
     if (ec) detail::fail("cannot read output folder '" + target_.string() + "': " + ec.message());
     if (!empty)
       detail::fail("output folder '" + target_.string() +
                    "' exists and holds files vmap did not write; vmap replaces its output folder as a whole, "
                    "so give a new or empty folder");
+  }
+
+  static constexpr const char* marker_header = "written by vmap; the folder is replaced as a whole";
+
+  /// The marker: its header line, then the name of every entry of the set, one a line.
+  void write_marker() const {
+    std::string text = std::string(marker_header) + "\n";
+    std::error_code ec;
+    for (const auto& e : std::filesystem::directory_iterator(tmp_, ec)) {
+      const std::string name = e.path().filename().string();
+      if (name != detail::output_marker && name.find('\n') == std::string::npos) text += name + "\n";
+    }
+    if (ec) detail::fail("cannot list the new output folder '" + tmp_.string() + "': " + ec.message());
+    write_file_atomically(tmp_ / detail::output_marker, text);
+  }
+
+  /// A marked folder is replaced only while it holds nothing but the files its marker
+  /// lists (see the top of this file).
+  void check_only_own_files() const {
+    const std::filesystem::path marker = target_ / detail::output_marker;
+    const std::string text = read_file(marker, std::uintmax_t{1} << 20, "output marker");
+    std::vector<std::string> listed;
+    std::size_t at = text.find('\n');
+    const bool has_list = at != std::string::npos && at + 1 < text.size();
+    while (at != std::string::npos && at + 1 < text.size()) {
+      const std::size_t end = text.find('\n', at + 1);
+      listed.push_back(text.substr(at + 1, (end == std::string::npos ? text.size() : end) - at - 1));
+      at = end;
+    }
+    std::error_code ec;
+    for (const auto& e : std::filesystem::directory_iterator(target_, ec)) {
+      const std::string name = e.path().filename().string();
+      if (name == detail::output_marker) continue;
+      const bool own = has_list ? std::find(listed.begin(), listed.end(), name) != listed.end()
+                                : e.path().extension() != ".vmem";
+      if (!own)
+        detail::fail("output folder '" + target_.string() + "' holds '" + name +
+                     "', which is not one of the files vmap wrote there; vmap replaces its output folder as a "
+                     "whole, so move it away or give another folder");
+    }
+    if (ec) detail::fail("cannot read output folder '" + target_.string() + "': " + ec.message());
   }
 
   [[noreturn]] void fail_commit(int e) {

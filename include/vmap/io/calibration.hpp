@@ -11,6 +11,11 @@
 //                  `distortion_coefficients: {data: [...]}`, `image_width` / `image_height`
 //   KITTI          calib.txt: `P0: <12 numbers>`, the 3x4 projection of rectified camera 0
 //                  (no distortion); `read_kitti_camera` takes another P1..P3
+//   Kalibr / ASL   a EuRoC `sensor.yaml` (`intrinsics: [fu, fv, cu, cv]`, `resolution:
+//                  [w, h]`, `distortion_model: radial-tangential | equidistant`,
+//                  `distortion_coefficients: [...]`) or a Kalibr camchain
+//                  (`cam0: {intrinsics, resolution, distortion_model: radtan | equidistant,
+//                  distortion_coeffs}`; `parse_kalibr_camera` takes another camN)
 //
 // `read_camera` tells them apart by their content. A bad file is a vmap::Error naming
 // the file and the missing or bad key (or "file:line" for KITTI).
@@ -19,6 +24,7 @@
 #include <vmap/geometry/camera.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/detail/lines.hpp>
+#include <vmap/io/yaml_limits.hpp>
 
 #include <opencv2/core.hpp>
 
@@ -35,17 +41,59 @@
 
 namespace vmap {
 
-enum class CalibrationFormat { orbslam, ros, kitti };
+enum class CalibrationFormat { orbslam, ros, kitti, kalibr };
 
 namespace detail {
 
+/// YAML text with every "indentless" block sequence indented: PyYAML (Kalibr, ROS tools)
+/// writes the items of a list at the indentation of its key,
+///     T_cn_cnm1:
+///     - [1, 0, 0, 0]
+/// which is valid YAML that OpenCV's reader rejects; two more spaces make it
+/// `  - [1, 0, 0, 0]`, the same document.
+inline std::string indent_block_sequences(std::string_view text) {
+  std::string out;
+  out.reserve(text.size() + 64);
+  std::optional<std::size_t> key_indent;  // indentation of a "key:" line opening a list
+  bool shifting = false;
+  for (std::size_t i = 0; i < text.size();) {
+    const std::size_t end = std::min(text.find('\n', i), text.size());
+    const std::string_view line = text.substr(i, end - i);
+    i = end + 1;
+    const std::size_t indent = std::min(line.find_first_not_of(' '), line.size());
+    const std::string_view body = line.substr(indent);
+    const bool item = body.size() >= 2 && body[0] == '-' && (body[1] == ' ' || body[1] == '\t');
+    const bool blank = body.empty() || body[0] == '#' || body[0] == '\r';
+    if (!blank) {
+      // Inside the list: its items at the key's indentation, and their continuation
+      // lines (deeper), move together.
+      shifting = key_indent && ((item && indent == *key_indent) || (shifting && indent > *key_indent));
+      if (!shifting) {
+        std::string_view trimmed = body;
+        while (!trimmed.empty() && (trimmed.back() == '\r' || trimmed.back() == ' ')) trimmed.remove_suffix(1);
+        key_indent = !item && !trimmed.empty() && trimmed.back() == ':' ? std::optional<std::size_t>(indent) : std::nullopt;
+      }
+    }
+    if (shifting && !blank) out += "  ";
+    out += line;
+    if (end < text.size()) out += '\n';
+  }
+  return out;
+}
+
 /// OpenCV's YAML reader needs the "%YAML:1.0" directive that ROS files do not have.
+/// Size and nesting are bounded first (io/yaml_limits.hpp): OpenCV's parser recurses
+/// once per level.
 inline cv::FileStorage open_yaml_text(const std::string& text, const std::string& name) {
-  std::string yaml = text;
+  check_yaml_limits(text, name);
+  std::string yaml = indent_block_sequences(text);
   if (yaml.rfind("%YAML", 0) != 0) yaml = "%YAML:1.0\n" + yaml;
   try {
     cv::FileStorage fs(yaml, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
     if (!fs.isOpened()) fail(name + ": cannot be read as a YAML file");
+    // Keys are looked up at the top level: OpenCV asserts (throws) on a lookup in a
+    // list or a scalar.
+    if (!fs.root().isMap()) fail(name + ": not a YAML map of keys (a calibration file is one)");
     return fs;
   } catch (const cv::Exception& e) {
     fail(name + ": not a valid YAML file (" + e.err + ")");
@@ -68,6 +116,7 @@ inline double yaml_required_number(const cv::FileNode& node, const std::string& 
 inline std::vector<double> yaml_data(const cv::FileStorage& fs, const std::string& key, const std::string& name) {
   const cv::FileNode m = fs[key];
   if (m.empty() || m.isNone()) fail(name + ": missing key '" + key + "'");
+  if (!m.isMap()) fail(name + ": key '" + key + "' is not a map with 'data'");
   const cv::FileNode d = m["data"];
   if (!d.isSeq()) fail(name + ": key '" + key + ".data' is missing or not a list");
   std::vector<double> out;
@@ -85,7 +134,8 @@ inline cv::Size yaml_image_size(const cv::FileNode& w, const cv::FileNode& h, co
   if (width.has_value() != height.has_value())
     fail(name + ": give both '" + wkey + "' and '" + hkey + "' or neither");
   if (!width) return {};
-  if (!(*width > 0 && *height > 0 && *width == std::floor(*width) && *height == std::floor(*height)))
+  if (!(*width > 0 && *height > 0 && *width <= 2147483647.0 && *height <= 2147483647.0 && *width == std::floor(*width) &&
+        *height == std::floor(*height)))
     fail(name + ": '" + wkey + "' and '" + hkey + "' must be positive whole numbers");
   return {static_cast<int>(*width), static_cast<int>(*height)};
 }
@@ -111,9 +161,11 @@ inline bool is_kitti_line(std::string_view line) {
   if (text.find("camera_matrix") != std::string::npos) return CalibrationFormat::ros;
   if (text.find("Camera.fx") != std::string::npos || text.find("Camera1.fx") != std::string::npos)
     return CalibrationFormat::orbslam;
+  if (text.find("intrinsics") != std::string::npos) return CalibrationFormat::kalibr;
   detail::fail(name +
                ": not a camera calibration file vmap knows: expected an ORB-SLAM YAML (Camera.fx ...), a ROS "
-               "camera_info YAML (camera_matrix ...) or a KITTI calib.txt (P0: ...)");
+               "camera_info YAML (camera_matrix ...), a Kalibr camchain or EuRoC sensor.yaml (intrinsics ...) or a "
+               "KITTI calib.txt (P0: ...)");
 }
 
 /// An ORB-SLAM2 / ORB-SLAM3 settings file (see the header comment).
@@ -225,17 +277,101 @@ inline bool is_kitti_line(std::string_view line) {
   return *found;
 }
 
-/// The camera of a calibration file of any of the three formats (see the header
-/// comment); the format is told from the content. Missing file: Error naming it.
-[[nodiscard]] inline Camera read_camera(const std::filesystem::path& path) {
-  const std::string text = read_file(path);
-  const std::string name = path.string();
-  switch (guess_calibration_format(text, name)) {
-    case CalibrationFormat::orbslam: return parse_orbslam_camera(text, name);
-    case CalibrationFormat::ros: return parse_ros_camera(text, name);
-    case CalibrationFormat::kitti: return parse_kitti_camera(text, name);
+namespace detail {
+
+/// A YAML list of numbers under `key` of `node` (Kalibr's `intrinsics: [...]`).
+inline std::vector<double> yaml_list(const cv::FileNode& node, const std::string& key, const std::string& name) {
+  const cv::FileNode l = node[key];
+  if (l.empty() || l.isNone()) fail(name + ": missing key '" + key + "'");
+  if (!l.isSeq()) fail(name + ": key '" + key + "' is not a list");
+  std::vector<double> out;
+  for (const auto& e : l) {
+    if (!e.isReal() && !e.isInt()) fail(name + ": key '" + key + "' holds a value that is not a number");
+    out.push_back(static_cast<double>(e));
+  }
+  return out;
+}
+
+}  // namespace detail
+
+/// A Kalibr camchain (`which`: "cam0", "cam1", ...) or an ASL / EuRoC `sensor.yaml`
+/// (the camera at the top level); see the header comment. Kalibr writes
+/// `distortion_coeffs`, EuRoC `distortion_coefficients`; the models `radtan` /
+/// `radial-tangential` (k1 k2 p1 p2) and `equidistant` / `equi` (fisheye k1..k4).
+[[nodiscard]] inline Camera parse_kalibr_camera(const std::string& text, const std::string& name = "<calibration>",
+                                                const std::string& which = "cam0") {
+  const cv::FileStorage fs = detail::open_yaml_text(text, name);
+  cv::FileNode cam = fs.root();
+  std::string prefix;
+  if (cam["intrinsics"].empty()) {
+    cam = fs[which];
+    prefix = which + ".";
+    if (!cam.isMap()) detail::fail(name + ": no 'intrinsics' and no camera '" + which + "' (a Kalibr camchain)");
+  }
+  if (const cv::FileNode m = cam["camera_model"]; !m.empty() && !m.isNone()) {
+    if (!m.isString() || static_cast<std::string>(m) != "pinhole")
+      detail::fail(name + ": key '" + prefix + "camera_model' must be 'pinhole' (vmap reads pinhole cameras)");
+  }
+  const std::vector<double> k = detail::yaml_list(cam, "intrinsics", name);
+  if (k.size() != 4)
+    detail::fail(name + ": key '" + prefix + "intrinsics' has " + std::to_string(k.size()) +
+                 " numbers, expected 4 (fu fv cu cv)");
+  Camera c;
+  c.fx = k[0];
+  c.fy = k[1];
+  c.cx = k[2];
+  c.cy = k[3];
+  std::string model = "radtan";
+  if (const cv::FileNode m = cam["distortion_model"]; !m.empty() && !m.isNone()) {
+    if (!m.isString()) detail::fail(name + ": key '" + prefix + "distortion_model' is not a string");
+    model = static_cast<std::string>(m);
+  }
+  const std::string dkey = cam["distortion_coeffs"].empty() ? "distortion_coefficients" : "distortion_coeffs";
+  std::vector<double> d;
+  if (!cam[dkey].empty()) d = detail::yaml_list(cam, dkey, name);
+  if (model == "equidistant" || model == "equi") {
+    c.lens = LensModel::fisheye;
+    if (d.size() != 4)
+      detail::fail(name + ": key '" + prefix + dkey + "' has " + std::to_string(d.size()) +
+                   " numbers, the equidistant model has 4 (k1 k2 k3 k4)");
+  } else if (model == "radtan" || model == "radial-tangential" || model == "none") {
+    if (std::all_of(d.begin(), d.end(), [](double x) { return x == 0.0; })) d.clear();
+  } else {
+    detail::fail(name + ": key '" + prefix + "distortion_model' is '" + model +
+                 "'; vmap reads radtan (radial-tangential) and equidistant");
+  }
+  c.distortion = d;
+  if (!cam["resolution"].empty()) {
+    const std::vector<double> r = detail::yaml_list(cam, "resolution", name);
+    if (r.size() != 2 || !(r[0] >= 1 && r[1] >= 1 && r[0] <= 2147483647.0 && r[1] <= 2147483647.0) || r[0] != std::floor(r[0]) ||
+        r[1] != std::floor(r[1]))
+      detail::fail(name + ": key '" + prefix + "resolution' must be two positive whole numbers [width, height]");
+    c.image_size = {static_cast<int>(r[0]), static_cast<int>(r[1])};
+  }
+  c.validate(name);
+  return c;
+}
+
+/// The camera of calibration text of any of the formats of the header comment; the
+/// format is told from the content. `name` names the text in errors.
+[[nodiscard]] inline Camera parse_camera(const std::string& text, const std::string& name = "<calibration>") {
+  try {
+    switch (guess_calibration_format(text, name)) {
+      case CalibrationFormat::orbslam: return parse_orbslam_camera(text, name);
+      case CalibrationFormat::ros: return parse_ros_camera(text, name);
+      case CalibrationFormat::kitti: return parse_kitti_camera(text, name);
+      case CalibrationFormat::kalibr: return parse_kalibr_camera(text, name);
+    }
+  } catch (const cv::Exception& e) {  // an OpenCV lookup on a node of an unexpected kind
+    detail::fail(name + ": not a calibration file vmap can read (" + e.err + ")");
   }
   detail::fail(name + ": unknown calibration format");
+}
+
+/// The camera of a calibration file (`parse_camera`), read with the bounds of every
+/// YAML input (io/yaml_limits.hpp). Missing file: Error naming it.
+[[nodiscard]] inline Camera read_camera(const std::filesystem::path& path) {
+  return parse_camera(read_text_file(path, "calibration file", max_yaml_bytes), path.string());
 }
 
 }  // namespace vmap

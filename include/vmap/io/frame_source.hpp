@@ -1,7 +1,22 @@
 #pragma once
 
-// Frame sources: a video file, a folder of images, a text list of image paths, or a TUM
-// RGB-D `rgb.txt`, read one frame at a time with optional start/end/stride/resize.
+// Frame sources: a video file, a folder of images, a text list of image paths, a TUM
+// RGB-D `rgb.txt`, or an ASL / EuRoC camera folder (`mav0/cam0`: `data.csv` beside
+// `data/`, or the `data.csv` itself), read one frame at a time with optional
+// start/end/stride/resize.
+//
+// Frame times (Frame::timestamp, FrameSource::timestamps()), in seconds, plus
+// FrameSourceOptions::time_offset:
+//   - EuRoC: the nanosecond timestamps of `data.csv`;
+//   - TUM rgb.txt: its times;
+//   - an image folder whose file names (without extension) are all numbers: the
+//     numbers, as timestamps in a unit told by the magnitude of the largest one:
+//     >= 1e17 nanoseconds (EuRoC's 19-digit names), >= 1e14 microseconds, >= 1e11
+//     milliseconds, else seconds (Unix times in seconds have 10 digits; a name with a
+//     decimal point, such as TUM's 1305031229.528748.png, is seconds). Names numbered
+//     0, 1, 2, ... thus time their frames in seconds by their number;
+//   - any other folder or list: the frame's index;
+//   - a video: its position in seconds (0 for the first frame).
 //
 // Unreadable frames are skipped, counted and reported (FrameSourceOptions::on_skip,
 // FrameSource::skipped()), never taken as the end of the sequence:
@@ -32,6 +47,7 @@
 #include <cmath>
 #include <chrono>
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <system_error>
@@ -49,7 +65,7 @@ struct Frame {
   cv::Mat image;
   std::size_t index = 0;
   std::string name;        ///< file name, or "<video>#<index>"
-  double timestamp = 0.0;  ///< TUM timestamp, video position in seconds, live: capture or Unix time; else the index
+  double timestamp = 0.0;  ///< seconds, see the top of this file (+ FrameSourceOptions::time_offset)
 };
 
 /// A frame that could not be decoded and was skipped.
@@ -59,7 +75,7 @@ struct SkippedFrame {
   std::string reason;
 };
 
-enum class SourceKind { video, image_folder, image_list, tum_rgb, live };
+enum class SourceKind { video, image_folder, image_list, tum_rgb, live, euroc };
 
 struct FrameSourceOptions {
   std::size_t start = 0;                                     ///< first frame index read
@@ -76,6 +92,9 @@ struct FrameSourceOptions {
   int min_side = 16;
   /// Failed video reads in a row taken as the end of a video (see the top of the file).
   std::size_t max_failed_reads = 16;
+  /// Seconds added to every frame time, to put frames on the clock of a pose file (a
+  /// video's times start at 0).
+  double time_offset = 0.0;
   /// Called for each unreadable frame inside a sequence before it is skipped;
   /// `FrameSource::skipped()` keeps the same list.
   std::function<void(const SkippedFrame&)> on_skip{};
@@ -195,6 +214,71 @@ inline std::vector<ListEntry> read_list(const std::filesystem::path& file, Sourc
   return out;
 }
 
+/// An ASL / EuRoC camera `data.csv`: `timestamp [ns],filename` a line (a '#' header
+/// line first), the images in the `data/` folder beside it. Errors name "file:line".
+inline std::vector<ListEntry> read_euroc_csv(const std::filesystem::path& file) {
+  const std::string text = read_text_file(file, "frame source: EuRoC data.csv", max_list_file_bytes);
+  const auto images = file.parent_path() / "data";
+  std::vector<ListEntry> out;
+  for_each_line(text, [&](std::string_view raw, std::size_t no) {
+    const std::string line = trim(std::string(raw));
+    if (line.empty() || line[0] == '#') return;
+    const auto comma = line.find(',');
+    const std::string where = "frame source: " + file.string() + ":" + std::to_string(no) + ": ";
+    std::uint64_t ns = 0;
+    const auto [ptr, ec] = std::from_chars(line.data(), line.data() + (comma == std::string::npos ? 0 : comma), ns);
+    if (comma == std::string::npos || ec != std::errc() || ptr != line.data() + comma)
+      fail(where + "'" + line + "' is not '<timestamp [ns]>,<file name>' (EuRoC data.csv)");
+    const std::string name = trim(line.substr(comma + 1));
+    if (name.empty() || name.find(',') != std::string::npos)
+      fail(where + "'" + line + "' is not '<timestamp [ns]>,<file name>' (EuRoC data.csv)");
+    out.push_back({images / name, static_cast<double>(ns / 1000000000ULL) + static_cast<double>(ns % 1000000000ULL) * 1e-9});
+  });
+  if (out.empty()) fail("frame source: EuRoC data.csv '" + file.string() + "' names no image");
+  return out;
+}
+
+/// The times of image files named by numbers (see the top of this file), or nothing when
+/// one name is not a number.
+inline std::optional<std::vector<double>> times_from_names(const std::vector<std::string>& names) {
+  std::vector<double> values;
+  bool fractional = false;
+  for (const auto& n : names) {
+    const std::string stem = std::filesystem::path(n).stem().string();
+    const auto dot = stem.find('.');
+    const auto all_digits = [](const std::string& d) {
+      return !d.empty() && d.find_first_not_of("0123456789") == std::string::npos;
+    };
+    const bool number = all_digits(stem.substr(0, dot)) && (dot == std::string::npos || all_digits(stem.substr(dot + 1)));
+    if (!number || stem.size() > 30) return std::nullopt;
+    fractional = fractional || dot != std::string::npos;
+    if (dot == std::string::npos) {
+      std::uint64_t v = 0;
+      const auto [ptr, ec] = std::from_chars(stem.data(), stem.data() + stem.size(), v);
+      if (ec != std::errc() || ptr != stem.data() + stem.size()) return std::nullopt;
+      values.push_back(static_cast<double>(v));
+    } else {
+      double v = 0;
+      const auto [ptr, ec] = std::from_chars(stem.data(), stem.data() + stem.size(), v);
+      if (ec != std::errc() || ptr != stem.data() + stem.size()) return std::nullopt;
+      values.push_back(v);
+    }
+  }
+  if (values.empty() || fractional) return values;
+  const double largest = *std::max_element(values.begin(), values.end());
+  // Whole numbers: the unit by magnitude; nanoseconds converted exactly from the digits.
+  const double unit = largest >= 1e17 ? 1e-9 : largest >= 1e14 ? 1e-6 : largest >= 1e11 ? 1e-3 : 1.0;
+  for (std::size_t k = 0; k < names.size(); ++k) {
+    if (unit == 1.0) continue;
+    const std::string stem = std::filesystem::path(names[k]).stem().string();
+    std::uint64_t v = 0;
+    (void)std::from_chars(stem.data(), stem.data() + stem.size(), v);
+    const auto per_second = static_cast<std::uint64_t>(std::llround(1.0 / unit));
+    values[k] = static_cast<double>(v / per_second) + static_cast<double>(v % per_second) * unit;
+  }
+  return values;
+}
+
 }  // namespace detail
 
 /// Reads frames one at a time. Not thread-safe; move-only.
@@ -210,6 +294,7 @@ class FrameSource {
     detail::check(options.max_pixels >= 1, "frame source: max_pixels must be >= 1");
     detail::check(options.min_side >= 1, "frame source: min_side must be >= 1");
     detail::check(options.max_failed_reads >= 1, "frame source: max_failed_reads must be >= 1");
+    detail::check(std::isfinite(options.time_offset), "frame source: time_offset must be a finite number of seconds");
     detail::check(options.start < options.end, "frame source: start (" + std::to_string(options.start) +
                                                    ") must be before end (" + std::to_string(options.end) + ")");
     detail::check(options.resize.width >= 0 && options.resize.height >= 0 &&
@@ -226,7 +311,11 @@ class FrameSource {
     s.input_ = input;
     s.options_ = std::move(options);
     s.next_index_ = s.options_.start;
-    if (std::filesystem::is_directory(input, ec)) {
+    if (std::filesystem::is_directory(input, ec) && std::filesystem::is_regular_file(input / "data.csv", ec) &&
+        std::filesystem::is_directory(input / "data", ec)) {
+      s.kind_ = SourceKind::euroc;
+      s.entries_ = detail::read_euroc_csv(input / "data.csv");
+    } else if (std::filesystem::is_directory(input, ec)) {
       s.kind_ = SourceKind::image_folder;
       std::vector<std::string> names;
       // Entries are listed by name only; whether each is a readable image is decided
@@ -242,8 +331,12 @@ class FrameSource {
       if (ec) detail::fail("frame source: cannot read folder '" + input.string() + "': " + ec.message());
       if (names.empty()) detail::fail("frame source: folder '" + input.string() + "' contains no image file");
       std::sort(names.begin(), names.end(), detail::natural_less);
+      const auto times = detail::times_from_names(names);
       for (std::size_t k = 0; k < names.size(); ++k)
-        s.entries_.push_back({input / names[k], static_cast<double>(k)});
+        s.entries_.push_back({input / names[k], times ? (*times)[k] : static_cast<double>(k)});
+    } else if (input.extension() == ".csv") {
+      s.kind_ = SourceKind::euroc;
+      s.entries_ = detail::read_euroc_csv(input);
     } else if (input.extension() == ".txt" || input.extension() == ".lst") {
       s.entries_ = detail::read_list(input, s.kind_);
     } else {
@@ -258,6 +351,7 @@ class FrameSource {
     std::optional<Frame> f = kind_ == SourceKind::video || kind_ == SourceKind::live ? next_video() : next_image();
     if (f) {
       ++delivered_;
+      f->timestamp += options_.time_offset;
       if (options_.resize.width > 0 && f->image.size() != options_.resize)
         cv::resize(f->image, f->image, options_.resize, 0, 0, cv::INTER_AREA);
     } else if (delivered_ == 0 && !skipped_.empty()) {
@@ -281,15 +375,21 @@ class FrameSource {
   [[nodiscard]] const std::vector<SkippedFrame>& skipped() const noexcept { return skipped_; }
   /// Frames returned by next() so far.
   [[nodiscard]] std::size_t delivered() const noexcept { return delivered_; }
-  /// Frame times of a list, folder or TUM source, without decoding an image (TUM: the
-  /// rgb.txt times; otherwise the indices); empty for a video or live source.
+  /// Frame times of a list, folder, TUM or EuRoC source (see the top of this file), with
+  /// the time offset, without decoding an image; a video that states its frame count and
+  /// rate: frame k at k / fps; empty for a live source or another video.
   [[nodiscard]] std::vector<double> timestamps() const {
     std::vector<double> out;
+    if (kind_ == SourceKind::video && video_frames_ > 0 && video_fps_ > 0) {
+      // Frame k at k / fps: the times next() reports for a constant-rate video.
+      for (std::size_t k = 0; k < video_frames_; ++k) out.push_back(static_cast<double>(k) / video_fps_ + options_.time_offset);
+      return out;
+    }
     out.reserve(entries_.size());
-    for (const auto& e : entries_) out.push_back(e.timestamp);
+    for (const auto& e : entries_) out.push_back(e.timestamp + options_.time_offset);
     return out;
   }
-  /// Image paths of a list, folder or TUM source (empty for a video).
+  /// Image paths of a list, folder, TUM or EuRoC source (empty for a video).
   [[nodiscard]] std::vector<std::filesystem::path> paths() const {
     std::vector<std::filesystem::path> out;
     out.reserve(entries_.size());
@@ -349,6 +449,8 @@ class FrameSource {
                    "' as a video (and it is not a folder or a .txt list)");
     const double count = capture_.get(cv::CAP_PROP_FRAME_COUNT);
     video_frames_ = count > 0 && count < 1e12 ? static_cast<std::size_t>(count) : 0;
+    const double fps = capture_.get(cv::CAP_PROP_FPS);
+    video_fps_ = std::isfinite(fps) && fps > 0 && fps < 1e6 ? fps : 0.0;
     const double w = capture_.get(cv::CAP_PROP_FRAME_WIDTH), h = capture_.get(cv::CAP_PROP_FRAME_HEIGHT);
     if (w > 0 && h > 0 && w * h > static_cast<double>(options_.max_pixels))
       detail::fail("frame source: video '" + input_.string() + "' has frames of " + std::to_string(static_cast<long long>(w)) +
@@ -484,6 +586,7 @@ class FrameSource {
   cv::VideoCapture capture_;
   cv::Mat pending_;
   std::size_t video_frames_ = 0;
+  double video_fps_ = 0.0;
   std::size_t video_pos_ = 0;
   std::size_t next_index_ = 0;
   std::size_t delivered_ = 0;

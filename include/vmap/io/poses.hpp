@@ -27,6 +27,8 @@
 #include <concepts>
 #include <numeric>
 #include <cstddef>
+#include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -66,7 +68,7 @@ struct CameraPose {
 }
 
 /// The trajectory formats `guess_camera_pose_format` tells apart.
-enum class CameraPoseFormat { tum, kitti };
+enum class CameraPoseFormat { tum, kitti, euroc };
 
 /// The format whose lines hold `numbers` values: 8 = TUM, 12 or 13 = KITTI.
 [[nodiscard]] inline std::optional<CameraPoseFormat> camera_pose_format_for(std::size_t numbers) {
@@ -166,9 +168,79 @@ struct PoseLine {
   return out;
 }
 
-/// The format of pose text by its first pose line (8 numbers = TUM, 12 or 13 = KITTI).
+namespace detail {
+
+/// True when the first line that is not empty or a '#' comment starts with a whole
+/// number followed by ',': an ASL / EuRoC CSV (nanosecond times).
+inline bool is_euroc_csv(std::string_view text) {
+  bool euroc = false, decided = false;
+  for_each_line(text, [&](std::string_view line, std::size_t) {
+    const std::size_t first = line.find_first_not_of(" \t\r");
+    if (decided || first == std::string_view::npos || line[first] == '#') return;
+    decided = true;
+    const std::size_t comma = line.find(',', first);
+    euroc = comma != std::string_view::npos && comma > first &&
+            line.substr(first, comma - first).find_first_not_of("0123456789") == std::string_view::npos;
+  });
+  return euroc;
+}
+
+}  // namespace detail
+
+/// Seconds from a whole number of nanoseconds, exact to the nanosecond at Unix times (a
+/// direct division of the 19-digit number would round it to a double first).
+[[nodiscard]] inline double seconds_from_nanoseconds(std::uint64_t ns) noexcept {
+  return static_cast<double>(ns / 1000000000ULL) + static_cast<double>(ns % 1000000000ULL) * 1e-9;
+}
+
+/// Poses from an ASL / EuRoC CSV such as `mav0/state_groundtruth_estimate0/data.csv`:
+/// `timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z[, ...]` a line (comma-separated,
+/// the quaternion's w first; further columns such as velocities and biases are ignored),
+/// '#' header lines skipped. The pose is the body's (EuRoC: the IMU's) in the world.
+[[nodiscard]] inline std::vector<CameraPose> parse_euroc_poses(std::string_view text,
+                                                               const std::string& name = "<poses>") {
+  std::vector<CameraPose> out;
+  detail::for_each_line(text, [&](std::string_view line, std::size_t line_no) {
+    const std::size_t first = line.find_first_not_of(" \t\r");
+    if (first == std::string_view::npos || line[first] == '#') return;
+    const std::string where = name + ":" + std::to_string(line_no) + ": ";
+    std::vector<std::string_view> fields;
+    for (std::size_t i = first;;) {
+      const std::size_t comma = line.find(',', i);
+      std::string_view f = line.substr(i, (comma == std::string_view::npos ? line.size() : comma) - i);
+      while (!f.empty() && (f.front() == ' ' || f.front() == '\t')) f.remove_prefix(1);
+      while (!f.empty() && (f.back() == ' ' || f.back() == '\t' || f.back() == '\r')) f.remove_suffix(1);
+      fields.push_back(f);
+      if (comma == std::string_view::npos || fields.size() > 64) break;
+      i = comma + 1;
+    }
+    if (fields.size() < 8)
+      detail::fail(where + std::to_string(fields.size()) +
+                   " fields, an ASL / EuRoC pose has at least 8 (timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z)");
+    std::uint64_t ns = 0;
+    const auto [tp, tec] = std::from_chars(fields[0].data(), fields[0].data() + fields[0].size(), ns);
+    if (tec != std::errc() || tp != fields[0].data() + fields[0].size())
+      detail::fail(where + "'" + std::string(fields[0]) + "' is not a timestamp in whole nanoseconds");
+    double v[7];
+    for (std::size_t k = 0; k < 7; ++k) {
+      const std::string_view tok = fields[k + 1];
+      const auto [ptr, ec] = std::from_chars(tok.data(), tok.data() + tok.size(), v[k]);
+      if (ec != std::errc() || ptr != tok.data() + tok.size() || !std::isfinite(v[k]))
+        detail::fail(where + "'" + std::string(tok) + "' is not a finite number");
+    }
+    if (v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6] < 1e-12)
+      detail::fail(where + "the quaternion (q_w q_x q_y q_z) is zero");
+    out.push_back({seconds_from_nanoseconds(ns), {v[0], v[1], v[2]}, rotation_from_quaternion(v[4], v[5], v[6], v[3])});
+  });
+  if (out.empty()) detail::fail(name + ": holds no pose");
+  return out;
+}
+
+/// The format of pose text by its first pose line (8 numbers = TUM, 12 or 13 = KITTI,
+/// a whole number and a comma first = ASL / EuRoC CSV).
 [[nodiscard]] inline CameraPoseFormat guess_camera_pose_format(std::string_view text,
                                                                const std::string& name = "<poses>") {
+  if (detail::is_euroc_csv(text)) return CameraPoseFormat::euroc;
   const auto lines = detail::parse_pose_lines(text, name);
   const std::size_t n = lines.front().values.size();
   if (const auto f = camera_pose_format_for(n)) return *f;
@@ -178,7 +250,12 @@ struct PoseLine {
 
 [[nodiscard]] inline std::vector<CameraPose> parse_camera_poses(std::string_view text, CameraPoseFormat format,
                                                                 const std::string& name = "<poses>") {
-  return format == CameraPoseFormat::tum ? parse_tum_poses(text, name) : parse_kitti_poses(text, name);
+  switch (format) {
+    case CameraPoseFormat::tum: return parse_tum_poses(text, name);
+    case CameraPoseFormat::kitti: return parse_kitti_poses(text, name);
+    case CameraPoseFormat::euroc: return parse_euroc_poses(text, name);
+  }
+  detail::fail(name + ": unknown pose format");
 }
 
 /// A TUM pose file; a missing file is an Error naming it.
@@ -191,7 +268,7 @@ struct PoseLine {
   return parse_kitti_poses(read_text_file(path, "pose file"), path.string());
 }
 
-/// A TUM or KITTI pose file, the format guessed from its first pose line.
+/// A TUM, KITTI or ASL / EuRoC pose file, the format guessed from its first pose line.
 [[nodiscard]] inline std::vector<CameraPose> load_camera_poses(const std::filesystem::path& path) {
   const std::string text = read_text_file(path, "pose file");
   return parse_camera_poses(text, guess_camera_pose_format(text, path.string()), path.string());
@@ -262,10 +339,25 @@ template <Timestamped P>
   std::vector<P> out;
   out.reserve(match.size());
   for (std::size_t f = 0; f < match.size(); ++f) {
-    if (!match[f])
+    if (!match[f]) {
+      // Both time ranges: a clock offset or a unit mistake shows at a glance.
+      const auto range = [](auto begin, auto end) {
+        const auto [lo, hi] = std::minmax_element(begin, end);
+        char buf[96];
+        std::snprintf(buf, sizeof buf, "%.6f .. %.6f s", *lo, *hi);
+        return std::string(buf);
+      };
+      std::vector<double> pose_times;
+      pose_times.reserve(poses.size());
+      for (const auto& p : poses) pose_times.push_back(static_cast<double>(p.timestamp));
+      char t[48];
+      std::snprintf(t, sizeof t, "%.6f", frame_times[f]);
       detail::fail(poses_name + ": no pose within " + std::to_string(tolerance) + " s of frame " + std::to_string(f) +
-                   " (time " + std::to_string(frame_times[f]) + "; " + std::to_string(poses.size()) + " poses, " +
-                   std::to_string(frame_times.size()) + " frames)");
+                   " (time " + t + " s); the " + std::to_string(poses.size()) + " poses cover " +
+                   (poses.empty() ? std::string("nothing") : range(pose_times.begin(), pose_times.end())) + ", the " +
+                   std::to_string(frame_times.size()) + " frames " + range(frame_times.begin(), frame_times.end()) +
+                   " (are both on one clock?)");
+    }
     out.push_back(poses[*match[f]]);
   }
   return out;

@@ -78,7 +78,8 @@ TEST_CASE("poses_for_frames: by order when counts match, else by time, every fra
   CHECK(timed[0].position[0] == 1.0);
   CHECK(timed[1].position[0] == 2.0);
   CHECK(vmap::test::error_of([&] { (void)vmap::poses_for_frames(poses, {2.01, 5.0}, "gt.txt"); }) ==
-        "gt.txt: no pose within 0.020000 s of frame 1 (time 5.000000; 3 poses, 2 frames)");
+        "gt.txt: no pose within 0.020000 s of frame 1 (time 5.000000 s); the 3 poses cover 1.000000 .. 3.000000 s, "
+        "the 2 frames 2.010000 .. 5.000000 s (are both on one clock?)");
   CHECK(vmap::test::error_of([&] { (void)vmap::associate_by_timestamp(poses, {1.0}, -1.0); })
             .find("the tolerance must be a finite number >= 0") != std::string::npos);
   CHECK(vmap::test::error_of([&] { (void)vmap::associate_by_timestamp(poses, {1.0, std::nan("")}, 0.1); }) ==

@@ -139,7 +139,7 @@ TEST_CASE("KITTI calib.txt") {
 }
 
 TEST_CASE("bad calibration files name the file and the key") {
-  CHECK(error_of([] { (void)vmap::read_camera("/nonexistent/cam.yaml"); }) == "file '/nonexistent/cam.yaml': does not exist");
+  CHECK(error_of([] { (void)vmap::read_camera("/nonexistent/cam.yaml"); }) == "calibration file '/nonexistent/cam.yaml': does not exist");
   const auto unknown = write("unknown.yaml", "%YAML:1.0\nfoo: 1\n");
   CHECK(error_of([&] { (void)vmap::read_camera(unknown); }).find(unknown.string() + ": not a camera calibration file") == 0);
 

@@ -1,0 +1,92 @@
+#pragma once
+
+// A visual memory's key images and loop edges in the formats other tools read
+// (include/vmap/io/exports.hpp): `vmap memory export M --out DIR` and `vmap build
+// --memory M --out DIR` write
+//
+//   key_images.txt   "frame_index name timestamp" a line (every key image)
+//   key_images.tum   the key images' poses as a TUM trajectory (only when the memory
+//                    holds poses: build --memory --poses), for evo
+//   loops.txt        each loop edge as "query_time match_time query_name match_name
+//                    inliers" (a timestamp-pair list)
+//   loops.g2o        VERTEX_SE3:QUAT per key image with a pose and EDGE_SE3:QUAT per loop
+//                    edge between two such key images (only when the memory holds poses);
+//                    the edge's relative pose is the one the two key images' poses give
+//                    (odometry or ground truth from --poses), not a visual measurement
+
+#include "common/memory_cli.hpp"
+
+#include <vmap/io/atomic_file.hpp>
+#include <vmap/io/exports.hpp>
+
+#include <opencv2/core/affine.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace vmap::examples {
+
+/// A key image's pose as a 3D pose: an SE(3) pose as it is, an SE(2) floor pose (x, y,
+/// theta) as (x, y, 0) turned by theta about z; nothing without a pose.
+inline std::optional<CameraPose> pose3(const OdometryPose& p, double timestamp) {
+  if (const auto* a = std::get_if<cv::Affine3d>(&p)) return CameraPose{timestamp, a->translation(), a->rotation()};
+  if (const auto* f = std::get_if<Pose2>(&p)) {
+    const double c = std::cos(f->theta()), s = std::sin(f->theta());
+    return CameraPose{timestamp, {f->x(), f->y(), 0.0}, cv::Matx33d(c, -s, 0, s, c, 0, 0, 0, 1)};
+  }
+  return std::nullopt;
+}
+
+/// Every file name export_memory may write (checked before the work starts).
+inline const std::vector<std::string>& export_file_names() {
+  static const std::vector<std::string> names = {"key_images.txt", "loops.txt", "key_images.tum", "loops.g2o"};
+  return names;
+}
+
+/// Writes the files of the top of this file into `dir` (each atomically), key_images.txt
+/// only when `key_list` (vmap build writes its own); returns their names.
+inline std::vector<std::string> export_memory(const CliMemory& mem, const std::filesystem::path& dir, bool key_list = true) {
+  const auto& keys = mem.map().keys;
+  std::vector<CameraPose> trajectory;
+  std::vector<std::optional<CameraPose>> posed(keys.size());
+  std::string vertices;
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    posed[k] = pose3(mem.poses()[k], keys[k].timestamp);
+    if (!posed[k]) continue;
+    trajectory.push_back(*posed[k]);
+    const auto q = quaternion_from_rotation(posed[k]->rotation);
+    vertices += "VERTEX_SE3:QUAT " + std::to_string(k);
+    for (double v : {posed[k]->position[0], posed[k]->position[1], posed[k]->position[2], q[0], q[1], q[2], q[3]})
+      vertices += " " + detail::shortest(v);
+    vertices += "\n";
+  }
+  std::vector<LoopPair> pairs;
+  std::string edges;
+  for (const auto& e : mem.loops()) {
+    const auto& a = keys[e.from];
+    const auto& b = keys[e.link.key];
+    pairs.push_back({e.from, e.link.key, a.timestamp, b.timestamp, a.name, b.name, e.link.inliers});
+    if (posed[e.from] && posed[e.link.key]) edges += g2o_edge_line(e.from, e.link.key, *posed[e.from], *posed[e.link.key]);
+  }
+  std::vector<std::string> written;
+  if (key_list) {
+    write_file_atomically(dir / "key_images.txt", key_images_text(keys));
+    written.push_back("key_images.txt");
+  }
+  write_file_atomically(dir / "loops.txt", loop_pairs_text(pairs));
+  written.push_back("loops.txt");
+  if (!trajectory.empty()) {
+    write_file_atomically(dir / "key_images.tum", tum_trajectory_text(trajectory));
+    write_file_atomically(dir / "loops.g2o", vertices + edges);
+    written.push_back("key_images.tum");
+    written.push_back("loops.g2o");
+  }
+  return written;
+}
+
+}  // namespace vmap::examples

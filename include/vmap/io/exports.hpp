@@ -1,0 +1,144 @@
+#pragma once
+
+// Results in the formats other tools read:
+//
+//   key images      "frame_index name timestamp" a line
+//   TUM trajectory  "timestamp tx ty tz qx qy qz qw" a line (evo, TUM's tools; read back
+//                   by load_tum_poses): the key images' poses with their frame times.
+//   loop pairs      "query_time match_time query_name match_name inliers" a line: each
+//                   loop edge as the two frames' timestamps and names.
+//   g2o             "EDGE_SE3:QUAT from to dx dy dz qx qy qz qw I11 I12 .. I66" a line
+//                   (g2o's and GTSAM's readers): a constraint between two key images,
+//                   the pose of `to` in the frame of `from`, with the upper triangle of
+//                   a 6x6 information matrix (translation first, then rotation).
+//
+// Numbers are printed in the shortest decimal form that reads back as the same double
+// (std::to_chars: "1305031229.528748", not "1305031229.528748035"), in fixed notation and
+// independent of the C locale.
+
+#include <vmap/core/error.hpp>
+#include <vmap/io/poses.hpp>
+#include <vmap/keyframe/visual_map.hpp>
+
+#include <opencv2/core.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <charconv>
+#include <system_error>
+#include <string>
+#include <vector>
+
+namespace vmap {
+
+/// The unit quaternion (x, y, z, w) of a rotation matrix, w >= 0 (Shepperd's method:
+/// the largest of the four diagonal combinations is divided by, for accuracy).
+[[nodiscard]] inline std::array<double, 4> quaternion_from_rotation(const cv::Matx33d& r) {
+  const double t = r(0, 0) + r(1, 1) + r(2, 2);
+  double x = 0, y = 0, z = 0, w = 0;
+  if (t > r(0, 0) && t > r(1, 1) && t > r(2, 2)) {
+    const double s = 2.0 * std::sqrt(1.0 + t);
+    w = 0.25 * s;
+    x = (r(2, 1) - r(1, 2)) / s;
+    y = (r(0, 2) - r(2, 0)) / s;
+    z = (r(1, 0) - r(0, 1)) / s;
+  } else if (r(0, 0) >= r(1, 1) && r(0, 0) >= r(2, 2)) {
+    const double s = 2.0 * std::sqrt(std::max(0.0, 1.0 + r(0, 0) - r(1, 1) - r(2, 2)));
+    w = (r(2, 1) - r(1, 2)) / s;
+    x = 0.25 * s;
+    y = (r(0, 1) + r(1, 0)) / s;
+    z = (r(0, 2) + r(2, 0)) / s;
+  } else if (r(1, 1) >= r(2, 2)) {
+    const double s = 2.0 * std::sqrt(std::max(0.0, 1.0 + r(1, 1) - r(0, 0) - r(2, 2)));
+    w = (r(0, 2) - r(2, 0)) / s;
+    x = (r(0, 1) + r(1, 0)) / s;
+    y = 0.25 * s;
+    z = (r(1, 2) + r(2, 1)) / s;
+  } else {
+    const double s = 2.0 * std::sqrt(std::max(0.0, 1.0 + r(2, 2) - r(0, 0) - r(1, 1)));
+    w = (r(1, 0) - r(0, 1)) / s;
+    x = (r(0, 2) + r(2, 0)) / s;
+    y = (r(1, 2) + r(2, 1)) / s;
+    z = 0.25 * s;
+  }
+  const double n = std::sqrt(x * x + y * y + z * z + w * w);
+  detail::check(std::isfinite(n) && n > 0, "quaternion_from_rotation: the matrix is not a rotation");
+  const double sign = w < 0 ? -1.0 : 1.0;
+  return {sign * x / n, sign * y / n, sign * z / n, sign * w / n};
+}
+
+namespace detail {
+
+inline std::string shortest(double v) {
+  char buf[400];  // a fixed-notation double has at most ~330 characters
+  const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::fixed);
+  return r.ec == std::errc() ? std::string(buf, r.ptr) : std::string("nan");
+}
+
+}  // namespace detail
+
+/// A TUM trajectory of `poses` (their timestamps, positions and rotations), with a '#'
+/// header line.
+[[nodiscard]] inline std::string tum_trajectory_text(const std::vector<CameraPose>& poses) {
+  std::string out = "# timestamp tx ty tz qx qy qz qw\n";
+  for (const auto& p : poses) {
+    const auto q = quaternion_from_rotation(p.rotation);
+    out += detail::shortest(p.timestamp);
+    for (double v : {p.position[0], p.position[1], p.position[2], q[0], q[1], q[2], q[3]}) out += " " + detail::shortest(v);
+    out += "\n";
+  }
+  return out;
+}
+
+/// "frame_index name timestamp" per key image, with a '#' header line: the frame each key
+/// image came from, its name (file name, "<video>#<index>") and its time in seconds.
+[[nodiscard]] inline std::string key_images_text(const std::vector<KeyImage>& keys) {
+  std::string out = "# frame_index name timestamp\n";
+  for (const auto& k : keys) out += std::to_string(k.frame_index) + " " + k.name + " " + detail::shortest(k.timestamp) + "\n";
+  return out;
+}
+
+/// One loop edge between two frames, for the exports.
+struct LoopPair {
+  std::size_t from = 0;  ///< the newer key image (its index)
+  std::size_t to = 0;    ///< the older key image it revisits
+  double from_time = 0.0, to_time = 0.0;
+  std::string from_name, to_name;
+  int inliers = 0;
+};
+
+/// The loop edges as frame timestamps and names, with a '#' header line. Names hold no
+/// white space in this format: a space in a name is written as '_'.
+[[nodiscard]] inline std::string loop_pairs_text(const std::vector<LoopPair>& loops) {
+  const auto token = [](std::string s) {
+    for (char& c : s)
+      if (c == ' ' || c == '\t' || c == '\n' || c == '\r') c = '_';
+    return s.empty() ? std::string("-") : s;
+  };
+  std::string out = "# query_time match_time query_name match_name inliers\n";
+  for (const auto& l : loops)
+    out += detail::shortest(l.from_time) + " " + detail::shortest(l.to_time) + " " + token(l.from_name) + " " +
+           token(l.to_name) + " " + std::to_string(l.inliers) + "\n";
+  return out;
+}
+
+/// A g2o EDGE_SE3:QUAT line: the pose of `to` in the frame of `from` (T_from^-1 T_to)
+/// between vertices `from_id` and `to_id`, with a diagonal information matrix
+/// (`translation_information` for x y z, `rotation_information` for the rotation).
+[[nodiscard]] inline std::string g2o_edge_line(std::size_t from_id, std::size_t to_id, const CameraPose& from,
+                                               const CameraPose& to, double translation_information = 1.0,
+                                               double rotation_information = 1.0) {
+  const cv::Matx33d r = from.rotation.t() * to.rotation;
+  const cv::Vec3d t = from.rotation.t() * (to.position - from.position);
+  const auto q = quaternion_from_rotation(r);
+  std::string out = "EDGE_SE3:QUAT " + std::to_string(from_id) + " " + std::to_string(to_id);
+  for (double v : {t[0], t[1], t[2], q[0], q[1], q[2], q[3]}) out += " " + detail::shortest(v);
+  for (int i = 0; i < 6; ++i)
+    for (int j = i; j < 6; ++j)
+      out += " " + detail::shortest(i != j ? 0.0 : i < 3 ? translation_information : rotation_information);
+  return out + "\n";
+}
+
+}  // namespace vmap
