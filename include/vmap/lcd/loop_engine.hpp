@@ -454,14 +454,14 @@ class LoopEngine {
     d.evidence = b.evidence;
     d.verification = b.verification;
     d.considered[b.considered].stage = CandidateStage::chosen;
-    // The best other place: a verified candidate that does not look like the best one
-    // (candidates of one place look alike: a revisit of a place seen twice is not
-    // ambiguous).
+    // The best other place: a verified candidate neither near the best one in the stream
+    // (within the window or the temporal tolerance) nor looking like it (candidates of
+    // one place look alike: a revisit of a place seen twice is not ambiguous).
     for (std::size_t i = 1; i < verified.size(); ++i) {
       const Verified& o = verified[i];
       const std::size_t gap = o.frame > b.frame ? o.frame - b.frame : b.frame - o.frame;
       const bool same_place =
-          gap <= options_.window ||
+          gap <= std::max(options_.window, options_.temporal_tolerance) ||
           (bow && ranker_.similarity(o.frame, b.frame) >= options_.left_ratio * ranker_.similarity(*bow, o.frame));
       if (!same_place) {
         d.second = o.frame;
