@@ -31,6 +31,8 @@
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
+#include <vmap/geometry/calibrated.hpp>
+#include <vmap/geometry/essential.hpp>
 #include <vmap/lcd/binary_tree.hpp>
 #include <vmap/lcd/label_vector.hpp>
 #include <vmap/lcd/place_decision.hpp>
@@ -47,6 +49,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -170,6 +173,22 @@ struct PlaceDecision {
   [[nodiscard]] bool accepted() const noexcept { return status == PlaceStatus::accepted; }
 };
 
+namespace detail {
+template <class E>
+struct fits_essential : std::false_type {};
+template <>
+struct fits_essential<EssentialEstimator> : std::true_type {};
+template <class Inner>
+struct fits_essential<Calibrated<Inner>> : fits_essential<Inner> {};
+}  // namespace detail
+
+/// The geometric model an estimator fits: essential for EssentialEstimator (bare or
+/// behind Calibrated), fundamental otherwise.
+template <class E>
+[[nodiscard]] constexpr PlaceModel place_model_of() noexcept {
+  return detail::fits_essential<E>::value ? PlaceModel::essential : PlaceModel::fundamental;
+}
+
 /// Borrowed features of frame `id`.
 template <class L>
 concept FeatureLookup = requires(const L& l, std::size_t id) {
@@ -183,7 +202,7 @@ class LoopEngine {
  public:
   /// `schema` is needed by the label sources only; `ranker` by the ranked ones.
   LoopEngine(M matcher, E estimator, const LoopOptions& options, Rank ranker = {}, LabelSchema schema = {},
-             PlaceModel model = PlaceModel::fundamental)
+             PlaceModel model = place_model_of<E>())
       : matcher_(std::move(matcher)),
         estimator_(std::move(estimator)),
         ranker_(std::move(ranker)),
@@ -280,10 +299,12 @@ class LoopEngine {
   }
 
   /// Where image features `q` were taken, among every frame added: the best `top` frames
-  /// by bag-of-words score (every frame without a ranker) are verified and decided. No
-  /// revisit rule, no temporal consistency: a single image.
+  /// by bag-of-words score are verified and decided; without a ranker every one of the
+  /// `unranked` frames the lookup knows (default: the frames added). No revisit rule, no
+  /// temporal consistency: a single image.
   template <FeatureLookup L>
-  PlaceDecision localize(const Features& q, std::size_t top, const L& lookup) const {
+  PlaceDecision localize(const Features& q, std::size_t top, const L& lookup,
+                         std::optional<std::size_t> unranked = std::nullopt) const {
     detail::check(top >= 1, "LoopEngine::localize: top must be >= 1");
     PlaceDecision d;
     const auto t0 = std::chrono::steady_clock::now();
@@ -295,8 +316,8 @@ class LoopEngine {
       d.candidates = frames_;
       d.not_in_top_k = frames_ - std::min(frames_, to_verify.size());
     } else {
-      for (std::size_t j = 0; j < frames_; ++j) to_verify.emplace_back(j, 0.0);
-      d.candidates = frames_;
+      d.candidates = unranked.value_or(frames_);
+      for (std::size_t j = 0; j < d.candidates; ++j) to_verify.emplace_back(j, 0.0);
     }
     d.rank_ms = ms_since(t0);
     std::vector<Verified> verified = verify(d, q, to_verify, lookup);
@@ -306,8 +327,38 @@ class LoopEngine {
     return d;
   }
 
+  /// The state a saved run ended with: the label vector of each frame indexed so far
+  /// (the ranker already holds their bags of words), the stationarity counts and the
+  /// temporal-consistency state. The tree is rebuilt exactly: the frames the last query
+  /// had inserted, in order.
+  void restore(std::vector<LabelVector> labels, std::size_t past_window, std::size_t left_queries,
+               std::size_t not_revisit, const ConsistencyState<std::size_t>& consistency) {
+    detail::check(frames_ == 0, "LoopEngine::restore: frames were added already");
+    detail::check(not_revisit + left_queries <= past_window && past_window <= labels.size(),
+                  "LoopEngine::restore: inconsistent stationarity counts");
+    for (const LabelVector& v : labels)
+      detail::check(!uses_labels(options_.index) || v.size() == schema_.size(),
+                    "LoopEngine::restore: a label vector does not fit the schema");
+    labels_ = std::move(labels);
+    frames_ = labels_.size();
+    past_window_ = past_window;
+    left_queries_ = left_queries;
+    not_revisit_ = not_revisit;
+    set_consistency(consistency);
+    if (uses_labels(options_.index) && frames_ > 0)
+      while (tree_next_ + options_.window < frames_ - 1) tree_.insert(labels_[tree_next_], tree_next_), ++tree_next_;
+  }
+
+  /// A new decision (e.g. another confidence threshold) for the queries from now on.
+  void set_decision(const PlaceDecisionOptions& decision) {
+    detail::check_place_decision_options(decision, "LoopOptions");
+    options_.decision = decision;
+  }
+
   [[nodiscard]] std::size_t frames() const noexcept { return frames_; }
   [[nodiscard]] std::size_t verifications() const noexcept { return verifications_; }
+  /// The label vector of each frame added (empty vectors for the sources without labels).
+  [[nodiscard]] const std::vector<LabelVector>& labels() const noexcept { return labels_; }
   [[nodiscard]] const LoopOptions& options() const noexcept { return options_; }
   [[nodiscard]] const LabelSchema& schema() const noexcept { return schema_; }
   [[nodiscard]] const BinaryClassifiedTree<std::size_t>& tree() const noexcept { return tree_; }
@@ -323,6 +374,8 @@ class LoopEngine {
   /// queries past the window: a camera that never left its place has the two equal.
   [[nodiscard]] std::size_t not_a_revisit_queries() const noexcept { return not_revisit_; }
   [[nodiscard]] std::size_t queries_past_window() const noexcept { return past_window_; }
+  /// Queries past the window with a candidate whose place the camera had left.
+  [[nodiscard]] std::size_t left_queries() const noexcept { return left_queries_; }
   /// True when at least `window` frames were queried past the window, none of them left
   /// the place of a candidate, and the last frame still looks like the first at least
   /// `left_ratio` times as much as the second did (the camera rests or hovers; a camera
