@@ -92,11 +92,11 @@ vmap::CandidateIndex parse_rank(const std::string& rank) {
 }
 
 /// The ground truth over a memory's key images: (i, j) when the frames' ground truth
-/// marks (f_i, f_j) and j + exclude_recent < i (the pairs the memory could find, as
+/// marks (f_i, f_j) and j + window < i (the pairs the memory could find, as
 /// ground_truth_from_poses' window leaves out the near ones).
 vmap::LoopGroundTruth key_ground_truth(const LoopsArgs& a, const ex::CliMemory& mem) {
   const auto& keys = mem.map().keys;
-  const std::size_t window = mem.options().exclude_recent;
+  const std::size_t window = mem.options().loops.window;
   if (!a.gt_poses.empty()) {
     std::vector<double> times;
     for (const auto& k : keys) times.push_back(k.timestamp);
@@ -124,14 +124,15 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
   for (const auto& [path, option] : {std::pair{a.gt, "--gt"}, std::pair{a.gt_poses, "--gt-poses"}})
     if (!path.empty()) ex::check_input_file(path, option);
   const auto mem = ex::load_memory(file, "--memory");
-  const int min_inliers = mem.options().min_loop_inliers;
+  const double min_confidence = mem.options().loops.decision.min_confidence;
   nlohmann::json loops = nlohmann::json::array();
   for (const auto& e : mem.loops()) loops.push_back(ex::loop_json(mem, e));
   nlohmann::json j{{"command", "loops"},
                    {"memory", ex::path_string(file)},
                    {"frames", mem.frames()},
                    {"key_images", mem.key_images()},
-                   {"min_inliers", min_inliers},
+                   {"min_confidence", min_confidence},
+                   {"stationary", mem.stationary()},
                    {"loops", loops}};
   if (a.gt.empty() && a.gt_poses.empty()) {
     if (a.json) {
@@ -139,25 +140,26 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
       return 0;
     }
     std::printf("memory %s: %zu frames, %zu key images\n", file.c_str(), mem.frames(), mem.key_images());
-    std::printf("%zu loop edges (inliers >= %d):\n", mem.loops().size(), min_inliers);
+    if (mem.stationary()) std::printf("the camera never left its place: no key image is a revisit\n");
+    std::printf("%zu loop edges (confidence >= %.2f):\n", mem.loops().size(), min_confidence);
     ex::print_loop_edges(mem);
     return 0;
   }
-  // Each key image proposes its edge with the most inliers, as each query frame proposes
-  // its best candidate in the frame-level evaluation (lcd/evaluation.hpp).
+  // Each key image proposes its most confident edge, as each query frame proposes its
+  // best candidate in the frame-level evaluation (lcd/evaluation.hpp).
   const auto gt = key_ground_truth(a, mem);
   std::vector<vmap::LoopScore> scores(mem.key_images());
   for (std::size_t k = 0; k < scores.size(); ++k) scores[k].query = k;
   std::size_t true_edges = 0;
   for (const auto& e : mem.loops()) {
     auto& s = scores[e.from];
-    if (!s.match || e.link.inliers > s.score) {
+    if (!s.match || e.link.confidence > s.score) {
       s.match = e.link.key;
-      s.score = e.link.inliers;
+      s.score = e.link.confidence;
     }
     true_edges += gt(e.from, e.link.key) ? 1 : 0;
   }
-  const auto pr = vmap::evaluate_loops(scores, gt, min_inliers);
+  const auto pr = vmap::evaluate_loops(scores, gt, min_confidence);
   const auto full = vmap::recall_at_full_precision(vmap::precision_recall_curve(scores, gt));
   for (auto& l : loops) l["true"] = gt(l["from"].get<std::size_t>(), l["to"].get<std::size_t>());
   if (a.json) {
@@ -173,8 +175,8 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
     return 0;
   }
   std::printf("memory %s: %zu frames, %zu key images, %zu with a ground-truth loop to a key image %zu or more before\n",
-              file.c_str(), mem.frames(), mem.key_images(), pr.positives, mem.options().exclude_recent + 1);
-  std::printf("%zu loop edges (inliers >= %d), %zu true:\n", mem.loops().size(), min_inliers, true_edges);
+              file.c_str(), mem.frames(), mem.key_images(), pr.positives, mem.options().loops.window + 1);
+  std::printf("%zu loop edges (confidence >= %.2f), %zu true:\n", mem.loops().size(), min_confidence, true_edges);
   ex::print_loop_edges(mem);
   std::printf("key images (best edge each): TP %zu, FP %zu, precision %.3f, recall %.3f; recall@100%%P %.3f\n",
               pr.true_positives, pr.false_positives, pr.precision, pr.recall, full.recall);
