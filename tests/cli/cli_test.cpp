@@ -409,7 +409,7 @@ TEST_CASE("cli: build --memory errors: mixed options, --resume without a memory,
   CHECK(std::count(bad.err.begin(), bad.err.end(), '\n') == 1);
 }
 
-TEST_CASE("cli: localize --memory answers every query with its key image; --json lists every answer") {
+TEST_CASE("cli: localize --memory answers every query with its place decision; --json lists every answer") {
   const auto& [file, built] = sample_memory();
   const auto keys = built["key_frames"].get<std::vector<std::size_t>>();
   // Frame 0 is the first key image; frame_b is frame 1, one frame later.
@@ -422,29 +422,56 @@ TEST_CASE("cli: localize --memory answers every query with its key image; --json
   CHECK(j["key_images"] == keys.size());
   CHECK(j["localized"] == 2);
   REQUIRE(j["queries"].size() == 2);
+  CHECK(j["min_confidence"] == 0.5);
   for (const auto& q : j["queries"]) {
-    CHECK(q["status"] == "localized");
+    CHECK(q["status"] == "accepted");
+    CHECK(q["localized"] == true);
+    CHECK(q["confidence"].get<double>() >= 0.5);
+    CHECK(q["confidence"].get<double>() <= 1.0);
+    CHECK(q["reason"].get<std::string>().rfind("confidence ", 0) == 0);
+    CHECK(q["evidence"]["inliers"].get<int>() >= 12);
+    CHECK(q["evidence"]["inlier_ratio"].get<double>() > 0.0);
+    CHECK(q["evidence"]["significance"].get<double>() > 0.0);
+    CHECK(q["evidence"]["spread"].get<double>() > 0.0);
+    CHECK(q["evidence"]["model"] == "fundamental");
     REQUIRE(!q["matches"].empty());
+    CHECK(q["key"] == q["matches"][0]["key"]);
     const auto& best = q["matches"][0];
     const auto key = best["key"].get<std::size_t>();
     REQUIRE(key < keys.size());
     CHECK(best["frame_index"] == keys[key]);
     CHECK(best["frame_index"].get<std::size_t>() <= 5);  // the queries are frames 0 and 1
-    CHECK(best["inliers"].get<int>() >= 20);
+    CHECK(best["inliers"].get<int>() == q["evidence"]["inliers"].get<int>());
+    CHECK(best["confidence"] == q["confidence"]);
     CHECK(best["inliers"].get<int>() <= best["matches"].get<int>());
     CHECK(best["bow_score"].get<double>() > 0.0);
     CHECK(best["bow_score"].get<double>() <= 1.0);
     CHECK(best["fundamental"].size() == 9);
     CHECK(best["pose"].is_null());  // built from images alone: no odometry
-    for (std::size_t m = 1; m < q["matches"].size(); ++m)  // every verified key image, most inliers first
-      CHECK(q["matches"][m]["inliers"].get<int>() <= q["matches"][m - 1]["inliers"].get<int>());
+    for (std::size_t m = 1; m < q["matches"].size(); ++m)  // every verified key image, most confident first
+      CHECK(q["matches"][m]["confidence"].get<double>() <= q["matches"][m - 1]["confidence"].get<double>());
   }
   // The query identical to key image 0 (frame 0) answers it.
   CHECK(j["queries"][0]["matches"][0]["key"] == 0);
   CHECK(j["queries"][0]["matches"][0]["name"] == "1305031229.528748.jpg");
   const Run text = run_vmap({"localize", "--memory", file.string(), frame_a});
   REQUIRE(text.code == 0);
-  CHECK(text.out.find(frame_a + ": key 0 (frame 0, 1305031229.528748.jpg), ") != std::string::npos);
+  CHECK(text.out.find(frame_a + ": key 0 (frame 0, 1305031229.528748.jpg), confidence ") != std::string::npos);
+  // A threshold no evidence reaches: "unknown place", with the reason, and still exit 0.
+  // (Frame 30 is not a key image: its confidence is below 1.)
+  const std::string frame_30 = "examples/data/tum_fr1_rpy_60/rgb/1305031230.566084.jpg";
+  const Run strict = run_vmap({"localize", "--memory", file.string(), frame_30, "--min-confidence", "1", "--json"});
+  INFO(strict.err);
+  REQUIRE(strict.code == 0);
+  const auto sj = nlohmann::json::parse(strict.out);
+  CHECK(sj["localized"] == 0);
+  CHECK(sj["queries"][0]["status"] == "unknown place");
+  CHECK(sj["queries"][0]["key"].is_null());
+  CHECK(sj["queries"][0]["reason"].get<std::string>().find("< 1.00") != std::string::npos);
+  const Run strict_text = run_vmap({"localize", "--memory", file.string(), frame_30, "--min-confidence", "1"});
+  REQUIRE(strict_text.code == 0);
+  CHECK(strict_text.out.find(frame_30 + ": unknown place (confidence ") != std::string::npos);
+  usage_error({"localize", "--memory", file.string(), frame_a, "--min-confidence", "1.5"}, "--min-confidence");
   // `vmap memory localize` shares the code: the same answers.
   const Run same = run_vmap({"memory", "localize", file.string(), frame_a, frame_b, "--json"});
   REQUIRE(same.code == 0);
@@ -487,7 +514,7 @@ TEST_CASE("cli: loops --memory prints the memory's loop edges; --gt evaluates th
     CHECK(to + 10 < from);  // the memory's exclude_recent
     CHECK(l["query"] == keys[from]);
     CHECK(l["match"] == keys[to]);
-    CHECK(l["inliers"].get<int>() >= j["min_inliers"].get<int>());
+    CHECK(l["confidence"].get<double>() >= j["min_confidence"].get<double>());
     CHECK(l["bow_score"].get<double>() > 0.0);
   }
   // Ground truth over the 60 frames marking the first edge's frames only: one true edge.
@@ -511,7 +538,7 @@ TEST_CASE("cli: loops --memory prints the memory's loop edges; --gt evaluates th
   CHECK(ej["recall"] == static_cast<double>(ej["true_positives"].get<std::size_t>()));
   const Run text = run_vmap({"loops", "--memory", file.string()});
   REQUIRE(text.code == 0);
-  CHECK(text.out.find(std::to_string(j["loops"].size()) + " loop edges (inliers >= ") != std::string::npos);
+  CHECK(text.out.find(std::to_string(j["loops"].size()) + " loop edges (confidence >= 0.50)") != std::string::npos);
   std::size_t lines = 0;
   for (auto at = text.out.find(") -> key "); at != std::string::npos; at = text.out.find(") -> key ", at + 1)) ++lines;
   CHECK(lines == j["loops"].size());
@@ -545,6 +572,28 @@ TEST_CASE("cli: memory build / info share the memory code: a folder means DIR/me
 }
 
 TEST_SUITE("data") {
+  TEST_CASE("cli: localize --memory of another place answers \"unknown place\" with its reason, exit 0") {
+    const auto& file = sample_memory().first;
+    const std::string kitti = vmap::test::data_path("kitti07_160/image_0/000050.png").string();
+    const std::string corridor = vmap::test::data_path("rtabmap_loop/images/30.jpg").string();
+    const Run r = run_vmap({"localize", "--memory", file.string(), kitti, corridor, "--json"});
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+    const auto j = nlohmann::json::parse(r.out);
+    CHECK(j["localized"] == 0);
+    for (const auto& q : j["queries"]) {
+      CHECK(q["status"] != "accepted");
+      CHECK(q["localized"] == false);
+      CHECK(q["key"].is_null());
+      CHECK(!q["reason"].get<std::string>().empty());
+      CHECK(q["confidence"].get<double>() < 0.5);
+    }
+    const Run text = run_vmap({"localize", "--memory", file.string(), kitti});
+    REQUIRE(text.code == 0);
+    CHECK(text.out.find(kitti + ": ") != std::string::npos);
+    CHECK(text.out.find(", key ") == std::string::npos);
+  }
+
   TEST_CASE("cli: build --memory --poses keeps each key image's pose; localize --memory answers it") {
     const std::string gt = vmap::test::data_path("tum_fr1_rpy/groundtruth.txt").string();
     const fs::path file = work_dir() / "memory_poses.vmem";

@@ -112,8 +112,12 @@ struct LoopOptions {
   std::size_t temporal_consistency = 0;
   std::size_t temporal_tolerance = 3;
   /// The revisit rule: candidate j was left when a frame between j and the query scores
-  /// below `left_ratio` times the query's bag-of-words score against j.
-  double left_ratio = 0.5;
+  /// below `left_ratio` times the query's bag-of-words score against j. 0.2: frames of a
+  /// resting camera with sensor noise and sub-pixel jitter score 0.15-0.63 against each
+  /// other (their ORB keypoints move), so at 0.3 a noisy still clip closed 21 false loops
+  /// in 60 frames; at 0.2 none, and rtabmap_loop keeps its recall (examples/loops.md,
+  /// "The place decision").
+  double left_ratio = 0.2;
   /// The decision (confidence threshold, evidence).
   PlaceDecisionOptions decision{};
 };
@@ -284,10 +288,10 @@ class LoopEngine {
       }
     }
     d.rank_ms = ms_since(t0);
-    std::vector<Verified> verified = verify(d, f, to_verify, lookup);
+    std::vector<Verified> verified = verify(d, f, to_verify, lookup, options_.decision);
     const auto td = std::chrono::steady_clock::now();
     const bool stayed = bow && filter_revisits(d, verified, *bow);
-    choose(d, verified, bow ? &*bow : nullptr, stayed, !to_verify.empty());
+    choose(d, verified, bow ? &*bow : nullptr, stayed, !to_verify.empty(), options_.decision);
     apply_temporal_consistency(d);
     d.decide_ms = ms_since(td);
 
@@ -301,10 +305,14 @@ class LoopEngine {
   /// Where image features `q` were taken, among every frame added: the best `top` frames
   /// by bag-of-words score are verified and decided; without a ranker every one of the
   /// `unranked` frames the lookup knows (default: the frames added). No revisit rule, no
-  /// temporal consistency: a single image.
+  /// temporal consistency: a single image. `decision` overrides the options' decision for
+  /// this query.
   template <FeatureLookup L>
   PlaceDecision localize(const Features& q, std::size_t top, const L& lookup,
-                         std::optional<std::size_t> unranked = std::nullopt) const {
+                         std::optional<std::size_t> unranked = std::nullopt,
+                         const PlaceDecisionOptions* decision = nullptr) const {
+    const PlaceDecisionOptions& dec = decision ? *decision : options_.decision;
+    if (decision) detail::check_place_decision_options(*decision, "LoopEngine::localize");
     detail::check(top >= 1, "LoopEngine::localize: top must be >= 1");
     PlaceDecision d;
     const auto t0 = std::chrono::steady_clock::now();
@@ -320,9 +328,9 @@ class LoopEngine {
       for (std::size_t j = 0; j < d.candidates; ++j) to_verify.emplace_back(j, 0.0);
     }
     d.rank_ms = ms_since(t0);
-    std::vector<Verified> verified = verify(d, q, to_verify, lookup);
+    std::vector<Verified> verified = verify(d, q, to_verify, lookup, dec);
     const auto td = std::chrono::steady_clock::now();
-    choose(d, verified, bow ? &*bow : nullptr, false, !to_verify.empty());
+    choose(d, verified, bow ? &*bow : nullptr, false, !to_verify.empty(), dec);
     d.decide_ms = ms_since(td);
     return d;
   }
@@ -377,16 +385,22 @@ class LoopEngine {
   /// Queries past the window with a candidate whose place the camera had left.
   [[nodiscard]] std::size_t left_queries() const noexcept { return left_queries_; }
   /// True when at least `window` frames were queried past the window, none of them left
-  /// the place of a candidate, and the last frame still looks like the first at least
-  /// `left_ratio` times as much as the second did (the camera rests or hovers; a camera
-  /// driving on along one view also never leaves, but its last frame no longer looks
-  /// like its first): a stationary sequence, reported as such instead of loops. Needs a
-  /// ranker (false without).
+  /// the place of a candidate, and the last three frames still look like the first three
+  /// at least half as much as the first three look like each other (mean bag-of-words
+  /// scores: one noisy pair decides nothing): the camera rests or hovers. A camera that
+  /// drives on along one view never leaves a candidate either, but its last frames no
+  /// longer look like its first. A stationary sequence is reported as such instead of
+  /// loops. Needs a ranker (false without).
   [[nodiscard]] bool stationary() const {
-    if (!ranker_.ready() || frames_ < 2 || past_window_ < std::max<std::size_t>(options_.window, 1) ||
+    if (!ranker_.ready() || frames_ < 6 || past_window_ < std::max<std::size_t>(options_.window, 1) ||
         left_queries_ != 0)
       return false;
-    return ranker_.similarity(frames_ - 1, 0) >= options_.left_ratio * ranker_.similarity(1, 0);
+    double first = 0.0, across = 0.0;
+    for (std::size_t a = 0; a < 3; ++a) {
+      for (std::size_t b = a + 1; b < 3; ++b) first += ranker_.similarity(a, b) / 3.0;
+      for (std::size_t b = frames_ - 3; b < frames_; ++b) across += ranker_.similarity(a, b) / 9.0;
+    }
+    return across >= 0.5 * first;
   }
 
   /// Bytes of the engine's own state: label vectors, revisit caches, ranker's index.
@@ -399,7 +413,8 @@ class LoopEngine {
 
  private:
   /// What the revisit rule has scanned of the frames after j: up to `until`, the lowest
-  /// bag-of-words score any of them had against j.
+  /// bag-of-words score any of them had against j. The query only moves the bar, so a
+  /// frame is never scanned twice for one j.
   struct LeftCache {
     std::size_t until = 0;
     double lowest = 2.0;
@@ -415,15 +430,8 @@ class LoopEngine {
     LeftCache& c = left_[j];
     if (c.until < j + 1) c.until = j + 1;
     const double bar = options_.left_ratio * query_score;
-    if (c.lowest < bar) return true;
-    for (; c.until < q; ++c.until) {
-      c.lowest = std::min(c.lowest, ranker_.similarity(c.until, j));
-      if (c.lowest < bar) {
-        ++c.until;
-        return true;
-      }
-    }
-    return false;
+    for (; c.lowest >= bar && c.until < q; ++c.until) c.lowest = std::min(c.lowest, ranker_.similarity(c.until, j));
+    return c.lowest < bar;
   }
 
   struct Verified {
@@ -437,7 +445,8 @@ class LoopEngine {
   /// Matches and verifies each candidate; the verified ones with their evidence.
   template <FeatureLookup L>
   std::vector<Verified> verify(PlaceDecision& d, const Features& f,
-                               const std::vector<std::pair<std::size_t, double>>& to_verify, const L& lookup) const {
+                               const std::vector<std::pair<std::size_t, double>>& to_verify, const L& lookup,
+                               const PlaceDecisionOptions& dec) const {
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<Verified> verified;
     for (const auto& [j, score] : to_verify) {
@@ -450,9 +459,9 @@ class LoopEngine {
         d.considered.push_back({j, score, 0, 0.0, CandidateStage::verification_failed});
         continue;
       }
-      PlaceEvidence e = measure_place_evidence(f, old, matches, v, model_, options_.decision);
+      PlaceEvidence e = measure_place_evidence(f, old, matches, v, model_, dec);
       e.bow_score = score;
-      const double conf = place_confidence(e, options_.decision);
+      const double conf = place_confidence(e, dec);
       d.considered.push_back({j, score, e.inliers, conf, CandidateStage::weaker});
       verified.push_back({j, conf, e, std::move(v), d.considered.size() - 1});
     }
@@ -484,10 +493,10 @@ class LoopEngine {
 
   /// The decision from the verified candidates (best confidence first).
   void choose(PlaceDecision& d, std::vector<Verified>& verified, const typename Rank::Bow* bow, bool stayed,
-              bool any_verified) const {
+              bool any_verified, const PlaceDecisionOptions& dec) const {
     std::stable_sort(verified.begin(), verified.end(),
                      [](const Verified& a, const Verified& b) { return a.confidence > b.confidence; });
-    const double need = options_.decision.min_confidence;
+    const double need = dec.min_confidence;
     char buf[96];
     if (verified.empty()) {
       if (stayed) {
@@ -522,14 +531,14 @@ class LoopEngine {
         break;
       }
     }
-    if (b.evidence.inliers < options_.decision.min_inliers) {
+    if (b.evidence.inliers < dec.min_inliers) {
       d.status = PlaceStatus::too_little_evidence;
-      std::snprintf(buf, sizeof buf, "%d inliers < %d", b.evidence.inliers, options_.decision.min_inliers);
+      std::snprintf(buf, sizeof buf, "%d inliers < %d", b.evidence.inliers, dec.min_inliers);
     } else if (b.confidence < need) {
       d.status = PlaceStatus::unknown_place;
       std::snprintf(buf, sizeof buf, "confidence %.2f < %.2f", b.confidence, need);
     } else if (d.second && d.second_confidence >= need &&
-               d.second_confidence >= options_.decision.ambiguity_ratio * b.confidence) {
+               d.second_confidence >= dec.ambiguity_ratio * b.confidence) {
       d.status = PlaceStatus::ambiguous;
       std::snprintf(buf, sizeof buf, "frames %zu and %zu: confidence %.2f and %.2f", b.frame, *d.second, b.confidence,
                     d.second_confidence);

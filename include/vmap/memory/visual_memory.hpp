@@ -615,17 +615,14 @@ class VisualMemory {
     }
     const auto lookup = [&map](std::size_t k) -> const Features& { return map.keys[k].features; };
     PlaceDecision d;
-    if (engine_ && !decision) {
-      d = engine_->localize(q, options_.localize_candidates, lookup);
+    if (engine_) {
+      d = engine_->localize(q, options_.localize_candidates, lookup, std::nullopt, decision);
     } else {
-      // No engine yet (no vocabulary), or another decision: an engine for this query,
-      // over the same ranked database when there is one.
+      // No vocabulary yet: every key image is verified, by an engine without a ranker.
       LoopOptions o = options_.loops;
-      if (decision) o.decision = *decision;
       o.index = CandidateIndex::brute_force;
-      const Engine once(selector_.front_end().matcher(), selector_.front_end().estimator(), o,
-                        engine_ ? engine_->ranker() : BasicPlaceRanker<std::uint32_t>{});
-      d = once.localize(q, options_.localize_candidates, lookup, map.keys.size());
+      const Engine all(selector_.front_end().matcher(), selector_.front_end().estimator(), o);
+      d = all.localize(q, options_.localize_candidates, lookup, map.keys.size(), decision);
     }
     out.status = d.status;
     out.reason = d.reason;
@@ -1388,10 +1385,16 @@ class VisualMemory {
     w.u64(engine_ ? engine_->queries_past_window() : 0);
     w.u64(engine_ ? engine_->left_queries() : 0);
     w.u64(engine_ ? engine_->not_a_revisit_queries() : 0);
-    const ConsistencyState<std::size_t> c = engine_ ? engine_->consistency() : ConsistencyState<std::size_t>{};
+    // Field by field from the engine (GCC 12 at -O2 reports a copy of the state's
+    // std::optional as possibly uninitialised).
+    const bool has_state = engine_.has_value();
+    const ConsistencyState<std::size_t> none{};
+    const ConsistencyState<std::size_t>& c = has_state ? engine_->consistency() : none;
+    std::uint64_t last = 0;
+    if (c.last.has_value()) last = *c.last;
     w.i32(c.consecutive);
-    w.u8(c.last ? 1 : 0);
-    w.u64(c.last.value_or(0));
+    w.u8(c.last.has_value() ? 1 : 0);
+    w.u64(last);
     w.u64(c.island_begin);
     w.u64(c.island_end);
     w.u8(c.accepted ? 1 : 0);

@@ -170,7 +170,9 @@ TEST_SUITE("data") {
     REQUIRE(vocabulary->floating() != nullptr);
     vmap::LoopDetector d(vmap::LabelSchema{}, std::move(xfeat), vmap::BruteForceMatcher{},
                          vmap::FundamentalEstimator({.seed = 1}),
-                         {.window = 0, .index = vmap::CandidateIndex::bow, .top_k = 2}, vmap::PlaceRanker(vocabulary));
+                         // 64 float words: the strictest revisit rule (as the two-lap SIFT case)
+                         {.window = 0, .index = vmap::CandidateIndex::bow, .top_k = 2, .left_ratio = 1.0},
+                         vmap::PlaceRanker(vocabulary));
     vmap::LoopResult last;
     for (const auto& f : frames) last = d.add(f, {});
     CHECK(last.candidates == 5);

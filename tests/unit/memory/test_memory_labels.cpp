@@ -302,7 +302,7 @@ TEST_CASE("memory files v2: policies' options are checked on load; version 1 fil
   // A version 1 file: the same first seven sections (their layout is unchanged), no
   // policies, labels or GCS. It loads (policies unchecked) and continues.
   const auto starts = section_starts(file);
-  REQUIRE(starts.size() == 10);
+  REQUIRE(starts.size() == 11);
   std::string v1 = file.substr(0, starts[7]);
   v1[8] = 1;
   v1[12] = 7;
@@ -319,8 +319,8 @@ TEST_CASE("memory files v2: policies' options are checked on load; version 1 fil
   }
   CHECK(old.map().key_indices() == mem.map().key_indices());
   CHECK(old.loops().size() == mem.loops().size());
-  // Saved again, it is a version 2 file.
-  CHECK(old.serialize()[8] == 2);
+  // Saved again, it is a version 3 file.
+  CHECK(old.serialize()[8] == 3);
 }
 
 TEST_CASE("memory files v2: truncated or flipped label, GCS and policy sections are Errors naming the section") {
@@ -334,7 +334,7 @@ TEST_CASE("memory files v2: truncated or flipped label, GCS and policy sections 
   REQUIRE(mem.label_schema().has_value());
   const std::string file = mem.serialize();
   const auto starts = section_starts(file);
-  REQUIRE(starts.size() == 10);
+  REQUIRE(starts.size() == 11);
   const auto message_of = [](const std::string& bytes) {
     return vmap::test::error_of([&] { (void)from_bytes(bytes, "bad.vmem"); });
   };
