@@ -461,7 +461,7 @@ TEST_CASE("cli: localize --memory answers every query with its place decision; -
   // (A frame that is not a key image: its confidence is below 1.)
   std::string frame_30;
   {
-    std::ifstream list("examples/data/tum_fr1_rpy_60/rgb.txt");
+    std::ifstream list(std::string(VMAP_TEST_SOURCE_DIR) + "/examples/data/tum_fr1_rpy_60/rgb.txt");
     std::string line;
     std::size_t k = 0;
     while (std::getline(list, line)) {
