@@ -250,7 +250,7 @@ int main(int argc, char** argv) {
                              std::shared_ptr<const vmap::AnyVocabulary> v) {
           config.detector.index = index;
           const auto r = vmap::examples::run_loops(config, features, l, std::move(v));
-          return std::make_pair(r, vmap::examples::summarize(r, d.gt, config.detector.min_inliers));
+          return std::make_pair(r, vmap::examples::summarize(r, d.gt, config.detector.decision.min_confidence));
         };
 
         const auto all = run(vmap::CandidateIndex::brute_force, labels, nullptr).second;
@@ -391,7 +391,7 @@ int main(int argc, char** argv) {
         const std::clock_t c0 = std::clock();
         const auto r = vmap::examples::run_loops(config, rtabmap_orb, labels, scale_voc, {}, &distractors);
         const double run_cpu_s = static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;
-        const auto s = vmap::examples::summarize(r, rt.gt, config.detector.min_inliers);
+        const auto s = vmap::examples::summarize(r, rt.gt, config.detector.decision.min_confidence);
         const double frames = static_cast<double>(r.results.size());
         std::printf("  %-44s recall@100%%P %.3f  verifications %4zu  ranking %.2f ms per query (wall), whole key frame "
                     "%.1f ms wall (detector %.1f + features %.1f); the run (%zu distractors + %zu frames) %.1f s CPU; "

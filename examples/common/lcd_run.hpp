@@ -120,6 +120,7 @@ struct LoopRun {
   std::size_t verifications = 0;          ///< over the sequence's frames
   std::size_t distractors = 0;            ///< key frames added before the sequence
   std::size_t memory_bytes = 0;           ///< the detector's frames and index after the run
+  bool stationary = false;                ///< the camera never left its place (LoopEngine::stationary)
 
   /// The evaluation's view: frame indices of the sequence; a loop with a distractor is
   /// reported as a match with `distractor_frame` (a frame no query has a loop with).
@@ -128,7 +129,10 @@ struct LoopRun {
     for (const LoopResult& r : results) {
       std::optional<std::size_t> match = r.best;
       if (match) match = *match >= distractors ? *match - distractors : distractor_frame.value_or(r.frame - distractors);
-      out.push_back({r.frame - distractors, match, static_cast<double>(r.inliers)});
+      // The PR curve runs over the confidence of the decisions the threshold alone
+      // decides (accepted or unknown place); the others score 0.
+      const bool by_threshold = r.status == PlaceStatus::accepted || r.status == PlaceStatus::unknown_place;
+      out.push_back({r.frame - distractors, match, by_threshold ? r.confidence : 0.0});
     }
     return out;
   }
@@ -194,6 +198,7 @@ inline LoopRun run_loops(const LoopRunConfig& config, const SequenceFeatures& fe
     run.detector_seconds = seconds_since(t0);
     run.verifications = detector.verifications() - before;
     run.memory_bytes = detector.memory_bytes();
+    run.stationary = detector.stationary();
   });
   run.seconds = features.seconds + run.detector_seconds;
   return run;
@@ -203,7 +208,7 @@ inline LoopRun run_loops(const LoopRunConfig& config, const SequenceFeatures& fe
 struct LoopSummary {
   std::size_t frames = 0;
   std::size_t loops_gt = 0;
-  PrecisionRecall at_decision;  ///< at the detector's min_inliers
+  PrecisionRecall at_decision;  ///< at the decision's min_confidence
   RecallAtFullPrecision at_full_precision;
   std::vector<PrecisionRecall> curve;
   std::size_t verifications = 0;
@@ -211,7 +216,7 @@ struct LoopSummary {
 };
 
 /// The run's figures against `gt` (the sequence's frames; distractor matches are false).
-inline LoopSummary summarize(const LoopRun& run, const LoopGroundTruth& gt, int min_inliers) {
+inline LoopSummary summarize(const LoopRun& run, const LoopGroundTruth& gt, double min_confidence) {
   detail::check(gt.frames() == run.results.size(), "the ground truth covers " + std::to_string(gt.frames()) +
                                                        " frames but the sequence has " +
                                                        std::to_string(run.results.size()));
@@ -229,7 +234,7 @@ inline LoopSummary summarize(const LoopRun& run, const LoopGroundTruth& gt, int 
   }
   s.frames = run.results.size();
   s.loops_gt = gt.loop_frames();
-  s.at_decision = evaluate_loops(scores, with_distractor, min_inliers);
+  s.at_decision = evaluate_loops(scores, with_distractor, min_confidence);
   s.curve = precision_recall_curve(scores, with_distractor);
   s.at_full_precision = recall_at_full_precision(s.curve);
   s.verifications = run.verifications;

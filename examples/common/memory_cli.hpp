@@ -102,6 +102,8 @@ struct NewMemory {
   std::string images = "none";  ///< none, png or jpeg
   std::string vocabulary;       ///< a vocabulary file (vmap vocabulary); empty: learned online
   std::size_t vocabulary_after = MemoryOptions{}.vocabulary_after;
+  /// The place decision's threshold for loop edges (lcd/place_decision.hpp).
+  double min_confidence = PlaceDecisionOptions{}.min_confidence;
 };
 
 inline CliMemory new_memory(const NewMemory& n) {
@@ -109,6 +111,7 @@ inline CliMemory new_memory(const NewMemory& n) {
   o.selector.tau = n.tau;
   o.selector.rule = n.rule;
   o.vocabulary_after = n.vocabulary_after;
+  o.loops.decision.min_confidence = n.min_confidence;
   if (n.images == "png")
     o.images = ImageStorage::png;
   else if (n.images == "jpeg")
@@ -252,6 +255,7 @@ inline nlohmann::json link_json(const CliMemory& mem, const PlaceLink& l) {
           {"matches", l.matches},
           {"bow_score", l.bow_score},
           {"similarity", l.similarity},
+          {"confidence", l.confidence},
           {"fundamental", f},
           {"pose", pose_json(mem.poses()[l.key])}};
 }
@@ -270,7 +274,8 @@ inline nlohmann::json loop_json(const CliMemory& mem, const LoopEdge& e) {
           {"inliers", e.link.inliers},
           {"matches", e.link.matches},
           {"bow_score", e.link.bow_score},
-          {"similarity", e.link.similarity}};
+          {"similarity", e.link.similarity},
+          {"confidence", e.link.confidence}};
 }
 
 /// One query image's answer.
@@ -282,7 +287,8 @@ struct MemoryQuery {
 
 /// Localizes each image (read in grey, as the memory's frames were); an unreadable image
 /// is a vmap::Error naming it.
-inline std::vector<MemoryQuery> localize_images(CliMemory& mem, const std::vector<std::string>& images) {
+inline std::vector<MemoryQuery> localize_images(CliMemory& mem, const std::vector<std::string>& images,
+                                                const PlaceDecisionOptions& decision) {
   std::vector<MemoryQuery> out;
   for (const auto& path : images) {
     current_inputs() = {path};
@@ -294,23 +300,35 @@ inline std::vector<MemoryQuery> localize_images(CliMemory& mem, const std::vecto
       vmap::detail::fail("query " + std::string(e.what()));  // "query image 'x': reason"
     }
     const auto t0 = std::chrono::steady_clock::now();
-    MemoryQuery q{path, mem.localize(img), 0.0};
+    MemoryQuery q{path, mem.localize(img, &decision), 0.0};
     q.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     out.push_back(std::move(q));
   }
   return out;
 }
 
-/// Every answer: per query its status, time and every verified key image (most inliers first).
+/// The evidence of a place decision (lcd/place_decision.hpp).
+inline nlohmann::json evidence_json(const PlaceEvidence& e) {
+  return {{"matches", e.matches},         {"inliers", e.inliers},       {"inlier_ratio", e.inlier_ratio},
+          {"significance", e.significance}, {"spread", e.spread},       {"bow_score", e.bow_score},
+          {"model", std::string(to_string(e.model))}};
+}
+
+/// Every answer: per query its decision (status, reason, confidence, evidence), time and
+/// every verified key image (most confident first).
 inline nlohmann::json localizations_json(const CliMemory& mem, const std::vector<MemoryQuery>& queries) {
   nlohmann::json out = nlohmann::json::array();
   for (const auto& q : queries) {
     nlohmann::json j{{"image", path_string(q.image)},
                      {"status", std::string(to_string(q.answer.status))},
+                     {"reason", q.answer.reason},
+                     {"confidence", q.answer.confidence},
                      {"localized", q.answer.ok()},
+                     {"evidence", evidence_json(q.answer.evidence)},
                      {"verified_candidates", q.answer.verified_candidates},
                      {"ms", q.ms},
                      {"matches", nlohmann::json::array()}};
+    j["key"] = q.answer.best() ? nlohmann::json(q.answer.best()->key) : nlohmann::json(nullptr);
     // The GCS position (Algorithm 5), present when the memory holds a trained GCS
     // (VisualMemory::train_gcs); null otherwise.
     j["position"] = q.answer.position ? pose_json(q.answer.position->pose) : nlohmann::json(nullptr);
@@ -320,17 +338,19 @@ inline nlohmann::json localizations_json(const CliMemory& mem, const std::vector
   return out;
 }
 
-/// One line per query: the best key image (index, frame, name), inliers, BoW score, pose.
+/// One line per query: the accepted key image (index, frame, name), confidence, inliers,
+/// BoW score, pose; or the decision and its reason ("unknown place (confidence 0.12 <
+/// 0.50)").
 inline void print_localizations(const CliMemory& mem, const std::vector<MemoryQuery>& queries) {
   for (const auto& q : queries) {
     if (const auto* b = q.answer.best()) {
       const auto& k = mem.map().keys[b->key];
-      std::printf("%s: key %u (frame %zu, %s), %d inliers of %d matches, BoW %.3f%s, %.1f ms\n", q.image.c_str(), b->key,
-                  k.frame_index, k.name.c_str(), b->inliers, b->matches, b->bow_score,
-                  pose_text(mem.poses()[b->key]).c_str(), q.ms);
+      std::printf("%s: key %u (frame %zu, %s), confidence %.2f, %d inliers of %d matches, BoW %.3f%s, %.1f ms\n",
+                  q.image.c_str(), b->key, k.frame_index, k.name.c_str(), q.answer.confidence, b->inliers, b->matches,
+                  b->bow_score, pose_text(mem.poses()[b->key]).c_str(), q.ms);
     } else {
-      std::printf("%s: not localized (%s), %.1f ms\n", q.image.c_str(), std::string(to_string(q.answer.status)).c_str(),
-                  q.ms);
+      std::printf("%s: %s (%s), %.1f ms\n", q.image.c_str(), std::string(to_string(q.answer.status)).c_str(),
+                  q.answer.reason.c_str(), q.ms);
     }
     if (q.answer.position) {
       const Pose2& p = q.answer.position->pose;
@@ -342,10 +362,13 @@ inline void print_localizations(const CliMemory& mem, const std::vector<MemoryQu
 /// `vmap localize --memory M IMAGE...` and `vmap memory localize M IMAGE...`: the answers
 /// as lines, or with `json` one object whose `queries` list every answer.
 inline int localize_from_memory(const std::filesystem::path& file, const std::string& option,
-                                const std::vector<std::string>& images, bool json) {
+                                const std::vector<std::string>& images, bool json,
+                                std::optional<double> min_confidence = std::nullopt) {
   current_inputs() = {file.string()};
   CliMemory mem = load_memory(file, option);
-  const auto queries = localize_images(mem, images);
+  PlaceDecisionOptions decision = mem.options().loops.decision;
+  if (min_confidence) decision.min_confidence = *min_confidence;
+  const auto queries = localize_images(mem, images, decision);
   if (!json) {
     print_localizations(mem, queries);
     return 0;
@@ -356,21 +379,23 @@ inline int localize_from_memory(const std::filesystem::path& file, const std::st
               {"memory", path_string(file)},
               {"frames", mem.frames()},
               {"key_images", mem.key_images()},
+              {"min_confidence", decision.min_confidence},
               {"queries", localizations_json(mem, queries)},
               {"localized", localized}});
   return 0;
 }
 
 /// The loop edges: with `all`, one line per edge in the style of `vmap loops` (frame
-/// names and times); otherwise a summary (how many, key images involved, inliers) and
-/// the five strongest edges, so a long memory does not flood the terminal.
+/// names and times); otherwise a summary (how many, key images involved, confidence) and
+/// the five most confident edges, so a long memory does not flood the terminal.
 inline void print_loop_edges(const CliMemory& mem, bool all = false) {
   const auto& keys = mem.map().keys;
   const auto line = [&](const LoopEdge& e) {
-    std::printf("  key %4u (frame %4zu, %s, %.6f s) -> key %4u (frame %4zu, %s, %.6f s)  inliers %4d  bow score %.3f\n",
+    std::printf("  key %4u (frame %4zu, %s, %.6f s) -> key %4u (frame %4zu, %s, %.6f s)  confidence %.2f  inliers %4d  "
+                "bow score %.3f\n",
                 e.from, keys[e.from].frame_index, keys[e.from].name.c_str(), keys[e.from].timestamp, e.link.key,
-                keys[e.link.key].frame_index, keys[e.link.key].name.c_str(), keys[e.link.key].timestamp, e.link.inliers,
-                e.link.bow_score);
+                keys[e.link.key].frame_index, keys[e.link.key].name.c_str(), keys[e.link.key].timestamp,
+                e.link.confidence, e.link.inliers, e.link.bow_score);
   };
   std::vector<LoopEdge> edges = mem.loops();
   if (all || edges.size() <= 5) {
@@ -381,9 +406,10 @@ inline void print_loop_edges(const CliMemory& mem, bool all = false) {
   for (const auto& e : edges) queries.push_back(e.from);
   std::sort(queries.begin(), queries.end());
   queries.erase(std::unique(queries.begin(), queries.end()), queries.end());
-  std::sort(edges.begin(), edges.end(), [](const LoopEdge& a, const LoopEdge& b) { return a.link.inliers > b.link.inliers; });
-  std::printf("  %zu edges from %zu key images, inliers %d .. %d; the 5 strongest (--edges lists all):\n", edges.size(),
-              queries.size(), edges.back().link.inliers, edges.front().link.inliers);
+  std::sort(edges.begin(), edges.end(),
+            [](const LoopEdge& a, const LoopEdge& b) { return a.link.confidence > b.link.confidence; });
+  std::printf("  %zu edges from %zu key images, confidence %.2f .. %.2f; the 5 most confident (--edges lists all):\n",
+              edges.size(), queries.size(), edges.back().link.confidence, edges.front().link.confidence);
   for (std::size_t k = 0; k < 5; ++k) line(edges[k]);
 }
 

@@ -50,6 +50,7 @@ struct BuildArgs {
   std::string poses;  // --poses FILE: odometry kept with the memory's key images
   bool gcs = false;   // --gcs: floor poses, and the GCS localizer trained at the end
   std::size_t vocabulary_after = vmap::MemoryOptions{}.vocabulary_after;
+  double min_confidence = vmap::PlaceDecisionOptions{}.min_confidence;  // --min-confidence: of loop edges
 };
 
 // The human table goes to stdout, or to stderr when --json owns stdout.
@@ -283,7 +284,8 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   std::optional<ex::CliMemory> mem;
   if (args.resume)
     mem.emplace(
-        ex::memory_to_resume(file, app, {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after"}));
+        ex::memory_to_resume(file, app,
+                             {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after", "--min-confidence"}));
   std::vector<fs::path> inputs{a.input};
   if (!args.poses.empty()) {
     ex::check_input_file(args.poses, "--poses");
@@ -309,7 +311,8 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
                                 .rule = ex::parse_rule(a.rule),
                                 .images = args.images,
                                 .vocabulary = args.vocabulary,
-                                .vocabulary_after = args.vocabulary_after}));
+                                .vocabulary_after = args.vocabulary_after,
+                                .min_confidence = args.min_confidence}));
   auto src = vmap::FrameSource::open(a.input, so);
   if (out_dir && src.kind() == vmap::SourceKind::live && mem->options().images == vmap::ImageStorage::none)
     ex::usage_error("--out with --memory on a live source needs the memory's pixels (--images png or jpeg): a live "
@@ -363,6 +366,10 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--vocabulary-after", args->vocabulary_after,
                  "With --memory and no --vocabulary: learn it from the first N key images (loops are searched from then on)")
       ->check(ex::count_in(1, 1000000));
+  app.add_option("--min-confidence", args->min_confidence,
+                 "With --memory: a loop edge needs this place-decision confidence in [0, 1] (0.5: inliers a chance "
+                 "alignment gives 1 in 10^12)")
+      ->check(ex::real_in(0.0, 1.0));
   app.add_option("--poses", args->poses,
                  "With --memory: each frame's odometry pose (TUM or KITTI camera poses; by order when there is one "
                  "per frame, else the nearest in time within 50 ms), kept with its key image");
@@ -374,7 +381,8 @@ std::function<int()> setup(CLI::App& app) {
     ex::current_inputs() = {a.input};
     ex::check_range(a);
     if (!args->memory.empty()) return build_memory(*args, app);
-    for (const char* o : {"--resume", "--save-every", "--images", "--vocabulary", "--vocabulary-after", "--poses", "--gcs"})
+    for (const char* o : {"--resume", "--save-every", "--images", "--vocabulary", "--vocabulary-after",
+                          "--min-confidence", "--poses", "--gcs"})
       if (app.get_option(o)->count() > 0) ex::usage_error(std::string(o) + " needs --memory DIR|FILE");
     const auto camera = ex::load_camera_option(a.camera);
     const bool pictures = !a.out.empty();

@@ -54,6 +54,7 @@ struct Settings {
   std::string out;
   bool json = false;
   std::string memory;               // --memory M: answer from a saved visual memory
+  std::optional<double> min_confidence;  // --min-confidence: with --memory, the place decision's threshold
   std::vector<std::string> images;  // its query images
 };
 
@@ -405,11 +406,15 @@ std::function<int()> setup(CLI::App& app) {
                  "Answer from a saved visual memory (vmap build --memory; a folder means DIR/memory.vmem): the key "
                  "image each IMAGE matches, instead of training a GCS map");
   app.add_option("image", s->images, "With --memory: the query images");
+  app.add_option("--min-confidence", s->min_confidence,
+                 "With --memory: accept a key image at this place-decision confidence in [0, 1] (default: the "
+                 "memory's, 0.5); below it the answer is \"unknown place\"")
+      ->check(ex::real_in(0.0, 1.0));
   return [s, &app] {
     if (!s->memory.empty()) {
-      ex::refuse_other_options(app, {"--memory", "IMAGE", "--json"}, "--memory");
+      ex::refuse_other_options(app, {"--memory", "IMAGE", "--json", "--min-confidence"}, "--memory");
       if (s->images.empty()) ex::usage_error("--memory needs query images: vmap localize --memory M IMAGE...");
-      return ex::localize_from_memory(ex::memory_file(s->memory), "--memory", s->images, s->json);
+      return ex::localize_from_memory(ex::memory_file(s->memory), "--memory", s->images, s->json, s->min_confidence);
     }
     if (!s->images.empty())
       ex::usage_error("query images on the command line need --memory M (the GCS modes take --query or --every-other)");

@@ -94,11 +94,11 @@ vmap::CandidateIndex parse_rank(const std::string& rank) {
 }
 
 /// The ground truth over a memory's key images: (i, j) when the frames' ground truth
-/// marks (f_i, f_j) and j + exclude_recent < i (the pairs the memory could find, as
+/// marks (f_i, f_j) and j + window < i (the pairs the memory could find, as
 /// ground_truth_from_poses' window leaves out the near ones).
 vmap::LoopGroundTruth key_ground_truth(const LoopsArgs& a, const ex::CliMemory& mem) {
   const auto& keys = mem.map().keys;
-  const std::size_t window = mem.options().exclude_recent;
+  const std::size_t window = mem.options().loops.window;
   if (!a.gt_poses.empty()) {
     std::vector<double> times;
     for (const auto& k : keys) times.push_back(k.timestamp);
@@ -126,14 +126,15 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
   for (const auto& [path, option] : {std::pair{a.gt, "--gt"}, std::pair{a.gt_poses, "--gt-poses"}})
     if (!path.empty()) ex::check_input_file(path, option);
   const auto mem = ex::load_memory(file, "--memory");
-  const int min_inliers = mem.options().min_loop_inliers;
+  const double min_confidence = mem.options().loops.decision.min_confidence;
   nlohmann::json loops = nlohmann::json::array();
   for (const auto& e : mem.loops()) loops.push_back(ex::loop_json(mem, e));
   nlohmann::json j{{"command", "loops"},
                    {"memory", ex::path_string(file)},
                    {"frames", mem.frames()},
                    {"key_images", mem.key_images()},
-                   {"min_inliers", min_inliers},
+                   {"min_confidence", min_confidence},
+                   {"stationary", mem.stationary()},
                    {"loops", loops}};
   if (a.gt.empty() && a.gt_poses.empty()) {
     if (a.json) {
@@ -141,25 +142,26 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
       return 0;
     }
     std::printf("memory %s: %zu frames, %zu key images\n", file.c_str(), mem.frames(), mem.key_images());
-    std::printf("%zu loop edges (inliers >= %d):\n", mem.loops().size(), min_inliers);
+    if (mem.stationary()) std::printf("the camera never left its place: no key image is a revisit\n");
+    std::printf("%zu loop edges (confidence >= %.2f):\n", mem.loops().size(), min_confidence);
     ex::print_loop_edges(mem, a.edges);
     return 0;
   }
-  // Each key image proposes its edge with the most inliers, as each query frame proposes
-  // its best candidate in the frame-level evaluation (lcd/evaluation.hpp).
+  // Each key image proposes its most confident edge, as each query frame proposes its
+  // best candidate in the frame-level evaluation (lcd/evaluation.hpp).
   const auto gt = key_ground_truth(a, mem);
   std::vector<vmap::LoopScore> scores(mem.key_images());
   for (std::size_t k = 0; k < scores.size(); ++k) scores[k].query = k;
   std::size_t true_edges = 0;
   for (const auto& e : mem.loops()) {
     auto& s = scores[e.from];
-    if (!s.match || e.link.inliers > s.score) {
+    if (!s.match || e.link.confidence > s.score) {
       s.match = e.link.key;
-      s.score = e.link.inliers;
+      s.score = e.link.confidence;
     }
     true_edges += gt(e.from, e.link.key) ? 1 : 0;
   }
-  const auto pr = vmap::evaluate_loops(scores, gt, min_inliers);
+  const auto pr = vmap::evaluate_loops(scores, gt, min_confidence);
   const auto full = vmap::recall_at_full_precision(vmap::precision_recall_curve(scores, gt));
   for (auto& l : loops) l["true"] = gt(l["from"].get<std::size_t>(), l["to"].get<std::size_t>());
   if (a.json) {
@@ -175,8 +177,8 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
     return 0;
   }
   std::printf("memory %s: %zu frames, %zu key images, %zu with a ground-truth loop to a key image %zu or more before\n",
-              file.c_str(), mem.frames(), mem.key_images(), pr.positives, mem.options().exclude_recent + 1);
-  std::printf("%zu loop edges (inliers >= %d), %zu true:\n", mem.loops().size(), min_inliers, true_edges);
+              file.c_str(), mem.frames(), mem.key_images(), pr.positives, mem.options().loops.window + 1);
+  std::printf("%zu loop edges (confidence >= %.2f), %zu true:\n", mem.loops().size(), min_confidence, true_edges);
   ex::print_loop_edges(mem, a.edges);
   std::printf("key images (best edge each): TP %zu, FP %zu, precision %.3f, recall %.3f; recall@100%%P %.3f\n",
               pr.true_positives, pr.false_positives, pr.precision, pr.recall, full.recall);
@@ -288,9 +290,9 @@ int run(LoopsArgs& a, const CLI::App& app) {
       vmap::examples::run_loops(c, features, labels, vocabulary, [&](const vmap::LoopResult& r) {
         progress.update(++done);
         if (!a.verbose) return;
-        std::fprintf(stderr, "frame %3zu  candidates %3zu  verified %3zu  best %4s  inliers %4d  %s\n", r.frame,
-                     r.candidates, r.verifications, r.best ? std::to_string(*r.best).c_str() : "-", r.inliers,
-                     std::string(vmap::to_string(r.status)).c_str());
+        std::fprintf(stderr, "frame %3zu  candidates %3zu  verified %3zu  best %4s  inliers %4d  confidence %.2f  %s (%s)\n",
+                     r.frame, r.candidates, r.verifications, r.best ? std::to_string(*r.best).c_str() : "-",
+                     r.evidence.inliers, r.confidence, std::string(vmap::to_string(r.status)).c_str(), r.reason.c_str());
       });
   progress.done();
   const std::size_t frames = result.results.size();
@@ -299,8 +301,16 @@ int run(LoopsArgs& a, const CLI::App& app) {
   nlohmann::json loops = nlohmann::json::array();
   for (const auto& r : result.results)
     if (r.loop())
-      loops.push_back({{"query", r.frame}, {"match", *r.best}, {"inliers", r.inliers}, {"bow_score", r.bow_score},
-                       {"similarity", r.similarity}});
+      loops.push_back({{"query", r.frame},
+                       {"match", *r.best},
+                       {"confidence", r.confidence},
+                       {"inliers", r.evidence.inliers},
+                       {"matches", r.evidence.matches},
+                       {"inlier_ratio", r.evidence.inlier_ratio},
+                       {"significance", r.evidence.significance},
+                       {"spread", r.evidence.spread},
+                       {"bow_score", r.evidence.bow_score}});
+  const bool stationary = result.stationary;
   if (!gt) {
     if (a.json) {
       nlohmann::json j = {{"command", "loops"},
@@ -312,7 +322,8 @@ int run(LoopsArgs& a, const CLI::App& app) {
                           {"verifications", result.verifications},
                           {"seconds", result.seconds},
                           {"fps", fps},
-                          {"min_inliers", c.detector.min_inliers},
+                          {"min_confidence", c.detector.decision.min_confidence},
+                          {"stationary", stationary},
                           {"loops", loops}};
       ex::print_json(j);
       return 0;
@@ -322,14 +333,16 @@ int run(LoopsArgs& a, const CLI::App& app) {
                 result.verifications,
                 static_cast<double>(result.verifications) / static_cast<double>(std::max<std::size_t>(1, frames)),
                 result.seconds, fps);
-    std::printf("%zu loops (inliers >= %d):\n", loops.size(), c.detector.min_inliers);
+    if (stationary) std::printf("the camera never left its place: no frame is a revisit\n");
+    std::printf("%zu loops (confidence >= %.2f):\n", loops.size(), c.detector.decision.min_confidence);
     for (const auto& l : loops)
-      std::printf("  frame %4zu -> frame %4zu  inliers %4d  bow score %.3f\n", l["query"].get<std::size_t>(),
-                  l["match"].get<std::size_t>(), l["inliers"].get<int>(), l["bow_score"].get<double>());
+      std::printf("  frame %4zu -> frame %4zu  confidence %.2f  inliers %4d of %4d  bow score %.3f\n",
+                  l["query"].get<std::size_t>(), l["match"].get<std::size_t>(), l["confidence"].get<double>(),
+                  l["inliers"].get<int>(), l["matches"].get<int>(), l["bow_score"].get<double>());
     return 0;
   }
 
-  const auto s = vmap::examples::summarize(result, *gt, c.detector.min_inliers);
+  const auto s = vmap::examples::summarize(result, *gt, c.detector.decision.min_confidence);
   const auto agree = result.agreement(*gt, c.detector.window);
 
   std::vector<std::string> written;
@@ -372,7 +385,8 @@ int run(LoopsArgs& a, const CLI::App& app) {
                         {"fps", fps},
                         {"rank", a.rank},
                         {"top_k", c.detector.top_k},
-                        {"min_inliers", c.detector.min_inliers},
+                        {"min_confidence", c.detector.decision.min_confidence},
+                        {"stationary", stationary},
                         {"threshold_at_100_precision", s.at_full_precision.true_positives > 0
                                                            ? nlohmann::json(s.at_full_precision.threshold)
                                                            : nlohmann::json(nullptr)},
@@ -411,12 +425,13 @@ int run(LoopsArgs& a, const CLI::App& app) {
               result.seconds, result.seconds > 0 ? static_cast<double>(frames) / result.seconds : 0.0,
               detect_seconds > 0 ? "" : " (detections precomputed)");
   if (detect_seconds > 0) std::printf("detector: %.2f s\n", detect_seconds);
-  std::printf("at inliers >= %d: TP %zu, FP %zu, precision %.3f, recall %.3f\n", c.detector.min_inliers,
+  if (stationary) std::printf("the camera never left its place: no frame is a revisit\n");
+  std::printf("at confidence >= %.2f: TP %zu, FP %zu, precision %.3f, recall %.3f\n", c.detector.decision.min_confidence,
               s.at_decision.true_positives, s.at_decision.false_positives, s.at_decision.precision,
               s.at_decision.recall);
   if (!a.out.empty()) std::printf("wrote %s/{pr.csv, pr.png}\n", a.out.c_str());
   if (s.at_full_precision.true_positives > 0)
-    std::printf("recall@100%%P %.3f (at inliers >= %g)\n", s.at_full_precision.recall, s.at_full_precision.threshold);
+    std::printf("recall@100%%P %.3f (at confidence >= %.3f)\n", s.at_full_precision.recall, s.at_full_precision.threshold);
   else
     std::printf("recall@100%%P 0.000 (no threshold without a false positive)\n");
   return 0;
@@ -461,10 +476,17 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--depth", a->vocabulary.depth, "Vocabulary learned here: depth L of the tree")
       ->check(ex::count_in(1, 16));
   app.add_option("--window", d.window, "Frames this recent are never candidates")->check(ex::count_in(0, 1000000));
+  app.add_option("--left-ratio", d.left_ratio,
+                 "Revisit rule: a candidate's place was left when a frame in between scored below this fraction of "
+                 "the query's bag-of-words score against it")
+      ->check(ex::real_in(0.0, 1.0));
   app.add_option("--min-candidates", d.min_candidates, "m: backtrack up the tree until this many candidates")
       ->check(ex::count_in(1, 1000000));
-  app.add_option("--min-inliers", d.min_inliers, "Decision threshold: F-matrix inliers of a loop")
-      ->check(ex::count_in(1, 1000000));
+  app.add_option("--min-confidence", d.decision.min_confidence,
+                 "Decision threshold: a loop's confidence in [0, 1] (0.5: inliers a chance alignment gives 1 in 10^12)")
+      ->check(ex::real_in(0.0, 1.0));
+  app.add_option("--min-inliers", d.decision.min_inliers, "Below this many inliers a candidate is not weighed")
+      ->check(ex::count_in(0, 1000000));
   app.add_option("--score", d.labels.min_score, "Detections below this score are ignored")->check(ex::real_in(0.0, 1.0));
   app.add_option("--min-influence", a->config.influence.min_influence, "Drop labels present in fewer frames (eq. 5)")
       ->check(ex::real_in(0.0, 1.0));
@@ -485,7 +507,8 @@ std::function<int()> setup(CLI::App& app) {
       ->check(ex::count_in(1, ex::max_nfeatures));
   app.add_option("--out", a->out, "Folder for pr.csv (threshold, TP, FP, precision, recall) and pr.png (created if missing)");
   app.add_flag("--json", a->json, "Print the figures as one JSON object on stdout");
-  app.add_flag("--verbose", a->verbose, "Print one line per frame to stderr (candidates, best, inliers, status)");
+  app.add_flag("--verbose", a->verbose,
+               "Print one line per frame to stderr (candidates, best, inliers, confidence, status and reason)");
   app.add_option("--memory", a->memory,
                  "Instead of INPUT: the loop edges of a saved visual memory (vmap build --memory; a folder means "
                  "DIR/memory.vmem), evaluated over its key images with --gt / --gt-poses");

@@ -32,6 +32,7 @@ struct MemoryArgs {
   bool resume = false, json = false, edges = false;
   std::string export_out;
   double tau = 0.3;
+  std::optional<double> min_confidence;  // localize: the query's threshold; build: of loop edges
   std::string storage = "none";
   std::size_t start = 0, end = 0, stride = 1, save_every = 0;
 };
@@ -44,11 +45,13 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   vmap::FrameSourceOptions so{.start = a.start, .stride = a.stride, .grey = true};
   if (a.end > 0) so.end = a.end;
   if (a.resume) {
-    mem.emplace(ex::memory_to_resume(file, app, {"--threshold", "--images", "--vocabulary"}));
+    mem.emplace(ex::memory_to_resume(file, app, {"--threshold", "--images", "--vocabulary", "--min-confidence"}));
     so = ex::resume_range(*mem, so, file.string());
   } else {
     ex::prepare_memory_output(file, "--memory", {a.input});
-    mem.emplace(ex::new_memory({.tau = a.tau, .images = a.storage, .vocabulary = a.vocabulary}));
+    ex::NewMemory n{.tau = a.tau, .images = a.storage, .vocabulary = a.vocabulary};
+    if (a.min_confidence) n.min_confidence = *a.min_confidence;
+    mem.emplace(ex::new_memory(n));
   }
   auto src = vmap::FrameSource::open(a.input, so);
   const auto r = ex::stream_into(*mem, src, file, a.save_every, std::nullopt, [](const ex::CliMemory&) {});
@@ -86,11 +89,13 @@ int info(const MemoryArgs& a) {
     ex::print_json({{"frames", mem.frames()},
                     {"last_frame_index", mem.last_frame_index() ? nlohmann::json(*mem.last_frame_index()) : nlohmann::json(nullptr)},
                     {"key_images", keys},
+                    {"stationary", mem.stationary()},
                     {"loops", loops}});
     return 0;
   }
   std::printf("%zu frames, %zu key images, %zu loop edges, vocabulary of %zu words, last frame %zu\n", mem.frames(),
               mem.key_images(), mem.loops().size(), mem.vocabulary().size(), mem.last_frame_index().value_or(0));
+  if (mem.stationary()) std::printf("the camera never left its place: no key image is a revisit\n");
   ex::print_loop_edges(mem, a.edges);
   return 0;
 }
@@ -133,10 +138,15 @@ std::function<int()> setup(CLI::App& app) {
   b->add_option("--end", a->end, "One past the last frame index read (0: all)")->check(ex::count_in(0, ex::max_frame_index));
   b->add_option("--stride", a->stride, "Read every n-th frame")->check(ex::count_in(1, ex::max_frame_index));
   b->add_flag("--json", a->json, "Print the result as JSON");
+  b->add_option("--min-confidence", a->min_confidence, "A loop edge needs this place-decision confidence in [0, 1]")
+      ->check(ex::real_in(0.0, 1.0));
   auto* l = app.add_subcommand("localize", "The key image(s) each query image matches");
   l->add_option("memory", a->memory, "Memory file")->required();
   l->add_option("images", a->images, "Query images")->required();
   l->add_flag("--json", a->json, "Print every answer as JSON");
+  l->add_option("--min-confidence", a->min_confidence,
+                "Accept a key image at this place-decision confidence in [0, 1] (default: the memory's)")
+      ->check(ex::real_in(0.0, 1.0));
   auto* i = app.add_subcommand("info", "Key images and loop edges of a memory file");
   i->add_option("memory", a->memory, "Memory file")->required();
   i->add_flag("--json", a->json, "Print as JSON");
@@ -147,7 +157,8 @@ std::function<int()> setup(CLI::App& app) {
   x->add_flag("--json", a->json, "Print the files written as JSON");
   return [a, b, l, x]() {
     if (b->parsed()) return build(*a, *b);
-    if (l->parsed()) return ex::localize_from_memory(ex::memory_file(a->memory), "memory", a->images, a->json);
+    if (l->parsed())
+      return ex::localize_from_memory(ex::memory_file(a->memory), "memory", a->images, a->json, a->min_confidence);
     if (x->parsed()) return export_files(*a);
     return info(*a);
   };

@@ -11,8 +11,12 @@
 #include <vmap/place/database.hpp>
 #include <vmap/place/vocabulary.hpp>
 
+#include <opencv2/core.hpp>
+
 #include <concepts>
 #include <cstddef>
+#include <cstdint>
+#include <string>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -38,23 +42,39 @@ concept PlaceRanking = std::move_constructible<R> &&
       { cr.ready() } -> std::convertible_to<bool>;                      // can describe and rank
       { cr.describe(f) } -> std::same_as<typename R::Bow>;              // the frame's bag of words
       { r.add(id, bow) };                                               // indexes a frame
-      { cr.rank(bow, n, only) } -> std::same_as<std::vector<RankedFrame>>;  // best first; only == nullptr: all
+      // Best first among the indexed frames with id < below (only == nullptr) or among
+      // `*only`.
+      { cr.rank(bow, n, only, id) } -> std::same_as<std::vector<RankedFrame>>;
+      { cr.similarity(bow, id) } -> std::convertible_to<double>;        // score against an indexed frame
+      { cr.similarity(id, id) } -> std::convertible_to<double>;         // score of two indexed frames
       { cr.memory_bytes() } -> std::convertible_to<std::size_t>;        // the index's memory
     };
 
 /// Models PlaceRanking over a shared, read-only vocabulary (one vocabulary may serve
 /// several detectors and threads: its const members are thread-safe). Without a
 /// vocabulary (default-constructed) it is not `ready()`, which the tree and brute_force
-/// sources do not need.
-class PlaceRanker {
+/// sources do not need. `Id` is the database's id type (the visual memory's key images
+/// are 32-bit).
+template <class Id = std::size_t>
+class BasicPlaceRanker {
  public:
   using Bow = BowVector;
 
-  PlaceRanker() = default;
-  explicit PlaceRanker(std::shared_ptr<const AnyVocabulary> vocabulary, BowScoring scoring = BowScoring::l1)
+  BasicPlaceRanker() = default;
+  explicit BasicPlaceRanker(std::shared_ptr<const AnyVocabulary> vocabulary, BowScoring scoring = BowScoring::l1)
       : vocabulary_(std::move(vocabulary)),
         database_(vocabulary_ ? vocabulary_->size() : 0, scoring) {
     detail::check(!vocabulary_ || !vocabulary_->empty(), "PlaceRanker: the vocabulary has no words");
+  }
+  /// Over a database already filled (a loaded memory): its ids and vectors are the
+  /// frames indexed so far.
+  BasicPlaceRanker(std::shared_ptr<const AnyVocabulary> vocabulary, PlaceDatabase<Id> database)
+      : vocabulary_(std::move(vocabulary)), database_(std::move(database)) {
+    detail::check(vocabulary_ && !vocabulary_->empty(), "PlaceRanker: the vocabulary has no words");
+    detail::check(database_.words() == vocabulary_->size(), [&] {
+      return "PlaceRanker: the database has " + std::to_string(database_.words()) + " words, the vocabulary " +
+             std::to_string(vocabulary_->size());
+    });
   }
 
   [[nodiscard]] bool ready() const noexcept { return vocabulary_ != nullptr; }
@@ -64,32 +84,60 @@ class PlaceRanker {
   [[nodiscard]] Bow describe(const Features& f) const {
     detail::check(ready(), "PlaceRanker::describe: no vocabulary");
     if (f.descriptors.empty()) return {};
+    detail::check(f.descriptors.type() == vocabulary_->descriptor_type() &&
+                      f.descriptors.cols == vocabulary_->descriptor_cols(),
+                  [&] {
+                    return "PlaceRanker: descriptors of type " + cv::typeToString(f.descriptors.type()) + " x " +
+                           std::to_string(f.descriptors.cols) + " do not fit the vocabulary (" +
+                           cv::typeToString(vocabulary_->descriptor_type()) + " x " +
+                           std::to_string(vocabulary_->descriptor_cols()) + ")";
+                  });
     return vocabulary_->transform(f.descriptors);
   }
 
-  void add(std::size_t frame, const Bow& bow) { database_.add(frame, bow); }
+  void add(std::size_t frame, const Bow& bow) { database_.add(static_cast<Id>(frame), bow); }
 
-  /// The `n` best-scoring indexed frames (among `*only` when given), best first.
-  [[nodiscard]] std::vector<RankedFrame> rank(const Bow& bow, std::size_t n,
-                                              const std::vector<std::size_t>* only) const {
-    QueryFilter<std::size_t> filter;
-    if (only) filter.only = *only;
+  /// The `n` best-scoring indexed frames, best first: among `*only` when given, else
+  /// among those with an id below `below`.
+  [[nodiscard]] std::vector<RankedFrame> rank(const Bow& bow, std::size_t n, const std::vector<std::size_t>* only,
+                                              std::size_t below = static_cast<std::size_t>(-1)) const {
+    QueryFilter<Id> filter;
+    if (only) {
+      filter.only.emplace();
+      for (std::size_t id : *only) filter.only->push_back(static_cast<Id>(id));
+    } else if (below != static_cast<std::size_t>(-1)) {
+      filter.exclude_from = static_cast<Id>(below);
+    }
     std::vector<RankedFrame> out;
-    for (const auto& m : database_.query(bow, n, filter)) out.push_back({m.id, m.score});
+    for (const auto& m : database_.query(bow, n, filter)) out.push_back({static_cast<std::size_t>(m.id), m.score});
     return out;
+  }
+
+  /// The score of `bow` against indexed frame `id` (0 when it is not indexed).
+  [[nodiscard]] double similarity(const Bow& bow, std::size_t id) const {
+    const BowVector* v = database_.bow(static_cast<Id>(id));
+    return v ? bow_score(bow, *v, database_.scoring()) : 0.0;
+  }
+  /// The score of two indexed frames (0 when either is not indexed).
+  [[nodiscard]] double similarity(std::size_t a, std::size_t b) const {
+    const BowVector* v = database_.bow(static_cast<Id>(a));
+    return v ? similarity(*v, b) : 0.0;
   }
 
   /// The inverted file and the stored vectors (the vocabulary is shared, not counted).
   [[nodiscard]] std::size_t memory_bytes() const noexcept { return database_.memory_bytes(); }
 
   [[nodiscard]] const AnyVocabulary* vocabulary() const noexcept { return vocabulary_.get(); }
-  [[nodiscard]] const PlaceDatabase<std::size_t>& database() const noexcept { return database_; }
+  [[nodiscard]] const PlaceDatabase<Id>& database() const noexcept { return database_; }
 
  private:
   std::shared_ptr<const AnyVocabulary> vocabulary_;
-  PlaceDatabase<std::size_t> database_;
+  PlaceDatabase<Id> database_;
 };
 
+using PlaceRanker = BasicPlaceRanker<std::size_t>;
+
 static_assert(PlaceRanking<PlaceRanker>);
+static_assert(PlaceRanking<BasicPlaceRanker<std::uint32_t>>);
 
 }  // namespace vmap

@@ -4,18 +4,20 @@
 // the key-image selector (Algorithm 1 / eq. 6 of García-Pintos et al. 2023, unchanged:
 // keyframe/selector.hpp) keeps key images; each new key image is described by its bag of
 // words (TF-IDF over a vocabulary tree, place/) from the features the selector already
-// extracted, ranked against the earlier key images in an inverted-file database and the
-// best few are verified by the selector's own matcher and F-matrix estimator: a verified
-// one is a loop edge. The key images, the chain of F-matrix links and the loop edges form
-// a graph (neighbours()). localize(image) answers the visual-map paper's localization
-// stage (sec. 1): the key image(s) a query image matches, verified by an F-matrix.
+// extracted and goes to the loop engine (lcd/loop_engine.hpp, the same one LoopDetector
+// uses): the best-ranked earlier key images are verified by the selector's own matcher
+// and estimator, and an accepted place decision (evidence, confidence, revisit rule) is a
+// loop edge. The key images, the chain of F-matrix links and the loop edges form a graph
+// (neighbours()). localize(image) answers the visual-map paper's localization stage
+// (sec. 1) with the engine's decision: the key image the query shows, or "unknown place"
+// with the reason.
 //
 // Object labels (LFM-LCD, Zhu et al., Sensors 2021; DESIGN.md sec. 1.2): frames pushed
 // with detections (any detector, or a file of precomputed ones) make the loop search
 // go through the binary classified tree instead of the whole database: each key
 // image's label vector (eq. 3-4) leads to a leaf, backtracked to m candidates (sec.
 // 3.3), whose key images are ranked by BoW score and the best verified (tree_ranked) or
-// all verified (tree). The schema (label order) is the user's, or eq. 5 over the first
+// all verified (tree), by the same engine. The schema (label order) is the user's, or eq. 5 over the first
 // M key images' detections, fixed from then on; the key images before it are then
 // checked in order, so nothing runs over the whole sequence first and the result is
 // the one a schema known from the start gives. Frames without detections keep the
@@ -28,17 +30,20 @@
 // The whole state saves to one file and loads back; push() after load() continues
 // exactly as the uninterrupted run would (same key images, same loops).
 //
-// Memory file format, version 2 (io/binary.hpp's encoding: little-endian fixed width,
-// f32/f64 as IEEE-754 bit patterns, str = u32 length + bytes). Version 1 is the same
-// without the last three sections (section count 7); it still loads (no labels, no GCS,
+// Memory file format, version 3 (io/binary.hpp's encoding: little-endian fixed width,
+// f32/f64 as IEEE-754 bit patterns, str = u32 length + bytes). Version 2 is the same
+// without the last section (section count 10), version 1 also without "plcy", "labl" and
+// "gcsl" (section count 7); both still load (the loop decision's options at their
+// defaults, the inlier floor the file's min_loop_inliers; version 1: no labels, no GCS,
 // policies unchecked).
-//   header: u8[8] magic "VMAPMEMO", u32 version (2), u32 section count (10)
+//   header: u8[8] magic "VMAPMEMO", u32 version (3), u32 section count (11)
 //   sections, in this order, each { u8[4] tag, u64 length, u32 CRC-32 of the bytes, bytes }:
 //     "opts" options: f64 tau, u8 rule, u8 skip_by_upper_bound, u8 images, i32 jpeg quality,
 //            u64 vocabulary_after, i32 branching, i32 depth, i32 iterations,
-//            u64 max_descriptors, u64 seed, u8 scoring, u64 exclude_recent,
-//            u64 loop_candidates, i32 min_loop_inliers, u64 localize_candidates,
-//            i32 min_localize_inliers
+//            u64 max_descriptors, u64 seed, u8 scoring, u64 window (loops.window),
+//            u64 top k (loops.top_k), i32 min_loop_inliers (loops.decision.min_inliers),
+//            u64 localize_candidates, i32 the same min_inliers again (version 2's
+//            min_localize_inliers)
 //     "keys" u64 frames pushed, u32 key images m, m x { u64 frame index (increasing),
 //            f64 timestamp, str name, features (keyframe/map_io.hpp's layout), image, pose }
 //            image = u8 0 (none) | 1 (PNG) | 2 (JPEG), then i32 rows, i32 cols, i32 type,
@@ -63,8 +68,8 @@
 //            (not recorded, not checked; e.g. network-backed descriptors, whose model
 //            file is not recorded either). load() compares them with the policies it is
 //            given and refuses a difference with an Error naming the policy and both.
-//     "labl" label options: f32 min_score, u64 sample M, f64 min_influence, f64
-//            max_influence, u8 index (CandidateIndex), u64 min_candidates, u32 n + n x i32
+//     "labl" label options: f32 min_score (loops.labels), u64 sample M, f64 min_influence, f64
+//            max_influence, u8 loops.index (CandidateIndex), u64 loops.min_candidates, u32 n + n x i32
 //            the given order; u8 labelled; u8 has schema, if 1: u32 n + n x i32 the schema;
 //            u32 m, m x detections of key image k; detections of the selector's I_{j-1}
 //            (an empty list when "selc" holds none).
@@ -77,6 +82,13 @@
 //            (place/vocabulary.hpp), u64 length + the network (som/gcs.hpp's file, holding
 //            the GcsOptions), u32 n + n x { u32 key image, u64 the neuron it won }: the
 //            pose map is rebuilt exactly from these and the key images' poses (Algorithm 4).
+//     "dcsn" the loop decision: u64 temporal_consistency, u64 temporal_tolerance, f64
+//            min_bow_score, f64 left_ratio, f64 min_confidence, f64 chance_inlier_rate,
+//            f64 half_significance, i32 spread_grid, f64 full_spread, f64 ambiguity_ratio;
+//            the engine's state: u64 queries past the window, u64 of which left a place,
+//            u64 of which were no revisit, the temporal-consistency state (i32
+//            consecutive, u8 has last + u64 last, u64 island begin, u64 island end, u8
+//            accepted); u32 e + e x f64 each loop edge's confidence.
 // Each section is parsed by its own reader, so every error names its section; counts
 // are checked against the bytes that remain before anything is allocated.
 //
@@ -115,7 +127,8 @@
 #include <vmap/lcd/binary_tree.hpp>
 #include <vmap/lcd/influence.hpp>
 #include <vmap/lcd/label_vector.hpp>
-#include <vmap/lcd/loop_detector.hpp>
+#include <vmap/lcd/loop_engine.hpp>
+#include <vmap/lcd/place_ranking.hpp>
 #include <vmap/matching/brute_force.hpp>
 #include <vmap/place/bow.hpp>
 #include <vmap/place/database.hpp>
@@ -140,14 +153,14 @@
 #include <string_view>
 #include <type_traits>
 #include <utility>
+#include <memory>
 #include <variant>
 #include <vector>
 
 namespace vmap {
 
-/// Written by this build; version 1 files (without the plcy, labl and gcsl sections)
-/// still load.
-inline constexpr std::uint32_t memory_format_version = 2;
+/// Written by this build; version 1 and 2 files still load.
+inline constexpr std::uint32_t memory_format_version = 3;
 
 /// How key images' pixels are kept and saved.
 enum class ImageStorage : std::uint8_t {
@@ -168,9 +181,9 @@ inline const OdometryPose no_odometry_pose{};
 
 /// LFM-LCD's label tree inside the memory (Zhu et al., Sensors 2021, sec. 3.2-3.3;
 /// DESIGN.md sec. 1.2), used when the frames are pushed with object detections.
+/// (Eq. 3's score threshold, the candidate source and m of sec. 3.3 are the loop
+/// engine's: MemoryOptions::loops.labels, .index, .min_candidates.)
 struct MemoryLabelOptions {
-  /// Eq. 3: detections scoring below `labels.min_score` (0.5) are not labels.
-  LabelVectorOptions labels{};
   /// The label order, large objects first. Given: it is the schema from the first key
   /// image on, as given (no eq. 5 pruning). Empty: the schema is learned online (below).
   std::vector<int> order{};
@@ -179,14 +192,6 @@ struct MemoryLabelOptions {
   /// then fixed, the tree built and the earlier key images caught up in order (>= 1).
   std::size_t sample = 20;
   InfluenceOptions influence{};
-  /// `tree` (every key image of the leaf verified: the paper) or `tree_ranked` (the
-  /// leaf's key images ranked by BoW score, the best MemoryOptions::loop_candidates
-  /// verified). The other sources are not label sources: bow is the memory without
-  /// detections, brute_force is for evaluation (lcd/loop_detector.hpp).
-  CandidateIndex index = CandidateIndex::tree_ranked;
-  /// m of sec. 3.3: backtrack up the tree until at least this many candidates (5, as
-  /// LoopDetectorOptions::min_candidates).
-  std::size_t min_candidates = 5;
 };
 
 /// The GCS localizer trained on the memory's key images (Trujillo-Romero 2024,
@@ -209,16 +214,14 @@ struct MemoryOptions {
   /// The learned vocabulary's shape (DBoW2-like tree; default 10^3 words, seeded).
   VocabularyTreeOptions vocabulary{};
   BowScoring scoring = BowScoring::l1;
-  /// The key images just before a new one (trivially similar) are not loop candidates.
-  std::size_t exclude_recent = 10;
-  /// Loop detection verifies the best `loop_candidates` key images by BoW score (>= 1).
-  std::size_t loop_candidates = 5;
-  /// A loop edge needs a verified F-matrix with at least this many inliers (>= 8).
-  int min_loop_inliers = 40;
-  /// localize() verifies the best `localize_candidates` key images by BoW score (>= 1).
+  /// The loop engine's options (lcd/loop_engine.hpp): the window of recent key images
+  /// that are not candidates, the top k verified, the decision (confidence threshold),
+  /// the revisit rule. `index` is used with detections (tree or tree_ranked); without,
+  /// the memory ranks every key image by bag of words (bow).
+  LoopOptions loops{};
+  /// localize() verifies the best `localize_candidates` key images by BoW score (>= 1)
+  /// and decides with loops.decision.
   std::size_t localize_candidates = 5;
-  /// A localization answer needs a verified F-matrix with at least this many inliers.
-  int min_localize_inliers = 20;
   /// The label-tree loop detection, used when frames are pushed with detections.
   MemoryLabelOptions labels{};
 };
@@ -232,6 +235,7 @@ struct PlaceLink {
   int matches = 0;                                 ///< raw correspondences
   int inliers = 0;                                 ///< F-matrix inliers
   double similarity = 0.0;                         ///< eq. 5
+  double confidence = 0.0;                         ///< the place decision's (lcd/place_decision.hpp)
 };
 
 /// A loop closure: key image `from` (the newer) revisits key image `link.key`.
@@ -247,34 +251,30 @@ struct MemoryStep {
   std::vector<LoopEdge> loops;           ///< loop edges found in this step
 };
 
-enum class LocalizeStatus : std::uint8_t {
-  localized,     ///< at least one key image verified
-  empty_memory,  ///< no key image yet
-  no_features,   ///< the query has no features
-  not_verified,  ///< candidates were ranked, none passed the F-matrix check
-};
-
-[[nodiscard]] constexpr std::string_view to_string(LocalizeStatus s) noexcept {
-  switch (s) {
-    case LocalizeStatus::localized: return "localized";
-    case LocalizeStatus::empty_memory: return "the memory has no key image";
-    case LocalizeStatus::no_features: return "the query image has no features";
-    case LocalizeStatus::not_verified: return "no candidate passed the F-matrix check";
-  }
-  return "unknown";
-}
-
-/// localize()'s answer: verified key images, most inliers first.
+/// localize()'s answer: the place decision (lcd/loop_engine.hpp) and the verified key
+/// images behind it.
 struct MemoryLocalization {
-  LocalizeStatus status = LocalizeStatus::empty_memory;
+  /// accepted, or why not: unknown place (verified candidates, none confident enough),
+  /// ambiguous (two places equally likely), too little evidence (an empty memory, a
+  /// query without features, no candidate verified).
+  PlaceStatus status = PlaceStatus::too_little_evidence;
+  std::string reason = "the memory has no key image";
+  double confidence = 0.0;   ///< of the best key image, in [0, 1]
+  PlaceEvidence evidence;    ///< of the best key image
+  /// Every verified key image, most confident first (matches.front() is the decision's
+  /// candidate, accepted or not).
   std::vector<PlaceLink> matches;
   std::size_t verified_candidates = 0;  ///< key images the estimator ran on
+  /// The query's pose relative to the best key image (R and the direction of t), when the
+  /// memory's estimator recovers one (EssentialEstimator with a calibrated camera).
+  std::optional<RelativePose> relative_pose;
   /// The GCS position estimate (Algorithm 5 with the one query image), when a GCS was
   /// trained (VisualMemory::train_gcs) and the query has features; independent of the
-  /// F-matrix verification.
+  /// place decision.
   std::optional<Localization> position;
-  [[nodiscard]] bool ok() const noexcept { return status == LocalizeStatus::localized; }
-  [[nodiscard]] const PlaceLink* best() const noexcept { return matches.empty() ? nullptr : &matches.front(); }
+  [[nodiscard]] bool ok() const noexcept { return status == PlaceStatus::accepted; }
+  /// The accepted key image; nullptr unless ok().
+  [[nodiscard]] const PlaceLink* best() const noexcept { return ok() && !matches.empty() ? &matches.front() : nullptr; }
 };
 
 /// A neighbour of a key image in the memory's graph.
@@ -288,7 +288,8 @@ namespace detail {
 
 inline constexpr char memory_magic[8] = {'V', 'M', 'A', 'P', 'M', 'E', 'M', 'O'};
 inline constexpr std::uint32_t memory_sections_v1 = 7;
-inline constexpr std::uint32_t memory_sections = 10;
+inline constexpr std::uint32_t memory_sections_v2 = 10;
+inline constexpr std::uint32_t memory_sections = 11;
 /// Longest policy description a file may hold.
 inline constexpr std::uint32_t memory_max_policy = 4096;
 /// Most detections one key image may have in a file (a detector gives a few hundred).
@@ -535,6 +536,8 @@ template <Descriptor D, Matcher M, Estimator E, Similarity S>
 class VisualMemory {
  public:
   using Selector = KeyframeSelector<D, M, E, S>;
+  /// The loop engine over the key images (32-bit key indices in the place database).
+  using Engine = LoopEngine<M, E, BasicPlaceRanker<std::uint32_t>>;
 
   /// `vocabulary`: a vocabulary for the descriptors' kind (binary / float), or empty to
   /// learn one from the first MemoryOptions::vocabulary_after key images.
@@ -545,9 +548,8 @@ class VisualMemory {
                   detail::memory_policy_record(estimator), detail::memory_policy_record(similarity)},
         selector_(std::move(descriptor), std::move(matcher), std::move(estimator), std::move(similarity),
                   selector_options(options_)),
-        vocabulary_(std::move(vocabulary)),
-        database_(vocabulary_.size(), options_.scoring) {
-    if (!options_.labels.order.empty()) fix_schema(LabelSchema(options_.labels.order));
+        vocabulary_(std::make_shared<const AnyVocabulary>(std::move(vocabulary))) {
+    if (!options_.labels.order.empty()) schema_ = LabelSchema(options_.labels.order);
   }
 
   explicit VisualMemory(const MemoryOptions& options, AnyVocabulary vocabulary = {})
@@ -595,29 +597,57 @@ class VisualMemory {
     return push_frame(bare_frame(image, timestamp), pose, &detections);
   }
 
-  /// The key image(s) `image` matches (visual-map paper, sec. 1): key images ranked by
-  /// BoW score (every key image while no vocabulary exists yet), the best
-  /// `localize_candidates` verified by an F-matrix; those with at least
-  /// `min_localize_inliers` inliers, most inliers first.
-  [[nodiscard]] MemoryLocalization localize(const cv::Mat& image) {
+  /// Where `image` was taken (visual-map paper, sec. 1): key images ranked by BoW score
+  /// (every key image while no vocabulary exists yet), the best `localize_candidates`
+  /// verified, and the loop engine's place decision (loops.decision) over them: the
+  /// key image it shows, or "unknown place" / "ambiguous" / "too little evidence" with the
+  /// reason. `decision` overrides loops.decision for this query (e.g. another
+  /// confidence threshold).
+  [[nodiscard]] MemoryLocalization localize(const cv::Mat& image, const PlaceDecisionOptions* decision = nullptr) {
     detail::check(!image.empty(), "VisualMemory::localize: the query image is empty");
     MemoryLocalization out;
     const VisualMap& map = selector_.map();
     if (map.keys.empty()) return out;
     const Features q = selector_.front_end().descriptor().extract(image);
     if (q.empty()) {
-      out.status = LocalizeStatus::no_features;
+      out.reason = "the query image has no features";
       return out;
     }
-    for (const auto& [key, score] : rank(q.descriptors, options_.localize_candidates, map.keys.size())) {
-      PlaceLink l = verify(key, score, q);
-      ++out.verified_candidates;
-      if (l.status == VerificationStatus::verified && l.inliers >= options_.min_localize_inliers)
-        out.matches.push_back(l);
+    const auto lookup = [&map](std::size_t k) -> const Features& { return map.keys[k].features; };
+    PlaceDecision d;
+    if (engine_) {
+      d = engine_->localize(q, options_.localize_candidates, lookup, std::nullopt, decision);
+    } else {
+      // No vocabulary yet: every key image is verified, by an engine without a ranker.
+      LoopOptions o = options_.loops;
+      o.index = CandidateIndex::brute_force;
+      const Engine all(selector_.front_end().matcher(), selector_.front_end().estimator(), o);
+      d = all.localize(q, options_.localize_candidates, lookup, map.keys.size(), decision);
     }
-    std::stable_sort(out.matches.begin(), out.matches.end(),
-                     [](const PlaceLink& a, const PlaceLink& b) { return a.inliers > b.inliers; });
-    out.status = out.matches.empty() ? LocalizeStatus::not_verified : LocalizeStatus::localized;
+    out.status = d.status;
+    out.reason = d.reason;
+    out.confidence = d.confidence;
+    out.evidence = d.evidence;
+    out.verified_candidates = d.verifications;
+    out.relative_pose = d.verification.relative_pose;
+    std::vector<std::pair<double, PlaceLink>> links;
+    for (const PlaceCandidate& c : d.considered)
+      if (c.stage == CandidateStage::chosen || c.stage == CandidateStage::weaker) {
+        PlaceLink l;
+        l.key = static_cast<std::uint32_t>(c.frame);
+        l.bow_score = std::clamp(c.bow_score, 0.0, 1.0);
+        l.status = VerificationStatus::verified;
+        l.inliers = c.inliers;
+        l.confidence = c.confidence;
+        if (d.best && c.frame == *d.best) {
+          l.fundamental = d.verification.model;
+          l.matches = d.evidence.matches;
+          l.similarity = selector_.front_end().similarity()(q, map.keys[c.frame].features, d.verification);
+        }
+        links.emplace_back(c.stage == CandidateStage::chosen ? 2.0 : c.confidence, l);
+      }
+    std::stable_sort(links.begin(), links.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    for (auto& [rank, l] : links) out.matches.push_back(std::move(l));
     if (gcs_) out.position = gcs_->map.localize({gcs_->histogram(q)});
     return out;
   }
@@ -691,8 +721,19 @@ class VisualMemory {
   [[nodiscard]] const std::vector<LoopEdge>& loops() const noexcept { return loops_; }
   /// Odometry poses of the key images (std::monostate where none was given).
   [[nodiscard]] const std::vector<OdometryPose>& poses() const noexcept { return poses_; }
-  [[nodiscard]] const AnyVocabulary& vocabulary() const noexcept { return vocabulary_; }
-  [[nodiscard]] const PlaceDatabase<std::uint32_t>& database() const noexcept { return database_; }
+  [[nodiscard]] const AnyVocabulary& vocabulary() const noexcept { return *vocabulary_; }
+  /// The key images checked for loops so far, by bag of words (empty before the
+  /// vocabulary, and with detections before the label schema).
+  [[nodiscard]] const PlaceDatabase<std::uint32_t>& database() const noexcept {
+    static const PlaceDatabase<std::uint32_t> none;
+    return engine_ ? engine_->ranker().database() : none;
+  }
+  /// The loop engine once loop detection runs (a vocabulary and, with detections, a
+  /// schema); nullptr before.
+  [[nodiscard]] const Engine* loop_engine() const noexcept { return engine_ ? &*engine_ : nullptr; }
+  /// Whether the camera never left its place (LoopEngine::stationary); false before the
+  /// loop detection runs.
+  [[nodiscard]] bool stationary() const { return engine_ && engine_->stationary(); }
   [[nodiscard]] const MemoryOptions& options() const noexcept { return options_; }
   [[nodiscard]] Selector& selector() noexcept { return selector_; }
   /// Whether the frames come with detections (the label-tree loop detection runs).
@@ -700,9 +741,12 @@ class VisualMemory {
   /// The label schema once fixed (given order, or after MemoryLabelOptions::sample key
   /// images); nullopt before, and in a memory without detections.
   [[nodiscard]] const std::optional<LabelSchema>& label_schema() const noexcept { return schema_; }
-  /// The binary classified tree: the key images older than `exclude_recent` of the
-  /// last one checked for loops, each at the leaf of its label vector.
-  [[nodiscard]] const BinaryClassifiedTree<std::uint32_t>& label_tree() const noexcept { return tree_; }
+  /// The binary classified tree: the key images older than the window of the last one
+  /// checked for loops, each at the leaf of its label vector (empty before the schema).
+  [[nodiscard]] const BinaryClassifiedTree<std::size_t>& label_tree() const noexcept {
+    static const BinaryClassifiedTree<std::size_t> none;
+    return engine_ ? engine_->tree() : none;
+  }
   /// The detections pushed with each key image's frame (empty without detections).
   [[nodiscard]] const std::vector<std::vector<Detection>>& key_detections() const noexcept { return key_detections_; }
   /// What the memory records of its policies (descriptor, matcher, estimator,
@@ -721,21 +765,24 @@ class VisualMemory {
     s.add("loop", loops_bytes());
     s.add("selc", selector_bytes(storage));
     detail::BinaryWriter v;
-    v.u8(vocabulary_.empty() ? 0 : 1);
-    if (!vocabulary_.empty()) {
-      const std::string bytes = vocabulary_.binary() ? vocabulary_.binary()->serialize() : vocabulary_.floating()->serialize();
+    v.u8(vocabulary_->empty() ? 0 : 1);
+    if (!vocabulary_->empty()) {
+      const std::string bytes =
+          vocabulary_->binary() ? vocabulary_->binary()->serialize() : vocabulary_->floating()->serialize();
       v.u64(bytes.size());
       v.bytes(bytes);
     }
     s.add("voca", std::move(v).take());
     detail::BinaryWriter d;
-    const std::string db = database_.serialize();
+    const std::string db =
+        engine_ ? database().serialize() : PlaceDatabase<std::uint32_t>(vocabulary_->size(), options_.scoring).serialize();
     d.u64(db.size());
     d.bytes(db);
     s.add("plcd", std::move(d).take());
     s.add("plcy", policies_bytes());
     s.add("labl", labels_bytes());
     s.add("gcsl", gcs_bytes());
+    s.add("dcsn", decision_bytes());
     detail::BinaryWriter h;
     h.bytes(detail::memory_magic, 8);
     h.u32(memory_format_version);
@@ -761,16 +808,18 @@ class VisualMemory {
     if (file.bytes(8, "magic") != std::string_view(detail::memory_magic, 8))
       file.corrupt("header: not a vmap memory (wrong magic bytes)");
     const std::uint32_t version = file.u32("version");
-    if (version != 1 && version != memory_format_version)
+    if (version < 1 || version > memory_format_version)
       file.corrupt("header: format version " + std::to_string(version) + " is not supported (this build reads 1 to " +
                    std::to_string(memory_format_version) + ")");
-    const std::uint32_t sections = version == 1 ? detail::memory_sections_v1 : detail::memory_sections;
+    const std::uint32_t sections = version == 1   ? detail::memory_sections_v1
+                                   : version == 2 ? detail::memory_sections_v2
+                                                  : detail::memory_sections;
     if (const std::uint32_t n = file.u32("section count"); n != sections)
       file.corrupt("header: " + std::to_string(n) + " sections, expected " + std::to_string(sections) +
                    " in version " + std::to_string(version));
 
     auto opts = detail::memory_open_section(file, "opts");
-    const MemoryOptions options = read_options(opts);
+    const MemoryOptions options = read_options(opts, version);
     VisualMemory mem(std::move(descriptor), std::move(matcher), std::move(estimator), std::move(similarity), options);
 
     SelectorState<Features> state;
@@ -853,22 +902,23 @@ class VisualMemory {
       const std::string_view vb = voc.bytes(len, "vocabulary");
       const std::string vname = voc.source() + " vocabulary";
       if (vb.size() > detail::place_header_size && static_cast<std::uint8_t>(vb[detail::place_header_size]) == 1)
-        mem.vocabulary_ = FloatVocabularyTree::deserialize(vb, vname);
+        mem.vocabulary_ = std::make_shared<const AnyVocabulary>(FloatVocabularyTree::deserialize(vb, vname));
       else
-        mem.vocabulary_ = BinaryVocabularyTree::deserialize(vb, vname);
+        mem.vocabulary_ = std::make_shared<const AnyVocabulary>(BinaryVocabularyTree::deserialize(vb, vname));
     }
     voc.expect_end("the vocabulary");
 
     auto db = detail::memory_open_section(file, "plcd");
     const std::uint64_t dlen = db.u64("database length");
-    mem.database_ = PlaceDatabase<std::uint32_t>::deserialize(db.bytes(dlen, "database"), db.source() + " database");
+    PlaceDatabase<std::uint32_t> database =
+        PlaceDatabase<std::uint32_t>::deserialize(db.bytes(dlen, "database"), db.source() + " database");
     db.expect_end("the database");
 
-    if (mem.database_.scoring() != options.scoring || mem.database_.words() != mem.vocabulary_.size())
+    if (database.scoring() != options.scoring || database.words() != mem.vocabulary_->size())
       detail::fail(db.source() + ": the database does not match the vocabulary or the scoring");
     {
       // The database holds the key images checked for loops: 0 .. n-1, in order.
-      const auto ids = mem.database_.ids();
+      const auto ids = database.ids();
       for (std::size_t i = 0; i < ids.size(); ++i)
         if (ids[i] != i || ids[i] >= m) detail::fail(db.source() + ": image id " + std::to_string(ids[i]) + " is not key image " + std::to_string(i));
     }
@@ -881,7 +931,24 @@ class VisualMemory {
       auto gcsl = detail::memory_open_section(file, "gcsl");
       mem.read_gcs(gcsl, m);
     }
+    EngineState engine_state;
+    if (version >= 3) {
+      auto dcsn = detail::memory_open_section(file, "dcsn");
+      engine_state = mem.read_decision(dcsn, database.size());
+    }
     if (!file.at_end()) file.corrupt(std::to_string(file.remaining()) + " unexpected bytes after the last section");
+    if (!database.empty()) {
+      if (!mem.detecting()) detail::fail(db.source() + ": key images checked for loops without a label schema");
+      mem.start_engine(std::move(database));
+      std::vector<LabelVector> labels;
+      for (std::size_t k = 0; k < mem.engine_->ranker().database().size(); ++k) labels.push_back(mem.label_vector(k));
+      try {
+        mem.engine_->restore(std::move(labels), engine_state.past_window, engine_state.left_queries,
+                             engine_state.not_revisit, engine_state.consistency);
+      } catch (const Error& err) {
+        detail::fail(file.source() + " section 'dcsn': " + err.what());
+      }
+    }
     mem.selector_.restore(std::move(state));
     return mem;
   }
@@ -895,19 +962,17 @@ class VisualMemory {
  private:
   static MemoryOptions checked(MemoryOptions o) {
     detail::check(o.vocabulary_after >= 1, "MemoryOptions.vocabulary_after must be >= 1");
-    detail::check(o.loop_candidates >= 1, "MemoryOptions.loop_candidates must be >= 1");
     detail::check(o.localize_candidates >= 1, "MemoryOptions.localize_candidates must be >= 1");
-    detail::check(o.min_loop_inliers >= 8, "MemoryOptions.min_loop_inliers must be >= 8 (an F-matrix needs 8 points)");
-    detail::check(o.min_localize_inliers >= 8, "MemoryOptions.min_localize_inliers must be >= 8");
+    Engine::check_options(o.loops, "MemoryOptions.loops");
+    detail::check(o.loops.top_k >= 1, "MemoryOptions.loops.top_k must be >= 1");
     detail::check(o.jpeg_quality >= 1 && o.jpeg_quality <= 100, "MemoryOptions.jpeg_quality must be in 1..100, got " +
                                                                     std::to_string(o.jpeg_quality));
     detail::check(o.images <= ImageStorage::jpeg, "MemoryOptions.images is not a known ImageStorage");
     const MemoryLabelOptions& l = o.labels;
-    detail::check_label_min_score(l.labels.min_score);
     detail::check_influence_options(l.influence);
     detail::check(l.sample >= 1, "MemoryOptions.labels.sample must be >= 1");
-    detail::check(l.index == CandidateIndex::tree || l.index == CandidateIndex::tree_ranked,
-                  "MemoryOptions.labels.index must be tree or tree_ranked, got " + std::string(to_string(l.index)));
+    detail::check(uses_labels(o.loops.index), "MemoryOptions.loops.index must be tree or tree_ranked (the source "
+                                              "with detections), got " + std::string(to_string(o.loops.index)));
     try {
       (void)LabelSchema(l.order);
     } catch (const Error& e) {
@@ -941,29 +1006,38 @@ class VisualMemory {
                            "nothing was detected)"));
     }
     // Scores are checked before anything changes, so a bad detection leaves the memory as it was.
-    if (with) (void)present_labels(*detections, options_.labels.labels.min_score);
+    if (with) (void)present_labels(*detections, options_.loops.labels.min_score);
     MemoryStep step;
     step.frame = selector_.push(frame);
     after_push(step, frame.index, pose, detections);
     return step;
   }
 
-  /// Fixes the label schema and sizes the tree for it (nothing is in the tree yet).
-  void fix_schema(LabelSchema schema) {
-    schema_ = std::move(schema);
-    tree_ = BinaryClassifiedTree<std::uint32_t>(schema_->size());
-  }
-
   /// Eq. 5 over the first `sample` key images' detections (label order by mean box area).
   void sample_schema() {
     if (!labelled_ || schema_ || key_detections_.size() < options_.labels.sample) return;
-    LabelStatistics stats(options_.labels.labels);
+    LabelStatistics stats(options_.loops.labels);
     for (std::size_t k = 0; k < options_.labels.sample; ++k) stats.observe(key_detections_[k]);
-    fix_schema(make_label_schema(stats, options_.labels.influence));
+    schema_ = make_label_schema(stats, options_.labels.influence);
   }
 
   /// Loop detection runs once there is a vocabulary and, for labels, a schema.
-  [[nodiscard]] bool detecting() const noexcept { return !vocabulary_.empty() && (!labelled_ || schema_); }
+  [[nodiscard]] bool detecting() const noexcept { return !vocabulary_->empty() && (!labelled_ || schema_); }
+
+  /// Key image k's label vector (eq. 3-4; empty without detections).
+  [[nodiscard]] LabelVector label_vector(std::size_t k) const {
+    return labelled_ ? schema_->vector(key_detections_[k], options_.loops.labels) : LabelVector{};
+  }
+
+  /// The loop engine over the key images, its ranker over `database` (the key images
+  /// checked so far): label sources with detections, bag of words without.
+  void start_engine(PlaceDatabase<std::uint32_t> database) {
+    LoopOptions o = options_.loops;
+    if (!labelled_) o.index = CandidateIndex::bow;
+    engine_.emplace(selector_.front_end().matcher(), selector_.front_end().estimator(), o,
+                    BasicPlaceRanker<std::uint32_t>(vocabulary_, std::move(database)),
+                    labelled_ ? *schema_ : LabelSchema{});
+  }
 
   static SelectorOptions selector_options(const MemoryOptions& o) { return o.selector; }
 
@@ -996,7 +1070,7 @@ class VisualMemory {
   void on_new_key(std::uint32_t key, std::vector<LoopEdge>& found) {
     const auto& keys = selector_.map().keys;
     sample_schema();
-    if (vocabulary_.empty()) {
+    if (vocabulary_->empty()) {
       if (keys.size() < options_.vocabulary_after) return;
       std::vector<cv::Mat> sets;
       for (const auto& k : keys) sets.push_back(k.features.descriptors);
@@ -1005,93 +1079,27 @@ class VisualMemory {
       // Too few descriptors to split into `branching` words (blank frames): try again
       // at the next key image.
       if (rows < static_cast<std::size_t>(std::max(options_.vocabulary.branching, 1))) return;
-      vocabulary_ = AnyVocabulary::learn(sets, options_.vocabulary);
-      database_ = PlaceDatabase<std::uint32_t>(vocabulary_.size(), options_.scoring);
+      vocabulary_ = std::make_shared<const AnyVocabulary>(AnyVocabulary::learn(sets, options_.vocabulary));
     }
     if (!detecting()) return;
-    // The database holds exactly the key images already checked, in order.
-    for (auto k = static_cast<std::uint32_t>(database_.size()); k <= key; ++k) detect_and_add(k, found);
-  }
-
-  void detect_and_add(std::uint32_t key, std::vector<LoopEdge>& found) {
-    const Features& f = selector_.map().keys[key].features;
-    const BowVector bow = transform(f.descriptors);
-    if (labelled_) {
-      detect_by_labels(key, f, bow, found);
-    } else if (key >= options_.exclude_recent + 1 && !database_.empty()) {
-      QueryFilter<std::uint32_t> filter;
-      filter.exclude_from = static_cast<std::uint32_t>(key - options_.exclude_recent);
-      for (const auto& c : database_.query(bow, options_.loop_candidates, filter)) add_if_loop(key, verify(c.id, c.score, f), found);
+    if (!engine_) start_engine(PlaceDatabase<std::uint32_t>(vocabulary_->size(), options_.scoring));
+    // The engine holds exactly the key images already checked, in order.
+    const auto lookup = [&keys](std::size_t k) -> const Features& { return keys[k].features; };
+    for (std::size_t k = engine_->frames(); k <= key; ++k) {
+      const PlaceDecision d = engine_->add(keys[k].features, label_vector(k), lookup);
+      if (!d.accepted()) continue;
+      PlaceLink l;
+      l.key = static_cast<std::uint32_t>(*d.best);
+      l.bow_score = std::clamp(d.evidence.bow_score, 0.0, 1.0);
+      l.status = d.verification.status;
+      l.fundamental = d.verification.model;
+      l.matches = d.evidence.matches;
+      l.inliers = d.evidence.inliers;
+      l.similarity = selector_.front_end().similarity()(keys[k].features, keys[*d.best].features, d.verification);
+      l.confidence = d.confidence;
+      loops_.push_back({static_cast<std::uint32_t>(k), l});
+      found.push_back(loops_.back());
     }
-    database_.add(key, bow);
-  }
-
-  void add_if_loop(std::uint32_t key, const PlaceLink& l, std::vector<LoopEdge>& found) {
-    if (l.status == VerificationStatus::verified && l.inliers >= options_.min_loop_inliers) {
-      loops_.push_back({key, l});
-      found.push_back({key, l});
-    }
-  }
-
-  /// LFM-LCD (sec. 3.3): the key images older than the exclusion window are in the tree
-  /// (inserted in order as they leave it, so the backtracking to m counts only valid
-  /// candidates, as LoopDetector does); the query's leaf, after backtracking, is
-  /// verified whole (tree) or ranked by BoW score and its best verified (tree_ranked).
-  void detect_by_labels(std::uint32_t key, const Features& f, const BowVector& bow, std::vector<LoopEdge>& found) {
-    while (static_cast<std::size_t>(tree_next_) + options_.exclude_recent < key) insert_in_tree(tree_next_++);
-    const LabelVector v = schema_->vector(key_detections_[key], options_.labels.labels);
-    const std::vector<std::uint32_t> leaf = tree_.candidates(v, options_.labels.min_candidates);
-    if (leaf.empty()) return;
-    if (options_.labels.index == CandidateIndex::tree) {
-      for (const std::uint32_t j : leaf) add_if_loop(key, verify(j, 0.0, f), found);
-      return;
-    }
-    QueryFilter<std::uint32_t> filter;
-    filter.only = leaf;
-    for (const auto& c : database_.query(bow, options_.loop_candidates, filter)) add_if_loop(key, verify(c.id, c.score, f), found);
-  }
-
-  void insert_in_tree(std::uint32_t key) { tree_.insert(schema_->vector(key_detections_[key], options_.labels.labels), key); }
-
-  BowVector transform(const cv::Mat& descriptors) const {
-    if (descriptors.empty()) return {};
-    detail::check(
-        descriptors.type() == vocabulary_.descriptor_type() && descriptors.cols == vocabulary_.descriptor_cols(), [&] {
-          return "VisualMemory: descriptors of type " + cv::typeToString(descriptors.type()) + " x " +
-                 std::to_string(descriptors.cols) + " do not fit the vocabulary (" +
-                 cv::typeToString(vocabulary_.descriptor_type()) + " x " +
-                 std::to_string(vocabulary_.descriptor_cols()) + ")";
-        });
-    return vocabulary_.transform(descriptors);
-  }
-
-  /// Candidate key images for a query: by BoW score, or all (score 0) without a vocabulary.
-  std::vector<std::pair<std::uint32_t, double>> rank(const cv::Mat& descriptors, std::size_t top,
-                                                     std::size_t keys) const {
-    std::vector<std::pair<std::uint32_t, double>> out;
-    if (vocabulary_.empty()) {
-      for (std::size_t k = 0; k < keys; ++k) out.emplace_back(static_cast<std::uint32_t>(k), 0.0);
-      return out;
-    }
-    for (const auto& c : database_.query(transform(descriptors), top)) out.emplace_back(c.id, c.score);
-    return out;
-  }
-
-  /// Matches and verifies key image `key` against `query` with the selector's own
-  /// matcher, estimator and similarity (no second extraction).
-  PlaceLink verify(std::uint32_t key, double bow_score, const Features& query) {
-    const PairScore s = selector_.front_end().score(selector_.map().keys[key].features, query, 0.0);
-    PlaceLink l;
-    l.key = key;
-    l.bow_score = std::clamp(bow_score, 0.0, 1.0);
-    l.status = s.verification.status;
-    l.matches = s.raw_matches;
-    if (s.verification.ok()) {
-      l.fundamental = s.verification.model;
-      l.inliers = s.verification.inliers;
-      l.similarity = s.similarity;
-    }
-    return l;
   }
 
   // ---- file sections ------------------------------------------------------------
@@ -1111,15 +1119,15 @@ class VisualMemory {
     w.u64(o.vocabulary.max_descriptors);
     w.u64(o.vocabulary.seed);
     w.u8(static_cast<std::uint8_t>(o.scoring));
-    w.u64(o.exclude_recent);
-    w.u64(o.loop_candidates);
-    w.i32(o.min_loop_inliers);
+    w.u64(o.loops.window);
+    w.u64(o.loops.top_k);
+    w.i32(o.loops.decision.min_inliers);
     w.u64(o.localize_candidates);
-    w.i32(o.min_localize_inliers);
+    w.i32(o.loops.decision.min_inliers);
     return std::move(w).take();
   }
 
-  static MemoryOptions read_options(detail::BinaryReader& r) {
+  static MemoryOptions read_options(detail::BinaryReader& r, std::uint32_t version) {
     MemoryOptions o;
     o.selector.tau = r.f64("tau");
     const std::uint8_t rule = r.u8("key rule");
@@ -1141,11 +1149,13 @@ class VisualMemory {
     const std::uint8_t scoring = r.u8("scoring");
     if (scoring > 2) r.corrupt("unknown scoring " + std::to_string(scoring));
     o.scoring = static_cast<BowScoring>(scoring);
-    o.exclude_recent = static_cast<std::size_t>(r.u64("exclude_recent"));
-    o.loop_candidates = static_cast<std::size_t>(r.u64("loop_candidates"));
-    o.min_loop_inliers = r.i32("min_loop_inliers");
+    o.loops.window = static_cast<std::size_t>(r.u64("window"));
+    o.loops.top_k = static_cast<std::size_t>(r.u64("top k"));
+    o.loops.decision.min_inliers = r.i32("min_loop_inliers");
     o.localize_candidates = static_cast<std::size_t>(r.u64("localize_candidates"));
-    o.min_localize_inliers = r.i32("min_localize_inliers");
+    // Version 2 had a separate floor for localization; version 3 one floor for both.
+    if (const int again = r.i32("min_localize_inliers"); version >= 3 && again != o.loops.decision.min_inliers)
+      r.corrupt("the two inlier floors differ");
     r.expect_end("the options");
     if (!(std::isfinite(o.selector.tau) && o.selector.tau > 0.0 && o.selector.tau <= 1.0)) r.corrupt("tau outside (0, 1]");
     try {
@@ -1264,12 +1274,12 @@ class VisualMemory {
   std::string labels_bytes() const {
     const MemoryLabelOptions& o = options_.labels;
     detail::BinaryWriter w;
-    w.f32(o.labels.min_score);
+    w.f32(options_.loops.labels.min_score);
     w.u64(o.sample);
     w.f64(o.influence.min_influence);
     w.f64(o.influence.max_influence);
-    w.u8(static_cast<std::uint8_t>(o.index));
-    w.u64(o.min_candidates);
+    w.u8(static_cast<std::uint8_t>(options_.loops.index));
+    w.u64(options_.loops.min_candidates);
     const auto write_labels = [&](const std::vector<int>& labels) {
       w.u32(static_cast<std::uint32_t>(labels.size()));
       for (const int l : labels) w.i32(l);
@@ -1288,18 +1298,19 @@ class VisualMemory {
     return std::move(w).take();
   }
 
-  /// Reads "labl" and rebuilds the tree exactly: the key images checked so far (the
-  /// database's) less the exclusion window, inserted in order as the run inserted them.
+  /// Reads "labl" (the tree is rebuilt by the engine from the schema and the key images'
+  /// detections: LoopEngine::restore).
   void read_labels(detail::BinaryReader& r, const MemoryOptions& file_options, std::uint32_t m, bool has_previous) {
     MemoryLabelOptions o;
-    o.labels.min_score = r.f32("label min_score");
+    MemoryOptions all = file_options;
+    all.loops.labels.min_score = r.f32("label min_score");
     o.sample = static_cast<std::size_t>(r.u64("label sample"));
     o.influence.min_influence = r.f64("min_influence");
     o.influence.max_influence = r.f64("max_influence");
     const std::uint8_t index = r.u8("label candidate source");
     if (index > static_cast<std::uint8_t>(CandidateIndex::brute_force)) r.corrupt("unknown candidate source");
-    o.index = static_cast<CandidateIndex>(index);
-    o.min_candidates = static_cast<std::size_t>(r.u64("min_candidates"));
+    all.loops.index = static_cast<CandidateIndex>(index);
+    all.loops.min_candidates = static_cast<std::size_t>(r.u64("min_candidates"));
     const auto read_labels = [&](const char* what) {
       const std::uint32_t n = r.u32(what);
       r.require_items(n, 4, what);
@@ -1308,11 +1319,10 @@ class VisualMemory {
       return labels;
     };
     o.order = read_labels("label order");
-    MemoryOptions all = file_options;
     all.labels = o;
     try {
       options_ = checked(all);
-      if (!o.order.empty()) fix_schema(LabelSchema(o.order));
+      if (!o.order.empty()) schema_ = LabelSchema(o.order);
       else schema_.reset();
     } catch (const Error& e) {
       r.corrupt(e.what());
@@ -1326,7 +1336,7 @@ class VisualMemory {
       std::vector<int> labels = read_labels("schema label count");
       if (!o.order.empty() && labels != o.order) r.corrupt("the schema is not the given label order");
       try {
-        fix_schema(LabelSchema(std::move(labels)));
+        schema_ = LabelSchema(std::move(labels));
       } catch (const Error& e) {
         r.corrupt(e.what());
       }
@@ -1349,17 +1359,102 @@ class VisualMemory {
     if (!has_previous) previous_detections_.clear();
     if (schema_ && o.order.empty() && (!labelled_ || m < o.sample)) r.corrupt("a schema before its sample");
     if (labelled_ && o.order.empty() && !schema_ && m >= o.sample) r.corrupt("no schema after the sample");
-    const std::size_t checked_keys = database_.size();
-    if (labelled_ && !schema_ && checked_keys > 0) r.corrupt("key images checked for loops without a schema");
-    if (labelled_ && checked_keys > 0) {
-      const std::size_t last = checked_keys - 1;
-      tree_next_ = last > options_.exclude_recent ? static_cast<std::uint32_t>(last - options_.exclude_recent) : 0;
-      try {
-        for (std::uint32_t k = 0; k < tree_next_; ++k) insert_in_tree(k);
-      } catch (const Error& e) {
-        r.corrupt(e.what());
-      }
+  }
+
+  /// What "dcsn" restores of the loop engine.
+  struct EngineState {
+    std::size_t past_window = 0;
+    std::size_t left_queries = 0;
+    std::size_t not_revisit = 0;
+    ConsistencyState<std::size_t> consistency{};
+  };
+
+  std::string decision_bytes() const {
+    const LoopOptions& o = options_.loops;
+    detail::BinaryWriter w;
+    w.u64(o.temporal_consistency);
+    w.u64(o.temporal_tolerance);
+    w.f64(o.min_bow_score);
+    w.f64(o.left_ratio);
+    w.f64(o.decision.min_confidence);
+    w.f64(o.decision.chance_inlier_rate);
+    w.f64(o.decision.half_significance);
+    w.i32(o.decision.spread_grid);
+    w.f64(o.decision.full_spread);
+    w.f64(o.decision.ambiguity_ratio);
+    w.u64(engine_ ? engine_->queries_past_window() : 0);
+    w.u64(engine_ ? engine_->left_queries() : 0);
+    w.u64(engine_ ? engine_->not_a_revisit_queries() : 0);
+    // Field by field from the engine (GCC 12 at -O2 reports a copy of the state's
+    // std::optional as possibly uninitialised).
+    const bool has_state = engine_.has_value();
+    const ConsistencyState<std::size_t> none{};
+    const ConsistencyState<std::size_t>& c = has_state ? engine_->consistency() : none;
+    std::uint64_t last = 0;
+    if (c.last.has_value()) last = *c.last;
+    w.i32(c.consecutive);
+    w.u8(c.last.has_value() ? 1 : 0);
+    w.u64(last);
+    w.u64(c.island_begin);
+    w.u64(c.island_end);
+    w.u8(c.accepted ? 1 : 0);
+    w.u32(static_cast<std::uint32_t>(loops_.size()));
+    for (const LoopEdge& e : loops_) w.f64(e.link.confidence);
+    return std::move(w).take();
+  }
+
+  /// Reads "dcsn": the decision's options (checked with the rest), the engine's state and
+  /// the loop edges' confidences; `checked_keys` is the number of key images the
+  /// database holds.
+  EngineState read_decision(detail::BinaryReader& r, std::size_t checked_keys) {
+    MemoryOptions all = options_;
+    LoopOptions& o = all.loops;
+    o.temporal_consistency = static_cast<std::size_t>(r.u64("temporal_consistency"));
+    o.temporal_tolerance = static_cast<std::size_t>(r.u64("temporal_tolerance"));
+    o.min_bow_score = r.f64("min_bow_score");
+    o.left_ratio = r.f64("left_ratio");
+    o.decision.min_confidence = r.f64("min_confidence");
+    o.decision.chance_inlier_rate = r.f64("chance_inlier_rate");
+    o.decision.half_significance = r.f64("half_significance");
+    o.decision.spread_grid = r.i32("spread_grid");
+    o.decision.full_spread = r.f64("full_spread");
+    o.decision.ambiguity_ratio = r.f64("ambiguity_ratio");
+    if (o.temporal_consistency > 1000) r.corrupt("temporal_consistency above 1000");
+    try {
+      options_ = checked(all);
+    } catch (const Error& e) {
+      r.corrupt(e.what());
     }
+    EngineState s;
+    s.past_window = static_cast<std::size_t>(r.u64("queries past the window"));
+    s.left_queries = static_cast<std::size_t>(r.u64("queries that left"));
+    s.not_revisit = static_cast<std::size_t>(r.u64("queries not revisits"));
+    if (s.past_window > checked_keys || s.left_queries + s.not_revisit > s.past_window)
+      r.corrupt("query counts do not fit the key images checked");
+    s.consistency.consecutive = r.i32("consistent queries");
+    const std::uint8_t has_last = r.u8("consistency flag");
+    if (has_last > 1) r.corrupt("consistency flag is not 0 or 1");
+    const std::uint64_t last = r.u64("consistency last");
+    if (has_last == 1) s.consistency.last = static_cast<std::size_t>(last);
+    s.consistency.island_begin = static_cast<std::size_t>(r.u64("island begin"));
+    s.consistency.island_end = static_cast<std::size_t>(r.u64("island end"));
+    const std::uint8_t accepted = r.u8("consistency accepted");
+    if (accepted > 1) r.corrupt("consistency accepted flag is not 0 or 1");
+    s.consistency.accepted = accepted == 1;
+    if (s.consistency.consecutive < 0 || static_cast<std::size_t>(s.consistency.consecutive) > checked_keys ||
+        s.consistency.island_begin > s.consistency.island_end || s.consistency.island_end > checked_keys ||
+        (s.consistency.last && *s.consistency.last >= checked_keys))
+      r.corrupt("invalid temporal-consistency state");
+    const std::uint32_t e = r.u32("loop edge count");
+    if (e != loops_.size())
+      r.corrupt(std::to_string(e) + " confidences for " + std::to_string(loops_.size()) + " loop edges");
+    r.require_items(e, 8, "loop edge count");
+    for (LoopEdge& edge : loops_) {
+      edge.link.confidence = r.f64("loop confidence");
+      if (!(edge.link.confidence >= 0.0 && edge.link.confidence <= 1.0)) r.corrupt("a loop confidence outside [0, 1]");
+    }
+    r.expect_end("the decision");
+    return s;
   }
 
   std::string gcs_bytes() const {
@@ -1465,8 +1560,8 @@ class VisualMemory {
   MemoryOptions options_;
   std::array<std::string, 4> policies_;  ///< detail::memory_policy_record of each policy
   Selector selector_;
-  AnyVocabulary vocabulary_;
-  PlaceDatabase<std::uint32_t> database_;
+  std::shared_ptr<const AnyVocabulary> vocabulary_;  ///< never null (empty before one is learned)
+  std::optional<Engine> engine_;                     ///< once loop detection runs (detecting())
   std::vector<LoopEdge> loops_;
   std::vector<OdometryPose> poses_;  ///< per key image
   OdometryPose previous_pose_;       ///< of the last pushed frame (eq. 6's I_{j-1})
@@ -1475,8 +1570,6 @@ class VisualMemory {
   std::vector<std::vector<Detection>> key_detections_;  ///< per key image
   std::vector<Detection> previous_detections_;          ///< of the last pushed frame
   std::optional<LabelSchema> schema_;
-  BinaryClassifiedTree<std::uint32_t> tree_;
-  std::uint32_t tree_next_ = 0;  ///< key images [0, tree_next_) are in the tree
   std::optional<GcsPart> gcs_;
 };
 

@@ -22,7 +22,7 @@
 #include <vector>
 
 using vmap::Detection;
-using vmap::LoopStatus;
+using vmap::PlaceStatus;
 
 namespace {
 
@@ -55,13 +55,17 @@ class ScriptedRanker {
     CHECK(id == bow);  // the detector adds frame j with the bag of words it described for j
     indexed_.push_back(id);
   }
-  [[nodiscard]] std::vector<vmap::RankedFrame> rank(Bow query, std::size_t n, const std::vector<std::size_t>* only) const {
+  [[nodiscard]] std::vector<vmap::RankedFrame> rank(Bow query, std::size_t n, const std::vector<std::size_t>* only,
+                                                    std::size_t below = static_cast<std::size_t>(-1)) const {
     std::vector<vmap::RankedFrame> out;
-    for (std::size_t id : only ? *only : indexed_) out.push_back({id, score_(query, id)});
+    for (std::size_t id : only ? *only : indexed_)
+      if (only || id < below) out.push_back({id, score_(query, id)});
     std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.score > b.score; });
     if (out.size() > n) out.resize(n);
     return out;
   }
+  // The bag of words is the frame index, so one overload scores a query and two frames alike.
+  [[nodiscard]] double similarity(std::size_t a, std::size_t b) const { return score_(a, b); }
   [[nodiscard]] std::size_t memory_bytes() const { return indexed_.size() * sizeof(std::size_t); }
   [[nodiscard]] const std::vector<std::size_t>& indexed() const { return indexed_; }
 
@@ -81,7 +85,7 @@ using TestDetector =
 TestDetector make_detector(vmap::CandidateIndex index, ScriptedRanker ranker = {}, std::size_t top_k = 3) {
   return TestDetector(vmap::LabelSchema({10, 11, 12, 13}), vmap::OrbDescriptor({.features = 500}),
                       vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}),
-                      {.window = 3, .min_candidates = 1, .min_inliers = 40, .index = index, .top_k = top_k},
+                      {.window = 3, .min_candidates = 1, .index = index, .top_k = top_k, .decision = {.min_inliers = 40}},
                       std::move(ranker));
 }
 
@@ -97,11 +101,12 @@ TEST_CASE("loop detector: two laps with a scripted detector find exactly the kno
     const vmap::LoopResult r = tree.push(img, scripted);
     const vmap::LoopResult b = brute.push(img, scripted_labels(k));
     CAPTURE(k);
-    CAPTURE(r.inliers);
+    CAPTURE(r.evidence.inliers);
     CHECK(r.frame == static_cast<std::size_t>(k));
     brute_verifications += b.verifications;
     if (k <= 3) {  // nothing outside the window yet
-      CHECK(r.status == LoopStatus::no_candidates);
+      CHECK(r.status == PlaceStatus::too_little_evidence);
+      CHECK(r.reason == "no candidates");
       CHECK(r.candidates == 0);
       continue;
     }
@@ -114,7 +119,7 @@ TEST_CASE("loop detector: two laps with a scripted detector find exactly the kno
       // Second lap: the leaf holds exactly the first visit of the place.
       CHECK(r.candidates == 1);
       CHECK(r.verifications == 1);
-      CHECK(r.status == LoopStatus::loop_found);
+      CHECK(r.status == PlaceStatus::accepted);
       REQUIRE(r.best.has_value());
       CHECK(*r.best == static_cast<std::size_t>(k - places));
       CHECK(r.labels == tree.schema().vector(scripted_labels(k)));
@@ -140,8 +145,8 @@ TEST_CASE("loop detector: tree_ranked and bow verify only the top k, and say whe
     const vmap::LoopResult w = bow.push(img, scripted_labels(k));
     CAPTURE(k);
     if (k <= 3) {
-      CHECK(t.status == LoopStatus::no_candidates);
-      CHECK(w.status == LoopStatus::no_candidates);
+      CHECK(t.status == PlaceStatus::too_little_evidence);
+      CHECK(w.reason == "no candidates");
       CHECK(w.verifications == 0);
       continue;
     }
@@ -155,10 +160,10 @@ TEST_CASE("loop detector: tree_ranked and bow verify only the top k, and say whe
     CHECK(t.not_in_top_k == t.candidates - 1);
     if (k >= places) {
       for (const vmap::LoopResult& r : {t, w}) {
-        CHECK(r.status == LoopStatus::loop_found);
+        CHECK(r.status == PlaceStatus::accepted);
         REQUIRE(r.best.has_value());
         CHECK(*r.best == static_cast<std::size_t>(k - places));
-        CHECK(r.bow_score == 1.0);
+        CHECK(r.evidence.bow_score == 1.0);
         CHECK(r.considered.front().frame == *r.best);  // the best-ranked comes first
         CHECK(r.considered.front().stage == vmap::CandidateStage::chosen);
       }
@@ -167,16 +172,16 @@ TEST_CASE("loop detector: tree_ranked and bow verify only the top k, and say whe
       CHECK_FALSE(t.loop());
     }
   }
-  // The ranker holds exactly the frames older than the window.
-  CHECK(bow.ranker().indexed().size() == 2 * places - 4);
+  // The ranker holds every frame; the window only filters the candidates.
+  CHECK(bow.ranker().indexed().size() == 2 * places);
   CHECK(bow.verifications() < 2 * 2 * places);
 }
 
 TEST_CASE("loop detector: a minimum bag-of-words score stops candidates before verification") {
   auto d = TestDetector(vmap::LabelSchema{}, vmap::OrbDescriptor({.features = 500}), vmap::BruteForceMatcher{},
                         vmap::FundamentalEstimator({.seed = 7}),
-                        {.window = 3, .min_inliers = 40, .index = vmap::CandidateIndex::bow, .top_k = 2,
-                         .min_bow_score = 0.5},
+                        {.window = 3, .index = vmap::CandidateIndex::bow, .top_k = 2, .min_bow_score = 0.5,
+                         .decision = {.min_inliers = 40}},
                         ScriptedRanker(place_score));
   for (int k = 0; k < 2 * places; ++k) {
     const vmap::LoopResult r = d.push(lap_frame(k), std::vector<Detection>{});
@@ -184,7 +189,8 @@ TEST_CASE("loop detector: a minimum bag-of-words score stops candidates before v
     if (k <= 3) continue;
     if (k < places) {
       // Every older frame is another place (score 0.1): nothing is verified.
-      CHECK(r.status == LoopStatus::below_bow_score);
+      CHECK(r.status == PlaceStatus::too_little_evidence);
+      CHECK(r.reason == "every candidate below the bag-of-words score");
       CHECK(r.verifications == 0);
       CHECK(r.below_bow_score == std::min<std::size_t>(2, r.candidates));
       for (const auto& c : r.considered) CHECK(c.stage == vmap::CandidateStage::below_bow_score);
@@ -194,15 +200,14 @@ TEST_CASE("loop detector: a minimum bag-of-words score stops candidates before v
       CHECK(r.below_bow_score == 1);
     }
   }
-  CHECK(vmap::to_string(LoopStatus::below_bow_score) == "candidates, all below the bag-of-words score");
   CHECK(vmap::to_string(vmap::CandidateStage::not_in_top_k) == "not in top k");
 }
 
 TEST_CASE("loop detector: temporal consistency holds a loop until k earlier frames agree on the place") {
   auto d = TestDetector(vmap::LabelSchema{}, vmap::OrbDescriptor({.features = 500}), vmap::BruteForceMatcher{},
                         vmap::FundamentalEstimator({.seed = 7}),
-                        {.window = 3, .min_inliers = 40, .index = vmap::CandidateIndex::bow, .top_k = 1,
-                         .temporal_consistency = 2, .temporal_tolerance = 1},
+                        {.window = 3, .index = vmap::CandidateIndex::bow, .top_k = 1, .temporal_consistency = 2,
+                         .temporal_tolerance = 1, .decision = {.min_inliers = 40}},
                         ScriptedRanker(place_score));
   for (int k = 0; k < 2 * places; ++k) {
     const vmap::LoopResult r = d.push(lap_frame(k), std::vector<Detection>{});
@@ -216,7 +221,8 @@ TEST_CASE("loop detector: temporal consistency holds a loop until k earlier fram
     // Every frame of the revisit extends the island; its first two frames have fewer
     // than two consistent predecessors.
     CHECK(r.consistent_queries == static_cast<std::size_t>(k - places));
-    CHECK(r.status == (k - places >= 2 ? LoopStatus::loop_found : LoopStatus::not_consistent));
+    CHECK(r.status == (k - places >= 2 ? PlaceStatus::accepted : PlaceStatus::too_little_evidence));
+    if (k - places < 2) CHECK(r.reason.rfind("not yet confirmed", 0) == 0);
   }
 }
 
@@ -231,7 +237,8 @@ TEST_CASE("loop detector: pre-extracted features give the same results as the de
     CAPTURE(k);
     CHECK(a.status == b.status);
     CHECK(a.best == b.best);
-    CHECK(a.inliers == b.inliers);
+    CHECK(a.evidence.inliers == b.evidence.inliers);
+    CHECK(a.confidence == b.confidence);
     CHECK(a.candidates == b.candidates);
     CHECK(a.verifications == b.verifications);
     CHECK(a.labels == b.labels);
@@ -240,41 +247,14 @@ TEST_CASE("loop detector: pre-extracted features give the same results as the de
   CHECK(added.memory_bytes() > 0);
 }
 
-// A similarity that halves the inlier ratio: the threshold sees the policy's value.
-struct HalfRatio {
-  [[nodiscard]] double operator()(const vmap::Features& a, const vmap::Features& b, const vmap::Verification& v) const {
-    return 0.5 * vmap::InlierRatio{}(a, b, v);
-  }
-  [[nodiscard]] double upper_bound(const vmap::Features& a, const vmap::Features& b, int raw) const {
-    return 0.5 * vmap::InlierRatio{}.upper_bound(a, b, raw);
-  }
-};
-
-TEST_CASE("loop detector: the Similarity policy is the one given") {
-  const vmap::LoopDetectorOptions o{.window = 3, .min_candidates = 1, .min_inliers = 0, .index = vmap::CandidateIndex::tree};
-  vmap::LoopDetector<vmap::OrbDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator, ScriptedRanker> eq5(
-      vmap::LabelSchema({10, 11, 12, 13}), vmap::OrbDescriptor({.features = 500}), vmap::BruteForceMatcher{},
-      vmap::FundamentalEstimator({.seed = 7}), o);
-  vmap::LoopDetector<vmap::OrbDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator, ScriptedRanker,
-                     HalfRatio>
-      half(vmap::LabelSchema({10, 11, 12, 13}), vmap::OrbDescriptor({.features = 500}), vmap::BruteForceMatcher{},
-           vmap::FundamentalEstimator({.seed = 7}), o);
-  for (int k = 0; k < places + 1; ++k) {
-    const vmap::LoopResult a = eq5.push(lap_frame(k), scripted_labels(k));
-    const vmap::LoopResult b = half.push(lap_frame(k), scripted_labels(k));
-    if (k < places) continue;
-    REQUIRE(a.loop());
-    CHECK(a.similarity > 0.05);
-    CHECK(b.similarity == doctest::Approx(0.5 * a.similarity));
-  }
-}
-
 TEST_CASE("loop detector: bad options and inputs are an Error; status strings print") {
   const auto make = [](const vmap::LoopDetectorOptions& o, ScriptedRanker r = {}) {
     return TestDetector(vmap::LabelSchema({1}), vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
                         vmap::FundamentalEstimator{}, o, std::move(r));
   };
-  CHECK_THROWS_AS(make({.min_inliers = -1, .index = vmap::CandidateIndex::tree}), vmap::Error);
+  CHECK_THROWS_AS(make({.index = vmap::CandidateIndex::tree, .decision = {.min_inliers = -1}}), vmap::Error);
+  CHECK_THROWS_AS(make({.index = vmap::CandidateIndex::tree, .decision = {.min_confidence = 1.5}}), vmap::Error);
+  CHECK_THROWS_AS(make({.index = vmap::CandidateIndex::tree, .left_ratio = -0.1}), vmap::Error);
   CHECK_THROWS_AS(make({.labels = {.min_score = 1.5f}, .index = vmap::CandidateIndex::tree}), vmap::Error);
   CHECK_THROWS_AS(make({.index = vmap::CandidateIndex::tree, .min_bow_score = -1}), vmap::Error);
   // A ranked source without a vocabulary, or with top_k 0.
@@ -285,8 +265,8 @@ TEST_CASE("loop detector: bad options and inputs are an Error; status strings pr
   CHECK_THROWS_AS((void)d.push(cv::Mat(), std::vector<Detection>{}), vmap::Error);
   CHECK_THROWS_AS((void)d.push(place_image(0), {{1, std::numeric_limits<float>::quiet_NaN(), cv::Rect2f()}}),
                   vmap::Error);
-  CHECK(vmap::to_string(LoopStatus::below_threshold) == "candidates, too few inliers");
-  CHECK(vmap::to_string(LoopStatus::loop_found) == "loop found");
+
+  CHECK(vmap::to_string(PlaceStatus::accepted) == "accepted");
   CHECK(vmap::to_string(vmap::CandidateIndex::tree_ranked) == "tree_ranked");
 }
 
@@ -308,9 +288,9 @@ TEST_SUITE("data") {
       last = d.push(img, std::vector<Detection>{});
     }
     CHECK(last.verifications == 5);
-    CHECK(last.status == LoopStatus::loop_found);
+    CHECK(last.status == PlaceStatus::accepted);
     REQUIRE(last.best.has_value());
-    CAPTURE(last.inliers);
+    CAPTURE(last.evidence.inliers);
     CHECK(gt(41, frames[*last.best]));
   }
 }

@@ -56,8 +56,8 @@ vmap::MemoryOptions small_options(vmap::ImageStorage images = vmap::ImageStorage
   o.images = images;
   o.vocabulary_after = 3;
   o.vocabulary = {.branching = 8, .depth = 2, .seed = 5};
-  o.exclude_recent = 2;
-  o.min_loop_inliers = 30;
+  o.loops.window = 2;
+  o.loops.decision.min_inliers = 30;
   return o;
 }
 
@@ -150,8 +150,9 @@ TEST_CASE("memory: key images are the selector's, with links, poses and the grap
   CHECK(n1[0].key == 0);
   CHECK(n1[1].key == 2);
   for (const auto& e : mem.loops()) {
-    CHECK(e.link.key + 2 <= e.from);  // exclude_recent = 2
+    CHECK(e.link.key + 2 < e.from);  // window = 2
     CHECK(e.link.inliers >= 30);
+    CHECK(e.link.confidence >= 0.5);
     CHECK(e.link.status == vmap::VerificationStatus::verified);
     bool found = false;
     for (const auto& n : mem.neighbours(e.link.key))
@@ -162,7 +163,7 @@ TEST_CASE("memory: key images are the selector's, with links, poses and the grap
                        vmap::Error);
 }
 
-TEST_CASE("memory: localize answers the key image a held-out frame shows, verified") {
+TEST_CASE("memory: localize answers the key image a held-out frame shows, with the place decision") {
   const auto& all = sample_frames();
   std::vector<vmap::Frame> kept, held;
   for (std::size_t i = 0; i < all.size(); ++i) (i % 10 == 5 ? held : kept).push_back(all[i]);
@@ -174,8 +175,12 @@ TEST_CASE("memory: localize answers the key image a held-out frame shows, verifi
     if (!loc.ok()) continue;
     const auto& best = *loc.best();
     CHECK(best.status == vmap::VerificationStatus::verified);
-    CHECK(best.inliers >= 20);
+    CHECK(best.inliers >= 12);
     CHECK(best.inliers <= best.matches);
+    CHECK(loc.confidence >= 0.5);
+    CHECK(best.confidence == loc.confidence);
+    CHECK(loc.evidence.inliers == best.inliers);
+    CHECK(loc.reason.rfind("confidence", 0) == 0);
     CHECK(loc.verified_candidates <= 5);
     const auto key_frame = mem.map().keys[best.key].frame_index;
     if ((key_frame > f.index ? key_frame - f.index : f.index - key_frame) <= 15) ++near;
@@ -186,12 +191,26 @@ TEST_CASE("memory: localize answers the key image a held-out frame shows, verifi
   REQUIRE(self.ok());
   CHECK(self.best()->key == 1);
   CHECK(self.best()->inliers > 500);
+  CHECK(self.confidence > 0.99);
+  // A stricter threshold for one query: the same evidence, now short of it.
+  vmap::PlaceDecisionOptions strict;
+  strict.half_significance = 1e6;  // the same evidence weighs almost nothing
+  const auto refused = mem.localize(all[mem.map().keys[1].frame_index].image, &strict);
+  CHECK(refused.status == vmap::PlaceStatus::unknown_place);
+  CHECK(refused.best() == nullptr);
+  CHECK(refused.confidence < 0.5);
+  CHECK(refused.evidence.inliers == self.evidence.inliers);
+  CHECK(refused.reason.find("< 0.50") != std::string::npos);
   // A blank image has no features: a value, not an error; an empty one is an error.
-  CHECK(mem.localize(cv::Mat(480, 640, CV_8UC1, cv::Scalar(128))).status == vmap::LocalizeStatus::no_features);
+  const auto blank = mem.localize(cv::Mat(480, 640, CV_8UC1, cv::Scalar(128)));
+  CHECK(blank.status == vmap::PlaceStatus::too_little_evidence);
+  CHECK(blank.reason == "the query image has no features");
   CHECK_THROWS_AS((void)mem.localize(cv::Mat()), vmap::Error);
   // An empty memory answers so.
   auto empty = make_memory(small_options());
-  CHECK(empty.localize(all[0].image).status == vmap::LocalizeStatus::empty_memory);
+  const auto none = empty.localize(all[0].image);
+  CHECK(none.status == vmap::PlaceStatus::too_little_evidence);
+  CHECK(none.reason == "the memory has no key image");
 }
 
 TEST_CASE("memory: save, load and push continue exactly where an uninterrupted run would") {
@@ -249,10 +268,12 @@ TEST_CASE("memory: invalid options are errors naming the option") {
     return vmap::test::error_of([&] { (void)make_memory(o); });
   };
   CHECK(with([](vmap::MemoryOptions& o) { o.vocabulary_after = 0; }).find("vocabulary_after") != std::string::npos);
-  CHECK(with([](vmap::MemoryOptions& o) { o.loop_candidates = 0; }).find("loop_candidates") != std::string::npos);
+  CHECK(with([](vmap::MemoryOptions& o) { o.loops.top_k = 0; }).find("loops.top_k") != std::string::npos);
   CHECK(with([](vmap::MemoryOptions& o) { o.localize_candidates = 0; }).find("localize_candidates") != std::string::npos);
-  CHECK(with([](vmap::MemoryOptions& o) { o.min_loop_inliers = 7; }).find("min_loop_inliers") != std::string::npos);
-  CHECK(with([](vmap::MemoryOptions& o) { o.min_localize_inliers = 3; }).find("min_localize_inliers") != std::string::npos);
+  CHECK(with([](vmap::MemoryOptions& o) { o.loops.decision.min_inliers = -1; }).find("min_inliers") != std::string::npos);
+  CHECK(with([](vmap::MemoryOptions& o) { o.loops.decision.min_confidence = 2; }).find("min_confidence") !=
+        std::string::npos);
+  CHECK(with([](vmap::MemoryOptions& o) { o.loops.left_ratio = -1; }).find("left_ratio") != std::string::npos);
   CHECK(with([](vmap::MemoryOptions& o) { o.jpeg_quality = 0; }).find("jpeg_quality") != std::string::npos);
   CHECK(with([](vmap::MemoryOptions& o) { o.selector.tau = 1.5; }).find("tau") != std::string::npos);
 }
@@ -264,19 +285,20 @@ TEST_CASE("memory files: truncated at every section, flipped bytes, wrong versio
   REQUIRE(mem.key_images() >= 3);
   const std::string file = mem.serialize();
   const auto starts = section_starts(file);
-  REQUIRE(starts.size() == 10);
+  REQUIRE(starts.size() == 11);
   CHECK(section_starts(file).back() < file.size());
 
   auto message_of = [](const std::string& bytes) {
     return vmap::test::error_of([&] { (void)deserialize_memory(bytes, "fuzz.vmem"); });
   };
-  const char* tags[] = {"opts", "keys", "link", "loop", "selc", "voca", "plcd", "plcy", "labl", "gcsl"};
+  const char* tags[] = {"opts", "keys", "link", "loop", "selc", "voca", "plcd", "plcy", "labl", "gcsl", "dcsn"};
   for (std::size_t s = 0; s < starts.size(); ++s) {
     CAPTURE(tags[s]);
     // Cut inside the section's header, right after it, and in the middle of its bytes.
     for (std::size_t cut : {starts[s], starts[s] + 3, starts[s] + 16, starts[s] + 17,
                             (starts[s] + (s + 1 < starts.size() ? starts[s + 1] : file.size())) / 2}) {
-      if (cut >= file.size()) continue;  // the last section may be shorter than 17 bytes
+      // A section may be shorter than 17 bytes (an empty GCS): a cut past its end is in the next.
+      if (cut >= (s + 1 < starts.size() ? starts[s + 1] : file.size())) continue;
       const std::string m = message_of(file.substr(0, cut));
       CAPTURE(m);
       CHECK(m.find("section '" + std::string(tags[s]) + "'") != std::string::npos);
@@ -304,12 +326,12 @@ TEST_CASE("memory files: truncated at every section, flipped bytes, wrong versio
     CHECK(names_a_part(m));
   }
   // Wrong version, wrong magic, padding.
-  std::string v3 = file;
-  v3[8] = 3;
-  CHECK(message_of(v3).find("format version 3 is not supported") != std::string::npos);
-  std::string v1 = file;  // a version 1 header over the 10 sections of version 2
+  std::string v4 = file;
+  v4[8] = 4;
+  CHECK(message_of(v4).find("format version 4 is not supported") != std::string::npos);
+  std::string v1 = file;  // a version 1 header over the 11 sections of version 3
   v1[8] = 1;
-  CHECK(message_of(v1).find("10 sections, expected 7 in version 1") != std::string::npos);
+  CHECK(message_of(v1).find("11 sections, expected 7 in version 1") != std::string::npos);
   std::string magic = file;
   magic[0] = 'X';
   CHECK(message_of(magic).find("not a vmap memory") != std::string::npos);
@@ -440,7 +462,7 @@ TEST_SUITE("data") {
       const auto frames = read_frames(c.input, {.end = c.end});
       auto o = vmap::MemoryOptions{};
       o.vocabulary_after = 10;
-      o.exclude_recent = 5;
+      o.loops.window = 5;
       const auto whole = run(frames, o, 0, dir / "m.vmem");
       const auto resumed = run(frames, o, c.every, dir / "m.vmem");
       check_same(resumed, whole);

@@ -46,10 +46,10 @@ vmap::MemoryOptions small_options() {
   o.selector.tau = 0.3;
   o.vocabulary_after = 3;
   o.vocabulary = {.branching = 8, .depth = 2, .seed = 5};
-  o.exclude_recent = 2;
-  o.min_loop_inliers = 30;
+  o.loops.window = 2;
+  o.loops.decision.min_inliers = 30;
   o.labels.sample = 6;
-  o.labels.min_candidates = 2;
+  o.loops.min_candidates = 2;
   return o;
 }
 
@@ -143,7 +143,7 @@ TEST_CASE("memory with labels: the online schema is eq. 5 over the first M key i
   const auto o = small_options();
   const auto mem = run(frames, o, 0, detections);
   REQUIRE(mem.labelled());
-  REQUIRE(mem.key_images() > o.labels.sample + o.exclude_recent + 1);
+  REQUIRE(mem.key_images() > o.labels.sample + o.loops.window + 1);
   // The key images carry the detections of their own frame (eq. 6 takes I_{j-1}).
   for (std::size_t k = 0; k < mem.key_images(); ++k)
     CHECK(mem.key_detections()[k].size() == per_frame[mem.map().keys[k].frame_index].size());
@@ -157,10 +157,10 @@ TEST_CASE("memory with labels: the online schema is eq. 5 over the first M key i
   for (int l : mem.label_schema()->labels()) CHECK((l != 9 && l != 2));
   // Every key image was checked, and the tree holds those older than the window.
   CHECK(mem.database().size() == mem.key_images());
-  CHECK(mem.label_tree().size() == mem.key_images() - 1 - o.exclude_recent);
+  CHECK(mem.label_tree().size() == mem.key_images() - 1 - o.loops.window);
   for (const auto& e : mem.loops()) {
-    CHECK(e.link.key + o.exclude_recent < e.from);
-    CHECK(e.link.inliers >= o.min_loop_inliers);
+    CHECK(e.link.key + o.loops.window < e.from);
+    CHECK(e.link.inliers >= o.loops.decision.min_inliers);
   }
   CHECK(!mem.loops().empty());
 
@@ -175,11 +175,11 @@ TEST_CASE("memory with labels: the online schema is eq. 5 over the first M key i
 
   // tree with m = 0 verifies the whole leaf and nothing else: every loop joins key
   // images of equal label vectors, and it finds every loop tree_ranked with m = 0 finds
-  // (the same leaf, of which tree_ranked verifies the best loop_candidates).
+  // (the same leaf, of which tree_ranked verifies the best top_k).
   auto leaf_only = o;
-  leaf_only.labels.min_candidates = 0;
+  leaf_only.loops.min_candidates = 0;
   const auto ranked = run(frames, leaf_only, 0, detections);
-  leaf_only.labels.index = vmap::CandidateIndex::tree;
+  leaf_only.loops.index = vmap::CandidateIndex::tree;
   const auto tree = run(frames, leaf_only, 0, detections);
   CHECK(tree.map().key_indices() == mem.map().key_indices());
   for (const auto& e : tree.loops())
@@ -224,7 +224,7 @@ TEST_CASE("memory with labels: detections must come with every frame or none; ba
     return vmap::test::error_of([&] { (void)make_memory(o); });
   };
   CHECK(with([](vmap::MemoryOptions& o) { o.labels.sample = 0; }).find("labels.sample") != std::string::npos);
-  CHECK(with([](vmap::MemoryOptions& o) { o.labels.index = vmap::CandidateIndex::bow; }).find("labels.index") !=
+  CHECK(with([](vmap::MemoryOptions& o) { o.loops.index = vmap::CandidateIndex::bow; }).find("loops.index") !=
         std::string::npos);
   CHECK(with([](vmap::MemoryOptions& o) { o.labels.order = {3, 3}; }).find("labels.order") != std::string::npos);
   CHECK(with([](vmap::MemoryOptions& o) { o.labels.influence.min_influence = 2.0; }).find("InfluenceOptions") !=
@@ -302,7 +302,7 @@ TEST_CASE("memory files v2: policies' options are checked on load; version 1 fil
   // A version 1 file: the same first seven sections (their layout is unchanged), no
   // policies, labels or GCS. It loads (policies unchecked) and continues.
   const auto starts = section_starts(file);
-  REQUIRE(starts.size() == 10);
+  REQUIRE(starts.size() == 11);
   std::string v1 = file.substr(0, starts[7]);
   v1[8] = 1;
   v1[12] = 7;
@@ -319,8 +319,8 @@ TEST_CASE("memory files v2: policies' options are checked on load; version 1 fil
   }
   CHECK(old.map().key_indices() == mem.map().key_indices());
   CHECK(old.loops().size() == mem.loops().size());
-  // Saved again, it is a version 2 file.
-  CHECK(old.serialize()[8] == 2);
+  // Saved again, it is a version 3 file.
+  CHECK(old.serialize()[8] == 3);
 }
 
 TEST_CASE("memory files v2: truncated or flipped label, GCS and policy sections are Errors naming the section") {
@@ -334,7 +334,7 @@ TEST_CASE("memory files v2: truncated or flipped label, GCS and policy sections 
   REQUIRE(mem.label_schema().has_value());
   const std::string file = mem.serialize();
   const auto starts = section_starts(file);
-  REQUIRE(starts.size() == 10);
+  REQUIRE(starts.size() == 11);
   const auto message_of = [](const std::string& bytes) {
     return vmap::test::error_of([&] { (void)from_bytes(bytes, "bad.vmem"); });
   };
@@ -377,11 +377,8 @@ TEST_SUITE("data") {
     const auto detections = [&](std::size_t i) { return per_frame[i]; };
     vmap::MemoryOptions o;
     o.vocabulary_after = 10;
-    o.exclude_recent = 5;
+    o.loops.window = 5;
     o.labels.sample = 30;
-    // 50 inliers: LoopDetectorOptions::min_inliers, above the strongest false loop (43)
-    // brute force finds on this sequence.
-    o.min_loop_inliers = 50;
     const auto whole = run(frames, o, 0, detections);
     check_same(run(frames, o, 20, detections), whole);
     REQUIRE(whole.label_schema().has_value());
@@ -427,7 +424,29 @@ TEST_CASE("memory fuzz seeds: both load, fill every section and write back the s
   CHECK(none.serialize() == empty);
 }
 
-TEST_CASE("memory files v1: a file written by the version 1 code loads; v2 writes its seven sections unchanged") {
+TEST_CASE("memory files v2: a version 2 file loads and writes its sections unchanged, the options aside") {
+  // The version 2 seeds (written by main at 83a80c7); the version 3 seeds above were
+  // written from them by this code.
+  const auto dir = vmap::test::source_dir() / "tests/fuzz/corpus/memory";
+  for (const char* name : {"labels_gcs_v2.vmem", "empty_v2.vmem"}) {
+    CAPTURE(name);
+    const std::string v2 = vmap::read_file(dir / name, 1 << 20, "seed");
+    REQUIRE(v2.size() > 16);
+    CHECK(v2[8] == 2);
+    const auto mem = vmap::OrbVisualMemory::deserialize(v2, name);
+    const std::string v3 = mem.serialize();
+    const auto old_starts = section_starts(v2), new_starts = section_starts(v3);
+    REQUIRE(old_starts.size() == 10);
+    REQUIRE(new_starts.size() == 11);
+    // "opts" keeps its layout but holds one inlier floor twice (version 2 had two);
+    // "keys" .. "gcsl" are the same bytes; "dcsn" is new.
+    CHECK(v3.substr(new_starts[1], new_starts[10] - new_starts[1]) == v2.substr(old_starts[1]));
+    CHECK(mem.options().loops.decision.min_confidence == vmap::PlaceDecisionOptions{}.min_confidence);
+    for (const auto& e : mem.loops()) CHECK(e.link.confidence == 0.0);  // not recorded in version 2
+  }
+}
+
+TEST_CASE("memory files v1: a file written by the version 1 code loads; its sections but the options are written unchanged") {
   // tests/fuzz/corpus/memory/v1_five_keys.vmem: written by main at 6af038d (format 1)
   // from five 72x72 crops of seeded noise with SE(2) poses.
   const std::string v1 = vmap::read_file(vmap::test::source_dir() / "tests/fuzz/corpus/memory/v1_five_keys.vmem",
@@ -441,10 +460,12 @@ TEST_CASE("memory files v1: a file written by the version 1 code loads; v2 write
   CHECK(!mem.has_gcs());
   REQUIRE(std::get_if<vmap::Pose2>(&mem.poses()[4]) != nullptr);
   CHECK(std::get_if<vmap::Pose2>(&mem.poses()[4])->x() == 2.0);
-  const std::string v2 = mem.serialize();
-  const auto starts = section_starts(v2);
-  REQUIRE(starts.size() == 10);
-  // Header (version and count aside) and the first seven sections: the same bytes.
-  CHECK(v2.substr(0, 8) == v1.substr(0, 8));
-  CHECK(v2.substr(16, starts[7] - 16) == v1.substr(16));
+  const std::string v3 = mem.serialize();
+  const auto starts = section_starts(v3), old = section_starts(v1);
+  REQUIRE(starts.size() == 11);
+  REQUIRE(old.size() == 7);
+  // Header (version and count aside) and the six sections after "opts" (which holds one
+  // inlier floor twice now): the same bytes.
+  CHECK(v3.substr(0, 8) == v1.substr(0, 8));
+  CHECK(v3.substr(starts[1], starts[7] - starts[1]) == v1.substr(old[1]));
 }

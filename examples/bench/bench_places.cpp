@@ -1,0 +1,372 @@
+// Benchmark of the place decision (lcd/loop_engine.hpp, lcd/place_decision.hpp): how
+// often vmap says "I know this place", and whether it is right, on every sequence of
+// ../shared/data and the 60 sample frames, in one run. Each figure is given for the
+// decision ("now") and for the rule it replaced ("before": the best verified candidate
+// is a loop at 50 inliers, a localization at 20, with no revisit rule), computed from the
+// same verifications.
+//
+//   1. Loops with the defaults (`vmap loops` without options: ORB 1000, bag-of-words
+//      ranking with a vocabulary learned on the sequence, top 2, window 10): precision,
+//      recall, recall at 100 % precision over the confidence, verifications per query,
+//      the time per query of ranking, verification and the decision, and the evidence of
+//      the best candidates that are true and false loops.
+//   2. Foreign places: a visual memory (`vmap build --memory` defaults) of each sequence;
+//      every 5th frame of every other sequence localized in it: accepted answers.
+//   3. Own places: tum_fr1_rpy with every 10th frame held out of the memory: accepted,
+//      and accepted within 15 frames of the query.
+//   4. Memories: loop edges of rtabmap_loop against its ground truth; a stream of
+//      tum_fr1_rpy then rtabmap_loop: loop edges between the two.
+//   5. A camera that does not move: one real frame repeated with seeded sensor noise and
+//      sub-pixel jitter: loops, and whether the run is reported as stationary.
+//
+//   bench_places [--shared DIR] [--static-frames 120] [--seed 1]
+#include <vmap/features/orb.hpp>
+#include <vmap/geometry/fundamental.hpp>
+#include <vmap/io/frame_source.hpp>
+#include <vmap/io/poses.hpp>
+#include <vmap/lcd/evaluation.hpp>
+#include <vmap/lcd/loop_detector.hpp>
+#include <vmap/matching/brute_force.hpp>
+#include <vmap/memory/visual_memory.hpp>
+
+#include <CLI/CLI.hpp>
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Sequence {
+  std::string name;
+  std::vector<vmap::Frame> frames;  ///< grey
+  std::optional<vmap::LoopGroundTruth> gt;
+};
+
+std::vector<vmap::Frame> read_grey(const fs::path& input) {
+  auto src = vmap::FrameSource::open(input, {.grey = true});
+  std::vector<vmap::Frame> out;
+  while (auto f = src.next()) out.push_back(std::move(*f));
+  return out;
+}
+
+std::vector<Sequence> load_sequences(const fs::path& shared) {
+  const fs::path d = shared / "data";
+  const vmap::PoseLoopOptions pose_gt{.max_distance = 0.5, .max_angle_deg = 30, .window = 10};
+  std::vector<Sequence> out;
+  const auto timed_gt = [&](const std::vector<vmap::Frame>& frames, const fs::path& poses) {
+    std::vector<double> t;
+    for (const auto& f : frames) t.push_back(f.timestamp);
+    return vmap::ground_truth_from_poses(
+        vmap::poses_for_frames(vmap::load_tum_poses(poses), t, poses.string(), 0.05, false), pose_gt);
+  };
+  {
+    Sequence s{"rtabmap_loop", read_grey(d / "rtabmap_loop/images"), {}};
+    s.gt = vmap::LoopGroundTruth::load(d / "rtabmap_loop/gt_loop_matrix_84x84.txt", s.frames.size());
+    out.push_back(std::move(s));
+  }
+  {
+    Sequence s{"tum_fr3_cabinet_kf", read_grey(d / "tum_fr3_cabinet_kf/rgb.txt"), {}};
+    // One pose per image, in the order of rgb.txt (its timestamps are frame numbers).
+    s.gt = vmap::ground_truth_from_poses(vmap::load_tum_poses(d / "tum_fr3_cabinet_kf/truth_cam_poses.txt"), pose_gt);
+    out.push_back(std::move(s));
+  }
+  {
+    Sequence s{"tum_fr1_rpy", read_grey(d / "tum_fr1_rpy/rgb.txt"), {}};
+    s.gt = timed_gt(s.frames, d / "tum_fr1_rpy/groundtruth.txt");
+    out.push_back(std::move(s));
+  }
+  {
+    Sequence s{"kitti07_160", read_grey(d / "kitti07_160/image_0"), {}};
+    s.gt = vmap::ground_truth_from_poses(vmap::load_kitti_poses(d / "kitti07_160/poses.txt"), pose_gt);
+    out.push_back(std::move(s));
+  }
+  {
+    Sequence s{"sample_60", read_grey(fs::path(VMAP_SOURCE_DIR) / "examples/data/tum_fr1_rpy_60/rgb.txt"), {}};
+    s.gt = timed_gt(s.frames, d / "tum_fr1_rpy/groundtruth.txt");
+    out.push_back(std::move(s));
+  }
+  return out;
+}
+
+/// Sequences that show the same place (the sample frames are tum_fr1_rpy's first 60).
+bool same_place(const std::string& a, const std::string& b) {
+  const auto tum = [](const std::string& n) { return n == "tum_fr1_rpy" || n == "sample_60"; };
+  return a == b || (tum(a) && tum(b));
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+// ---- 1. loops with the defaults -----------------------------------------------------
+
+struct LoopRow {
+  std::string name;
+  std::size_t frames = 0, loops_gt = 0, verifications = 0;
+  std::size_t tp = 0, fp = 0, before_tp = 0, before_fp = 0;
+  double recall_full = 0.0, before_recall_full = 0.0;
+  double rank_ms = 0.0, verify_ms = 0.0, decide_ms = 0.0;
+  std::map<std::string, std::size_t> statuses;
+  std::vector<double> true_conf, false_conf, true_inliers, false_inliers, true_ratio, false_ratio, true_spread,
+      false_spread;
+  bool stationary = false;
+};
+
+LoopRow run_loops(const Sequence& s, const std::vector<vmap::Features>& features) {
+  std::vector<cv::Mat> sets;
+  for (const auto& f : features) sets.push_back(f.descriptors);
+  auto voc = std::make_shared<const vmap::AnyVocabulary>(
+      vmap::AnyVocabulary::learn(sets, {.branching = 10, .depth = 3, .seed = 1}));
+  vmap::LoopDetector det(vmap::LabelSchema{}, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                         vmap::FundamentalEstimator({.check_degeneracy = false}),
+                         {.index = vmap::CandidateIndex::bow}, vmap::PlaceRanker(voc));
+  LoopRow row;
+  row.name = s.name;
+  row.frames = features.size();
+  const auto& gt = *s.gt;
+  row.loops_gt = gt.loop_frames();
+  std::vector<vmap::LoopScore> now, before;
+  for (const auto& f : features) {
+    const vmap::LoopResult r = det.add(f, {});
+    ++row.statuses[std::string(vmap::to_string(r.status))];
+    row.rank_ms += r.rank_ms;
+    row.verify_ms += r.verify_ms;
+    row.decide_ms += r.decide_ms;
+    const bool by_threshold = r.status == vmap::PlaceStatus::accepted || r.status == vmap::PlaceStatus::unknown_place;
+    now.push_back({r.frame, r.best, by_threshold ? r.confidence : 0.0});
+    if (r.loop()) (gt(r.frame, *r.best) ? row.tp : row.fp) += 1;
+    if (r.best && by_threshold) {
+      const bool t = gt(r.frame, *r.best);
+      (t ? row.true_conf : row.false_conf).push_back(r.confidence);
+      (t ? row.true_inliers : row.false_inliers).push_back(r.evidence.inliers);
+      (t ? row.true_ratio : row.false_ratio).push_back(r.evidence.inlier_ratio);
+      (t ? row.true_spread : row.false_spread).push_back(r.evidence.spread);
+    }
+    // Before: the verified candidate with the most inliers, revisit or not.
+    std::optional<std::size_t> best;
+    int inliers = 0;
+    for (const auto& c : r.considered)
+      if (c.inliers > inliers) best = c.frame, inliers = c.inliers;
+    before.push_back({r.frame, best, static_cast<double>(inliers)});
+    if (best && inliers >= 50) (gt(r.frame, *best) ? row.before_tp : row.before_fp) += 1;
+  }
+  row.verifications = det.verifications();
+  row.recall_full = vmap::recall_at_full_precision(vmap::precision_recall_curve(now, gt)).recall;
+  row.before_recall_full = vmap::recall_at_full_precision(vmap::precision_recall_curve(before, gt)).recall;
+  row.stationary = det.stationary();
+  return row;
+}
+
+std::string fraction(std::size_t tp, std::size_t fp) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.3f", tp + fp ? static_cast<double>(tp) / static_cast<double>(tp + fp) : 1.0);
+  return b;
+}
+
+// ---- 2-4. memories ------------------------------------------------------------------
+
+vmap::OrbVisualMemory build_memory(const std::vector<const vmap::Frame*>& frames) {
+  vmap::OrbVisualMemory mem;
+  std::size_t index = 0;
+  for (const vmap::Frame* f : frames) {
+    vmap::Frame g = *f;
+    g.index = index++;  // one stream: the frames in push order
+    mem.push(g);
+  }
+  return mem;
+}
+
+std::vector<const vmap::Frame*> all_of(const Sequence& s) {
+  std::vector<const vmap::Frame*> out;
+  for (const auto& f : s.frames) out.push_back(&f);
+  return out;
+}
+
+/// A 'before' localization: a verified key image with at least 20 inliers.
+bool before_localized(const vmap::MemoryLocalization& a) {
+  return std::any_of(a.matches.begin(), a.matches.end(), [](const vmap::PlaceLink& l) { return l.inliers >= 20; });
+}
+
+// ---- 5. a camera that does not move -------------------------------------------------
+
+std::vector<vmap::Frame> static_clip(const vmap::Frame& source, std::size_t n, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> jitter(-0.5, 0.5);
+  std::vector<vmap::Frame> out;
+  for (std::size_t i = 0; i < n; ++i) {
+    const cv::Matx23d shift(1, 0, jitter(rng), 0, 1, jitter(rng));
+    cv::Mat moved;
+    cv::warpAffine(source.image, moved, shift, source.image.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+    cv::Mat noise(moved.size(), CV_16SC1);
+    cv::theRNG().state = seed * 1000003 + i;  // cv::randn draws from cv::theRNG(): seeded per frame
+    cv::randn(noise, 0, 2.0);
+    cv::Mat noisy;
+    moved.convertTo(noisy, CV_16SC1);
+    noisy += noise;
+    noisy.convertTo(moved, CV_8UC1);
+    out.push_back({moved, i, static_cast<double>(i) / 30.0, "static#" + std::to_string(i)});
+  }
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app("The place decision on every shared sequence: loops, foreign and own places, a static camera");
+  std::string shared = VMAP_SHARED_DIR;
+  std::size_t static_frames = 120;
+  std::uint64_t seed = 1;
+  app.add_option("--shared", shared, "The shared folder (data/)");
+  app.add_option("--static-frames", static_frames, "Frames of the static clip")->check(CLI::Range(11, 100000));
+  app.add_option("--seed", seed, "Seed of the static clip's noise and jitter");
+  CLI11_PARSE(app, argc, argv);
+
+  const auto sequences = load_sequences(shared);
+  vmap::OrbDescriptor orb;
+
+  std::printf("## 1. Loops with the defaults (bow, top 2, window 10, vocabulary learned on the sequence)\n\n");
+  std::printf("| sequence | frames | loop queries | now: TP / FP, precision, recall | now: recall@100%%P | before "
+              "(50 inliers): TP / FP, precision | before: recall@100%%P | verifications per query | stationary |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|\n");
+  std::vector<LoopRow> rows;
+  for (const auto& s : sequences) {
+    std::vector<vmap::Features> features;
+    for (const auto& f : s.frames) features.push_back(orb.extract(f.image));
+    const LoopRow r = run_loops(s, features);
+    std::printf("| %s | %zu | %zu | %zu / %zu, %s, %.3f | %.3f | %zu / %zu, %s | %.3f | %.2f | %s |\n", r.name.c_str(),
+                r.frames, r.loops_gt, r.tp, r.fp, fraction(r.tp, r.fp).c_str(),
+                r.loops_gt ? static_cast<double>(r.tp) / static_cast<double>(r.loops_gt) : 0.0, r.recall_full,
+                r.before_tp, r.before_fp, fraction(r.before_tp, r.before_fp).c_str(), r.before_recall_full,
+                static_cast<double>(r.verifications) / static_cast<double>(r.frames), r.stationary ? "yes" : "no");
+    std::fflush(stdout);
+    rows.push_back(r);
+  }
+  std::printf("\nEvidence of the best candidate of each query the threshold decides (accepted or unknown place):\n\n");
+  std::printf("| sequence | true: n, min confidence, median inliers, median ratio, median spread | false: n, max "
+              "confidence, max inliers, median ratio, median spread |\n|---|---|---|\n");
+  for (const auto& r : rows) {
+    const auto mn = [](const std::vector<double>& v) { return v.empty() ? 0.0 : *std::min_element(v.begin(), v.end()); };
+    const auto mx = [](const std::vector<double>& v) { return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()); };
+    std::printf("| %s | %zu, %.3f, %.0f, %.2f, %.2f | %zu, %.3f, %.0f, %.2f, %.2f |\n", r.name.c_str(),
+                r.true_conf.size(), mn(r.true_conf), median(r.true_inliers), median(r.true_ratio),
+                median(r.true_spread), r.false_conf.size(), mx(r.false_conf), mx(r.false_inliers),
+                median(r.false_ratio), median(r.false_spread));
+  }
+  std::printf("\nStatuses and time per query (ms: ranking / verification / decision):\n\n");
+  for (const auto& r : rows) {
+    std::printf("- %s: %.2f / %.2f / %.3f ms;", r.name.c_str(), r.rank_ms / static_cast<double>(r.frames),
+                r.verify_ms / static_cast<double>(r.frames), r.decide_ms / static_cast<double>(r.frames));
+    for (const auto& [k, v] : r.statuses) std::printf(" %s %zu,", k.c_str(), v);
+    std::printf("\n");
+  }
+  std::fflush(stdout);
+
+  std::printf("\n## 2. Foreign places (memory of each sequence; every 5th frame of every other sequence)\n\n");
+  std::printf("| memory | key images | queries | now: accepted | before (20 inliers): localized |\n|---|---|---|---|---|\n");
+  std::map<std::string, vmap::OrbVisualMemory> memories;
+  for (const auto& s : sequences) memories.emplace(s.name, build_memory(all_of(s)));
+  std::size_t total_now = 0, total_before = 0, total_queries = 0;
+  for (const auto& s : sequences) {
+    auto& mem = memories.at(s.name);
+    std::size_t queries = 0, now = 0, before = 0;
+    for (const auto& t : sequences) {
+      if (same_place(s.name, t.name)) continue;
+      for (std::size_t i = 0; i < t.frames.size(); i += 5) {
+        const auto a = mem.localize(t.frames[i].image);
+        ++queries;
+        now += a.ok() ? 1 : 0;
+        before += before_localized(a) ? 1 : 0;
+      }
+    }
+    std::printf("| %s | %zu | %zu | %zu | %zu |\n", s.name.c_str(), mem.key_images(), queries, now, before);
+    total_now += now;
+    total_before += before;
+    total_queries += queries;
+  }
+  std::printf("| all | | %zu | **%zu** | %zu |\n", total_queries, total_now, total_before);
+  std::fflush(stdout);
+
+  std::printf("\n## 3. Own places (tum_fr1_rpy, every 10th frame held out)\n\n");
+  {
+    const Sequence& tum = sequences[2];
+    std::vector<const vmap::Frame*> kept, held;
+    for (std::size_t i = 0; i < tum.frames.size(); ++i) (i % 10 == 5 ? held : kept).push_back(&tum.frames[i]);
+    vmap::OrbVisualMemory mem;
+    for (const vmap::Frame* f : kept) mem.push(*f);
+    std::size_t now = 0, now_near = 0, before = 0, before_near = 0;
+    const auto near = [&](std::uint32_t key, std::size_t frame) {
+      const std::size_t k = mem.map().keys[key].frame_index;
+      return (k > frame ? k - frame : frame - k) <= 15;
+    };
+    for (const vmap::Frame* f : held) {
+      const auto a = mem.localize(f->image);
+      if (a.ok()) {
+        ++now;
+        now_near += near(a.best()->key, f->index) ? 1 : 0;
+      }
+      if (before_localized(a)) {
+        ++before;
+        before_near += near(a.matches.front().key, f->index) ? 1 : 0;
+      }
+    }
+    std::printf("%zu held-out frames, %zu key images: now %zu accepted (%.1f %%), %zu within 15 frames (%.1f %%); "
+                "before %zu localized, %zu within 15 frames (%.1f %%)\n",
+                held.size(), mem.key_images(), now, 100.0 * static_cast<double>(now) / static_cast<double>(held.size()),
+                now_near, 100.0 * static_cast<double>(now_near) / static_cast<double>(held.size()), before, before_near,
+                100.0 * static_cast<double>(before_near) / static_cast<double>(held.size()));
+  }
+  std::fflush(stdout);
+
+  std::printf("\n## 4. Memories: loop edges\n\n");
+  {
+    const Sequence& rt = sequences[0];
+    const auto& mem = memories.at(rt.name);
+    std::size_t tp = 0;
+    for (const auto& e : mem.loops())
+      tp += (*rt.gt)(mem.map().keys[e.from].frame_index, mem.map().keys[e.link.key].frame_index) ? 1 : 0;
+    std::printf("- rtabmap_loop memory: %zu key images, %zu loop edges, %zu marked by the ground truth (precision %s)\n",
+                mem.key_images(), mem.loops().size(), tp, fraction(tp, mem.loops().size() - tp).c_str());
+    std::vector<const vmap::Frame*> stream = all_of(sequences[2]);
+    const std::size_t first = stream.size();
+    for (const auto& f : rt.frames) stream.push_back(&f);
+    const auto both = build_memory(stream);
+    std::size_t across = 0;
+    for (const auto& e : both.loops())
+      across += (both.map().keys[e.from].frame_index >= first) != (both.map().keys[e.link.key].frame_index >= first);
+    std::printf("- tum_fr1_rpy then rtabmap_loop in one memory: %zu key images, %zu loop edges, **%zu between the two "
+                "sequences**\n",
+                both.key_images(), both.loops().size(), across);
+  }
+  std::fflush(stdout);
+
+  std::printf("\n## 5. A camera that does not move (tum_fr1_rpy frame 0, %zu frames, noise sigma 2, jitter +-0.5 px, "
+              "seed %llu)\n\n",
+              static_frames, static_cast<unsigned long long>(seed));
+  {
+    const auto clip = static_clip(sequences[2].frames[0], static_frames, seed);
+    Sequence s{"static", clip, vmap::LoopGroundTruth(clip.size())};
+    std::vector<vmap::Features> features;
+    for (const auto& f : clip) features.push_back(orb.extract(f.image));
+    const LoopRow r = run_loops(s, features);
+    std::printf("- loops (bow, defaults): now %zu, before %zu; reported stationary: %s;", r.tp + r.fp,
+                r.before_tp + r.before_fp, r.stationary ? "yes" : "no");
+    for (const auto& [k, v] : r.statuses) std::printf(" %s %zu,", k.c_str(), v);
+    std::vector<const vmap::Frame*> frames;
+    for (const auto& f : clip) frames.push_back(&f);
+    const auto mem = build_memory(frames);
+    std::printf("\n- memory: %zu key images, %zu loop edges\n", mem.key_images(), mem.loops().size());
+  }
+  return 0;
+}

@@ -1,0 +1,585 @@
+#pragma once
+
+// The one loop engine (DESIGN.md sec. 1.4): "same place?" for loop closure over a stream
+// of key frames and for localization of a single image, used by LoopDetector (over its
+// frames) and by VisualMemory (over its key images).
+//
+// Per query: candidates from one of four sources -> verification of each by the stack's
+// matcher and estimator -> the evidence of each verified candidate (lcd/place_decision.hpp)
+// -> one decision with a status, a reason and a confidence:
+//   tree         every frame of the query's leaf of the binary classified tree, after
+//                backtracking to m frames (LFM-LCD, Zhu et al., Sensors 2021, sec. 3.3);
+//   tree_ranked  the same frames ranked by bag-of-words score, the top k verified;
+//   bow          every indexed frame ranked by bag-of-words score (no labels), the top k
+//                verified (DBoW2's query; iBoW-LCD and ORB-SLAM3 verify a handful too);
+//   brute_force  every frame older than the window (the reference).
+//
+// Loops only (not localization):
+//   - the revisit rule: a loop needs the camera to have left the candidate's place and
+//     come back. Candidate j is "left" when some frame between j and the query looks
+//     much less like j than the query does (bag-of-words score below `left_ratio` times
+//     the query's); a camera that rests or hovers, or drives on along the same view, never
+//     leaves, so its frames are not loops of each other whatever the window. The window
+//     stays as an option (frames just before the query are not candidates at all). The
+//     rule needs bags of words (the ranked sources); the unranked ones keep the window.
+//   - temporal consistency (DBoW2's islands, place/consistency.hpp): a loop stands when the
+//     `temporal_consistency` previous queries also placed themselves near it.
+//
+// The engine borrows each frame's Features through a lookup (a callable id -> const
+// Features&, as nanoflann's dataset adaptor), so its owner keeps them once.
+
+#include <vmap/core/concepts.hpp>
+#include <vmap/core/error.hpp>
+#include <vmap/core/features.hpp>
+#include <vmap/geometry/calibrated.hpp>
+#include <vmap/geometry/essential.hpp>
+#include <vmap/lcd/binary_tree.hpp>
+#include <vmap/lcd/label_vector.hpp>
+#include <vmap/lcd/place_decision.hpp>
+#include <vmap/lcd/place_ranking.hpp>
+#include <vmap/place/consistency.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cmath>
+#include <concepts>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+namespace vmap {
+
+/// Where loop candidates come from (see the file comment).
+enum class CandidateIndex : std::uint8_t {
+  tree,         ///< every frame of the leaf after backtracking (LFM-LCD)
+  tree_ranked,  ///< the leaf's frames ranked by bag-of-words score, top k verified
+  bow,          ///< every indexed frame ranked by bag-of-words score, top k verified
+  brute_force,  ///< every frame older than the window
+};
+
+[[nodiscard]] constexpr std::string_view to_string(CandidateIndex c) noexcept {
+  switch (c) {
+    case CandidateIndex::tree: return "tree";
+    case CandidateIndex::tree_ranked: return "tree_ranked";
+    case CandidateIndex::bow: return "bow";
+    case CandidateIndex::brute_force: return "brute_force";
+  }
+  return "unknown";
+}
+
+/// The candidate sources that rank by bag-of-words score (and so need a ranker).
+[[nodiscard]] constexpr bool ranks(CandidateIndex c) noexcept {
+  return c == CandidateIndex::tree_ranked || c == CandidateIndex::bow;
+}
+
+/// The candidate sources that need label vectors.
+[[nodiscard]] constexpr bool uses_labels(CandidateIndex c) noexcept {
+  return c == CandidateIndex::tree || c == CandidateIndex::tree_ranked;
+}
+
+/// The options of the loop engine, the same names for LoopDetector, VisualMemory and the
+/// command line.
+struct LoopOptions {
+  LabelVectorOptions labels{};  ///< score threshold of eq. 3 (0.5)
+  /// Frames j with j + window >= i are never candidates of frame i: consecutive frames
+  /// are trivially similar. 10 as in the rtabmap_loop baseline. The revisit rule, not
+  /// the window, decides whether an older frame is a revisit.
+  std::size_t window = 10;
+  /// m of sec. 3.3: backtrack up the tree until at least this many candidates. 5: a
+  /// leaf of a handful of frames is one place seen from a few positions.
+  std::size_t min_candidates = 5;
+  /// tree_ranked: the paper's tree with bag-of-words ranking (needs labels and a
+  /// vocabulary); VisualMemory uses bow for frames without detections.
+  CandidateIndex index = CandidateIndex::tree_ranked;
+  /// Ranked sources: how many of the best-scored candidates are verified. 2: on
+  /// rtabmap_loop (ORB) bow keeps brute force's recall with 19x fewer verifications
+  /// (examples/loops.md). ORB-SLAM3 verifies 3.
+  std::size_t top_k = 2;
+  /// Ranked sources: candidates scoring below this bag-of-words score are not verified.
+  /// 0: none is dropped for its score.
+  double min_bow_score = 0.0;
+  /// A loop stands when the previous `temporal_consistency` queries also matched places
+  /// within `temporal_tolerance` frames of the next one's (DBoW2's islands). 0 (off) by
+  /// default: on rtabmap_loop one confirmation cost 6 of 41 true loops (recall 0.932 ->
+  /// 0.795) and the decision alone kept precision 1.0 on every shared sequence
+  /// (examples/loops.md, "The place decision").
+  std::size_t temporal_consistency = 0;
+  std::size_t temporal_tolerance = 3;
+  /// The revisit rule: candidate j was left when a frame between j and the query scores
+  /// below `left_ratio` times the query's bag-of-words score against j. 0.2: frames of a
+  /// resting camera with sensor noise and sub-pixel jitter score 0.15-0.63 against each
+  /// other (their ORB keypoints move), so at 0.3 a noisy still clip closed 21 false loops
+  /// in 60 frames; at 0.2 none, and rtabmap_loop keeps its recall (examples/loops.md,
+  /// "The place decision").
+  double left_ratio = 0.2;
+  /// The decision (confidence threshold, evidence).
+  PlaceDecisionOptions decision{};
+};
+
+/// Why one candidate frame was not the answer.
+enum class CandidateStage : std::uint8_t {
+  chosen,               ///< the answer's candidate (the best place)
+  not_in_top_k,         ///< ranked below the top k
+  below_bow_score,      ///< its bag-of-words score is below min_bow_score
+  verification_failed,  ///< no geometric model
+  weaker,               ///< verified, but another candidate had more confidence
+  not_a_revisit,        ///< verified, but the camera never left its place
+};
+
+[[nodiscard]] constexpr std::string_view to_string(CandidateStage s) noexcept {
+  switch (s) {
+    case CandidateStage::chosen: return "chosen";
+    case CandidateStage::not_in_top_k: return "not in top k";
+    case CandidateStage::below_bow_score: return "below bag-of-words score";
+    case CandidateStage::verification_failed: return "verification failed";
+    case CandidateStage::weaker: return "less confidence than the chosen one";
+    case CandidateStage::not_a_revisit: return "not a revisit";
+  }
+  return "unknown";
+}
+
+/// One candidate that reached the ranking or verification stage.
+struct PlaceCandidate {
+  std::size_t frame = 0;
+  double bow_score = 0.0;  ///< 0 for unranked sources
+  int inliers = 0;         ///< 0 unless verified
+  double confidence = 0.0;
+  CandidateStage stage = CandidateStage::not_in_top_k;
+};
+
+/// The answer for one query (a frame of the stream, or an image to localize).
+struct PlaceDecision {
+  PlaceStatus status = PlaceStatus::too_little_evidence;
+  std::string reason = "no candidates";  ///< why, in words (e.g. "no candidates", "confidence 0.31 < 0.50")
+  double confidence = 0.0;               ///< of the best place, in [0, 1]
+  std::optional<std::size_t> best;       ///< the best place's frame (verified), if any
+  PlaceEvidence evidence;                ///< of `best`
+  Verification verification;             ///< of `best` (the model: F, or E with a calibrated estimator)
+  std::optional<std::size_t> second;     ///< the best other place, if verified
+  double second_confidence = 0.0;
+  std::size_t candidates = 0;            ///< frames the source proposed
+  std::size_t not_in_top_k = 0;
+  std::size_t below_bow_score = 0;
+  std::size_t verifications = 0;
+  std::size_t failed_verifications = 0;
+  std::size_t consistent_queries = 0;    ///< loops: earlier queries that agreed (temporal consistency)
+  double rank_ms = 0.0;                  ///< bag of words + ranking
+  double verify_ms = 0.0;                ///< matching + verification
+  double decide_ms = 0.0;                ///< evidence, revisit rule and decision
+  std::vector<PlaceCandidate> considered;
+
+  [[nodiscard]] bool accepted() const noexcept { return status == PlaceStatus::accepted; }
+};
+
+namespace detail {
+template <class E>
+struct fits_essential : std::false_type {};
+template <>
+struct fits_essential<EssentialEstimator> : std::true_type {};
+template <class Inner>
+struct fits_essential<Calibrated<Inner>> : fits_essential<Inner> {};
+}  // namespace detail
+
+/// The geometric model an estimator fits: essential for EssentialEstimator (bare or
+/// behind Calibrated), fundamental otherwise.
+template <class E>
+[[nodiscard]] constexpr PlaceModel place_model_of() noexcept {
+  return detail::fits_essential<E>::value ? PlaceModel::essential : PlaceModel::fundamental;
+}
+
+/// Borrowed features of frame `id`.
+template <class L>
+concept FeatureLookup = requires(const L& l, std::size_t id) {
+  { l(id) } -> std::convertible_to<const Features&>;
+};
+
+/// The engine over frames 0, 1, 2, ... added in order. Not thread-safe for add(); one
+/// engine per stream.
+template <Matcher M, Estimator E, PlaceRanking Rank = PlaceRanker>
+class LoopEngine {
+ public:
+  /// `schema` is needed by the label sources only; `ranker` by the ranked ones.
+  LoopEngine(M matcher, E estimator, const LoopOptions& options, Rank ranker = {}, LabelSchema schema = {},
+             PlaceModel model = place_model_of<E>())
+      : matcher_(std::move(matcher)),
+        estimator_(std::move(estimator)),
+        ranker_(std::move(ranker)),
+        options_(options),
+        schema_(std::move(schema)),
+        model_(model),
+        tree_(schema_.size()),
+        consistency_({.required = static_cast<int>(options_.temporal_consistency) + 1,
+                      .tolerance = options_.temporal_tolerance}) {
+    check_options(options_, "LoopOptions");
+    if (ranks(options_.index))
+      detail::check(static_cast<bool>(ranker_.ready()), [&] {
+        return "LoopOptions.index " + std::string(to_string(options_.index)) +
+               " ranks by bag of words and needs a vocabulary; give a ranker with one, or choose the tree or "
+               "brute_force source";
+      });
+  }
+
+  static void check_options(const LoopOptions& o, std::string_view owner) {
+    detail::check_label_min_score(o.labels.min_score);
+    detail::check_place_decision_options(o.decision, owner);
+    detail::check(std::isfinite(o.min_bow_score) && o.min_bow_score >= 0,
+                  [&] { return std::string(owner) + ".min_bow_score must be finite and >= 0"; });
+    detail::check(std::isfinite(o.left_ratio) && o.left_ratio >= 0 && o.left_ratio <= 1,
+                  [&] { return std::string(owner) + ".left_ratio must be in [0, 1]"; });
+    if (ranks(o.index))
+      detail::check(o.top_k >= 1, [&] {
+        return std::string(owner) + ".top_k must be >= 1 for the " + std::string(to_string(o.index)) +
+               " candidate source";
+      });
+  }
+
+  /// Frame `frames()` (its features `f`, its label vector for the label sources): its
+  /// loop decision against the frames before it, then it is indexed.
+  template <FeatureLookup L>
+  PlaceDecision add(const Features& f, const LabelVector& labels, const L& lookup) {
+    const std::size_t q = frames_;
+    PlaceDecision d;
+    const auto t0 = std::chrono::steady_clock::now();
+    std::optional<typename Rank::Bow> bow;
+    if (ranker_.ready()) bow = ranker_.describe(f);
+    // Frames that just left the window become tree candidates.
+    if (uses_labels(options_.index))
+      while (tree_next_ + options_.window < q) tree_.insert(labels_[tree_next_], tree_next_), ++tree_next_;
+    const std::size_t older = q > options_.window ? q - options_.window : 0;  // candidates are < older
+
+    std::vector<std::pair<std::size_t, double>> to_verify;
+    switch (options_.index) {
+      case CandidateIndex::tree:
+        for (std::size_t j : tree_.candidates(labels, options_.min_candidates)) to_verify.emplace_back(j, 0.0);
+        d.candidates = to_verify.size();
+        break;
+      case CandidateIndex::brute_force:
+        for (std::size_t j = 0; j < older; ++j) to_verify.emplace_back(j, 0.0);
+        d.candidates = to_verify.size();
+        break;
+      case CandidateIndex::tree_ranked:
+      case CandidateIndex::bow: {
+        std::vector<std::size_t> leaf;
+        if (options_.index == CandidateIndex::tree_ranked) {
+          leaf = tree_.candidates(labels, options_.min_candidates);
+          d.candidates = leaf.size();
+        } else {
+          d.candidates = older;
+        }
+        if (d.candidates == 0) break;
+        const std::vector<RankedFrame> ranked = ranker_.rank(
+            *bow, options_.top_k, options_.index == CandidateIndex::tree_ranked ? &leaf : nullptr, older);
+        d.not_in_top_k = d.candidates - std::min(d.candidates, ranked.size());
+        for (const RankedFrame& r : ranked) {
+          if (r.score < options_.min_bow_score) {
+            ++d.below_bow_score;
+            d.considered.push_back({r.frame, r.score, 0, 0.0, CandidateStage::below_bow_score});
+            continue;
+          }
+          to_verify.emplace_back(r.frame, r.score);
+        }
+        break;
+      }
+    }
+    d.rank_ms = ms_since(t0);
+    std::vector<Verified> verified = verify(d, f, to_verify, lookup, options_.decision);
+    const auto td = std::chrono::steady_clock::now();
+    const bool stayed = bow && filter_revisits(d, verified, *bow);
+    choose(d, verified, bow ? &*bow : nullptr, stayed, !to_verify.empty(), options_.decision);
+    apply_temporal_consistency(d);
+    d.decide_ms = ms_since(td);
+
+    labels_.push_back(uses_labels(options_.index) ? labels : LabelVector{});
+    if (bow) ranker_.add(q, *bow);
+    ++frames_;
+    verifications_ += d.verifications;
+    return d;
+  }
+
+  /// Where image features `q` were taken, among every frame added: the best `top` frames
+  /// by bag-of-words score are verified and decided; without a ranker every one of the
+  /// `unranked` frames the lookup knows (default: the frames added). No revisit rule, no
+  /// temporal consistency: a single image. `decision` overrides the options' decision for
+  /// this query.
+  template <FeatureLookup L>
+  PlaceDecision localize(const Features& q, std::size_t top, const L& lookup,
+                         std::optional<std::size_t> unranked = std::nullopt,
+                         const PlaceDecisionOptions* decision = nullptr) const {
+    const PlaceDecisionOptions& dec = decision ? *decision : options_.decision;
+    if (decision) detail::check_place_decision_options(*decision, "LoopEngine::localize");
+    detail::check(top >= 1, "LoopEngine::localize: top must be >= 1");
+    PlaceDecision d;
+    const auto t0 = std::chrono::steady_clock::now();
+    std::vector<std::pair<std::size_t, double>> to_verify;
+    std::optional<typename Rank::Bow> bow;
+    if (ranker_.ready()) {
+      bow = ranker_.describe(q);
+      for (const RankedFrame& r : ranker_.rank(*bow, top, nullptr)) to_verify.emplace_back(r.frame, r.score);
+      d.candidates = frames_;
+      d.not_in_top_k = frames_ - std::min(frames_, to_verify.size());
+    } else {
+      d.candidates = unranked.value_or(frames_);
+      for (std::size_t j = 0; j < d.candidates; ++j) to_verify.emplace_back(j, 0.0);
+    }
+    d.rank_ms = ms_since(t0);
+    std::vector<Verified> verified = verify(d, q, to_verify, lookup, dec);
+    const auto td = std::chrono::steady_clock::now();
+    choose(d, verified, bow ? &*bow : nullptr, false, !to_verify.empty(), dec);
+    d.decide_ms = ms_since(td);
+    return d;
+  }
+
+  /// The state a saved run ended with: the label vector of each frame indexed so far
+  /// (the ranker already holds their bags of words), the stationarity counts and the
+  /// temporal-consistency state. The tree is rebuilt exactly: the frames the last query
+  /// had inserted, in order.
+  void restore(std::vector<LabelVector> labels, std::size_t past_window, std::size_t left_queries,
+               std::size_t not_revisit, const ConsistencyState<std::size_t>& consistency) {
+    detail::check(frames_ == 0, "LoopEngine::restore: frames were added already");
+    detail::check(not_revisit + left_queries <= past_window && past_window <= labels.size(),
+                  "LoopEngine::restore: inconsistent stationarity counts");
+    for (const LabelVector& v : labels)
+      detail::check(!uses_labels(options_.index) || v.size() == schema_.size(),
+                    "LoopEngine::restore: a label vector does not fit the schema");
+    labels_ = std::move(labels);
+    frames_ = labels_.size();
+    past_window_ = past_window;
+    left_queries_ = left_queries;
+    not_revisit_ = not_revisit;
+    set_consistency(consistency);
+    if (uses_labels(options_.index) && frames_ > 0)
+      while (tree_next_ + options_.window < frames_ - 1) tree_.insert(labels_[tree_next_], tree_next_), ++tree_next_;
+  }
+
+  /// A new decision (e.g. another confidence threshold) for the queries from now on.
+  void set_decision(const PlaceDecisionOptions& decision) {
+    detail::check_place_decision_options(decision, "LoopOptions");
+    options_.decision = decision;
+  }
+
+  [[nodiscard]] std::size_t frames() const noexcept { return frames_; }
+  [[nodiscard]] std::size_t verifications() const noexcept { return verifications_; }
+  /// The label vector of each frame added (empty vectors for the sources without labels).
+  [[nodiscard]] const std::vector<LabelVector>& labels() const noexcept { return labels_; }
+  [[nodiscard]] const LoopOptions& options() const noexcept { return options_; }
+  [[nodiscard]] const LabelSchema& schema() const noexcept { return schema_; }
+  [[nodiscard]] const BinaryClassifiedTree<std::size_t>& tree() const noexcept { return tree_; }
+  [[nodiscard]] const Rank& ranker() const noexcept { return ranker_; }
+  [[nodiscard]] const M& matcher() const noexcept { return matcher_; }
+  [[nodiscard]] const E& estimator() const noexcept { return estimator_; }
+  [[nodiscard]] const ConsistencyState<std::size_t>& consistency() const noexcept { return consistency_.state(); }
+  /// Restores the temporal-consistency state (a resumed stream).
+  void set_consistency(const ConsistencyState<std::size_t>& s) {
+    consistency_ = TemporalConsistency<std::size_t>(consistency_.options(), s);
+  }
+  /// Queries past the window whose best verified candidate was not a revisit, and all
+  /// queries past the window: a camera that never left its place has the two equal.
+  [[nodiscard]] std::size_t not_a_revisit_queries() const noexcept { return not_revisit_; }
+  [[nodiscard]] std::size_t queries_past_window() const noexcept { return past_window_; }
+  /// Queries past the window with a candidate whose place the camera had left.
+  [[nodiscard]] std::size_t left_queries() const noexcept { return left_queries_; }
+  /// True when at least `window` frames were queried past the window, none of them left
+  /// the place of a candidate, and the last three frames still look like the first three
+  /// at least half as much as the first three look like each other (mean bag-of-words
+  /// scores: one noisy pair decides nothing): the camera rests or hovers. A camera that
+  /// drives on along one view never leaves a candidate either, but its last frames no
+  /// longer look like its first. A stationary sequence is reported as such instead of
+  /// loops. Needs a ranker (false without).
+  [[nodiscard]] bool stationary() const {
+    if (!ranker_.ready() || frames_ < 6 || past_window_ < std::max<std::size_t>(options_.window, 1) ||
+        left_queries_ != 0)
+      return false;
+    double first = 0.0, across = 0.0;
+    for (std::size_t a = 0; a < 3; ++a) {
+      for (std::size_t b = a + 1; b < 3; ++b) first += ranker_.similarity(a, b) / 3.0;
+      for (std::size_t b = frames_ - 3; b < frames_; ++b) across += ranker_.similarity(a, b) / 9.0;
+    }
+    return across >= 0.5 * first;
+  }
+
+  /// Bytes of the engine's own state: label vectors, revisit caches, ranker's index.
+  [[nodiscard]] std::size_t memory_bytes() const {
+    std::size_t bytes = labels_.capacity() * sizeof(LabelVector) + left_.capacity() * sizeof(LeftCache) +
+                        static_cast<std::size_t>(ranker_.memory_bytes());
+    for (const LabelVector& v : labels_) bytes += v.capacity() / 8;
+    return bytes;
+  }
+
+ private:
+  /// What the revisit rule has scanned of the frames after j: up to `until`, the lowest
+  /// bag-of-words score any of them had against j. The query only moves the bar, so a
+  /// frame is never scanned twice for one j.
+  struct LeftCache {
+    std::size_t until = 0;
+    double lowest = 2.0;
+  };
+
+  static double ms_since(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  }
+
+  /// The revisit rule for candidate j of query q (frames j+1 .. q-1 in the ranker).
+  bool left_place(std::size_t j, std::size_t q, double query_score) {
+    if (left_.size() < frames_) left_.resize(frames_);
+    LeftCache& c = left_[j];
+    if (c.until < j + 1) c.until = j + 1;
+    const double bar = options_.left_ratio * query_score;
+    for (; c.lowest >= bar && c.until < q; ++c.until) c.lowest = std::min(c.lowest, ranker_.similarity(c.until, j));
+    return c.lowest < bar;
+  }
+
+  struct Verified {
+    std::size_t frame;
+    double confidence;
+    PlaceEvidence evidence;
+    Verification verification;
+    std::size_t considered;  ///< its entry in PlaceDecision::considered
+  };
+
+  /// Matches and verifies each candidate; the verified ones with their evidence.
+  template <FeatureLookup L>
+  std::vector<Verified> verify(PlaceDecision& d, const Features& f,
+                               const std::vector<std::pair<std::size_t, double>>& to_verify, const L& lookup,
+                               const PlaceDecisionOptions& dec) const {
+    const auto t0 = std::chrono::steady_clock::now();
+    std::vector<Verified> verified;
+    for (const auto& [j, score] : to_verify) {
+      const Features& old = lookup(j);
+      const Matches matches = matcher_.match(f, old);
+      Verification v = estimator_.verify(f, old, matches);
+      ++d.verifications;
+      if (!v.ok()) {
+        ++d.failed_verifications;
+        d.considered.push_back({j, score, 0, 0.0, CandidateStage::verification_failed});
+        continue;
+      }
+      PlaceEvidence e = measure_place_evidence(f, old, matches, v, model_, dec);
+      e.bow_score = score;
+      const double conf = place_confidence(e, dec);
+      d.considered.push_back({j, score, e.inliers, conf, CandidateStage::weaker});
+      verified.push_back({j, conf, e, std::move(v), d.considered.size() - 1});
+    }
+    d.verify_ms = ms_since(t0);
+    return verified;
+  }
+
+  /// The revisit rule over the verified candidates of loop query `frames_`: drops those
+  /// whose place the camera never left; true when it dropped any. Counts the queries
+  /// past the window that left or stayed (stationary()).
+  bool filter_revisits(PlaceDecision& d, std::vector<Verified>& verified, const typename Rank::Bow& bow) {
+    bool any_left = false, any_stayed = false;
+    std::erase_if(verified, [&](const Verified& c) {
+      if (left_place(c.frame, frames_, ranker_.similarity(bow, c.frame))) {
+        any_left = true;
+        return false;
+      }
+      any_stayed = true;
+      d.considered[c.considered].stage = CandidateStage::not_a_revisit;
+      return true;
+    });
+    if (frames_ > options_.window) {
+      ++past_window_;
+      if (any_stayed && !any_left) ++not_revisit_;
+      if (any_left) ++left_queries_;
+    }
+    return any_stayed;
+  }
+
+  /// The decision from the verified candidates (best confidence first).
+  void choose(PlaceDecision& d, std::vector<Verified>& verified, const typename Rank::Bow* bow, bool stayed,
+              bool any_verified, const PlaceDecisionOptions& dec) const {
+    std::stable_sort(verified.begin(), verified.end(),
+                     [](const Verified& a, const Verified& b) { return a.confidence > b.confidence; });
+    const double need = dec.min_confidence;
+    char buf[96];
+    if (verified.empty()) {
+      if (stayed) {
+        d.status = PlaceStatus::not_a_revisit;
+        d.reason = "the camera never left the candidates' place";
+      } else {
+        d.status = PlaceStatus::too_little_evidence;
+        d.reason = d.candidates == 0 ? "no candidates"
+                   : !any_verified   ? "every candidate below the bag-of-words score"
+                                     : "no candidate verified";
+      }
+      return;
+    }
+    const Verified& b = verified.front();
+    d.best = b.frame;
+    d.confidence = b.confidence;
+    d.evidence = b.evidence;
+    d.verification = b.verification;
+    d.considered[b.considered].stage = CandidateStage::chosen;
+    // The best other place: a verified candidate neither near the best one in the stream
+    // (within the window or the temporal tolerance) nor looking like it (candidates of
+    // one place look alike: a revisit of a place seen twice is not ambiguous).
+    for (std::size_t i = 1; i < verified.size(); ++i) {
+      const Verified& o = verified[i];
+      const std::size_t gap = o.frame > b.frame ? o.frame - b.frame : b.frame - o.frame;
+      const bool same_place =
+          gap <= std::max(options_.window, options_.temporal_tolerance) ||
+          (bow && ranker_.similarity(o.frame, b.frame) >= options_.left_ratio * ranker_.similarity(*bow, o.frame));
+      if (!same_place) {
+        d.second = o.frame;
+        d.second_confidence = o.confidence;
+        break;
+      }
+    }
+    if (b.evidence.inliers < dec.min_inliers) {
+      d.status = PlaceStatus::too_little_evidence;
+      std::snprintf(buf, sizeof buf, "%d inliers < %d", b.evidence.inliers, dec.min_inliers);
+    } else if (b.confidence < need) {
+      d.status = PlaceStatus::unknown_place;
+      std::snprintf(buf, sizeof buf, "confidence %.2f < %.2f", b.confidence, need);
+    } else if (d.second && d.second_confidence >= need &&
+               d.second_confidence >= dec.ambiguity_ratio * b.confidence) {
+      d.status = PlaceStatus::ambiguous;
+      std::snprintf(buf, sizeof buf, "frames %zu and %zu: confidence %.2f and %.2f", b.frame, *d.second, b.confidence,
+                    d.second_confidence);
+    } else {
+      d.status = PlaceStatus::accepted;
+      std::snprintf(buf, sizeof buf, "confidence %.2f >= %.2f", b.confidence, need);
+    }
+    d.reason = buf;
+  }
+
+  /// Temporal consistency (place/consistency.hpp): the query's place is its best
+  /// candidate when accepted, none otherwise; the loop stands when this query and the k
+  /// before it matched places within the tolerance.
+  void apply_temporal_consistency(PlaceDecision& d) {
+    if (options_.temporal_consistency == 0) return;
+    const bool candidate = d.accepted();
+    const ConsistencyState<std::size_t> s = consistency_.update(candidate ? d.best : std::nullopt);
+    d.consistent_queries = s.consecutive > 0 ? static_cast<std::size_t>(s.consecutive - 1) : 0;
+    if (candidate && !s.accepted) {
+      d.status = PlaceStatus::too_little_evidence;
+      d.reason = "not yet confirmed: " + std::to_string(d.consistent_queries) + " of " +
+                 std::to_string(options_.temporal_consistency) + " earlier queries agree";
+    }
+  }
+
+  M matcher_;
+  E estimator_;
+  Rank ranker_;
+  LoopOptions options_;
+  LabelSchema schema_;
+  PlaceModel model_;
+  BinaryClassifiedTree<std::size_t> tree_;
+  TemporalConsistency<std::size_t> consistency_;
+  std::vector<LabelVector> labels_;
+  std::vector<LeftCache> left_;
+  std::size_t frames_ = 0;
+  std::size_t tree_next_ = 0;
+  std::size_t verifications_ = 0;
+  std::size_t past_window_ = 0;
+  std::size_t not_revisit_ = 0;
+  std::size_t left_queries_ = 0;
+};
+
+}  // namespace vmap

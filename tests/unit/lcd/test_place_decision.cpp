@@ -1,0 +1,405 @@
+#include <vmap/features/orb.hpp>
+#include <vmap/geometry/fundamental.hpp>
+#include <vmap/lcd/evaluation.hpp>
+#include <vmap/lcd/loop_detector.hpp>
+#include <vmap/lcd/loop_engine.hpp>
+#include <vmap/lcd/place_decision.hpp>
+#include <vmap/matching/brute_force.hpp>
+#include <vmap/memory/visual_memory.hpp>
+
+#include "support/shared_data.hpp"
+#include "support/two_laps.hpp"
+
+#include <doctest/doctest.h>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <cmath>
+#include <functional>
+#include <random>
+#include <string>
+#include <vector>
+
+using vmap::PlaceStatus;
+
+namespace {
+
+// P(X >= k) for X ~ Binomial(n, p), summed term by term in double precision.
+double binomial_tail(int k, int n, double p) {
+  double sum = 0.0;
+  for (int i = k; i <= n; ++i) sum += std::exp(std::lgamma(n + 1.0) - std::lgamma(i + 1.0) - std::lgamma(n - i + 1.0)) *
+                                      std::pow(p, i) * std::pow(1 - p, n - i);
+  return sum;
+}
+
+// Keypoints on a w x h grid of `step` pixels, and matches i -> i; the first `inliers`
+// marked inliers in the mask.
+struct Pair {
+  vmap::Features a, b;
+  vmap::Matches matches;
+  vmap::Verification v;
+};
+
+Pair grid_pair(int w, int h, int step, const std::function<bool(cv::Point2f)>& inlier) {
+  Pair p;
+  for (int y = 0; y < h; y += step)
+    for (int x = 0; x < w; x += step) {
+      p.a.keypoints.emplace_back(cv::Point2f(static_cast<float>(x), static_cast<float>(y)), 1.0f);
+      p.b.keypoints.emplace_back(cv::Point2f(static_cast<float>(x), static_cast<float>(y)), 1.0f);
+    }
+  for (std::size_t i = 0; i < p.a.keypoints.size(); ++i) {
+    p.matches.emplace_back(static_cast<int>(i), static_cast<int>(i), 0.0f);
+    const bool in = inlier(p.a.keypoints[i].pt);
+    p.v.inlier_mask.push_back(in ? 1 : 0);
+    p.v.inliers += in ? 1 : 0;
+  }
+  p.v.matches = static_cast<int>(p.matches.size());
+  p.v.status = vmap::VerificationStatus::verified;
+  return p;
+}
+
+// A ranker whose bag of words is the frame index and whose scores come from the test.
+class ScriptedRanker {
+ public:
+  using Bow = std::size_t;
+  ScriptedRanker() = default;
+  explicit ScriptedRanker(std::function<double(std::size_t, std::size_t)> score) : score_(std::move(score)) {}
+  [[nodiscard]] bool ready() const { return static_cast<bool>(score_); }
+  [[nodiscard]] Bow describe(const vmap::Features&) const { return next_++; }
+  void add(std::size_t id, Bow) { indexed_.push_back(id); }
+  [[nodiscard]] std::vector<vmap::RankedFrame> rank(Bow query, std::size_t n, const std::vector<std::size_t>* only,
+                                                    std::size_t below = static_cast<std::size_t>(-1)) const {
+    std::vector<vmap::RankedFrame> out;
+    for (std::size_t id : only ? *only : indexed_)
+      if (only || id < below) out.push_back({id, score_(query, id)});
+    std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.score > b.score; });
+    if (out.size() > n) out.resize(n);
+    return out;
+  }
+  // The bag of words is the frame index, so one overload scores a query and two frames alike.
+  [[nodiscard]] double similarity(std::size_t a, std::size_t b) const { return score_(a, b); }
+  [[nodiscard]] std::size_t memory_bytes() const { return indexed_.size() * sizeof(std::size_t); }
+
+ private:
+  std::function<double(std::size_t, std::size_t)> score_;
+  mutable std::size_t next_ = 0;
+  std::vector<std::size_t> indexed_;
+};
+static_assert(vmap::PlaceRanking<ScriptedRanker>);
+
+using Engine = vmap::LoopEngine<vmap::BruteForceMatcher, vmap::FundamentalEstimator, ScriptedRanker>;
+
+}  // namespace
+
+TEST_CASE("place evidence: significance is the binomial tail beyond the minimal sample, exactly") {
+  // Hand-checked small cases: P(Bin(10, 0.1) >= 5) = 0.0016349374...
+  CHECK(vmap::detail::binomial_tail_significance(5, 10, 0.1) == doctest::Approx(-std::log10(0.00163493739)).epsilon(1e-9));
+  for (const auto& [k, n] : {std::pair{3, 20}, {12, 40}, {40, 66}, {19, 25}, {300, 400}}) {
+    CAPTURE(k);
+    CAPTURE(n);
+    const double tail = binomial_tail(k, n, 0.1);
+    if (tail > 1e-300) CHECK(vmap::detail::binomial_tail_significance(k, n, 0.1) == doctest::Approx(-std::log10(tail)).epsilon(1e-9));
+  }
+  // At or below the mode there is no evidence; it grows with k for a fixed n.
+  CHECK(vmap::detail::binomial_tail_significance(1, 10, 0.1) == 0.0);
+  CHECK(vmap::detail::binomial_tail_significance(0, 0, 0.1) == 0.0);
+  double last = 0.0;
+  for (int k = 15; k <= 100; k += 5) {  // above the mode (10)
+    const double s = vmap::detail::binomial_tail_significance(k, 100, 0.1);
+    CHECK(s > last);
+    last = s;
+  }
+}
+
+TEST_CASE("place evidence: inliers, ratio, significance and spread of a pair with known inliers") {
+  // 20 x 20 keypoints over 400 x 400 px; the inliers are the keypoints left of x = 100:
+  // 5 columns of 20, all in the first of the four grid columns.
+  const Pair left = grid_pair(400, 400, 20, [](cv::Point2f p) { return p.x < 100; });
+  const vmap::PlaceEvidence e =
+      vmap::measure_place_evidence(left.a, left.b, left.matches, left.v, vmap::PlaceModel::fundamental);
+  CHECK(e.matches == 400);
+  CHECK(e.inliers == 100);
+  CHECK(e.inlier_ratio == doctest::Approx(0.25));
+  CHECK(e.significance == doctest::Approx(-std::log10(binomial_tail(93, 393, 0.1))).epsilon(1e-9));
+  CHECK(e.spread == doctest::Approx(4.0 / 16.0));  // one grid column of four cells
+  // The same count spread over the image (every 4th keypoint): every cell holds inliers.
+  std::size_t i = 0;
+  const Pair spread = grid_pair(400, 400, 20, [&](cv::Point2f) { return (i++ % 4) == 0; });
+  const vmap::PlaceEvidence s =
+      vmap::measure_place_evidence(spread.a, spread.b, spread.matches, spread.v, vmap::PlaceModel::fundamental);
+  CHECK(s.inliers == 100);
+  CHECK(s.spread == 1.0);
+  CHECK(s.significance == doctest::Approx(e.significance));
+  // Bunched inliers lose confidence in proportion to the spread below full_spread.
+  const vmap::PlaceDecisionOptions o;
+  const double full = 1.0 - std::exp2(-s.significance / o.half_significance);
+  CHECK(vmap::place_confidence(s, o) == doctest::Approx(full));
+  CHECK(vmap::place_confidence(e, o) == doctest::Approx(full * 0.25 / o.full_spread));
+  // An essential matrix's minimal sample is 5: two more inliers count as evidence.
+  const vmap::PlaceEvidence ess =
+      vmap::measure_place_evidence(spread.a, spread.b, spread.matches, spread.v, vmap::PlaceModel::essential);
+  CHECK(ess.significance == doctest::Approx(-std::log10(binomial_tail(95, 395, 0.1))).epsilon(1e-9));
+  // Below min_inliers, or unverified: no confidence at all.
+  vmap::PlaceEvidence few = s;
+  few.inliers = 11;
+  CHECK(vmap::place_confidence(few, o) == 0.0);
+  vmap::Verification failed;
+  const auto none = vmap::measure_place_evidence(spread.a, spread.b, spread.matches, failed, vmap::PlaceModel::fundamental);
+  CHECK(none.inliers == 0);
+  CHECK(none.significance == 0.0);
+  CHECK(vmap::place_confidence(none, o) == 0.0);
+}
+
+TEST_CASE("place decision: a repeated texture patch with many inliers in a small area loses to a real revisit") {
+  // The place: a textured scene. A revisit: the scene seen again, rotated by 4 degrees.
+  // An impostor: another scene that holds one 80 x 80 patch of the place (a poster, a
+  // repeated tile): its inliers fill one small area of the image.
+  const cv::Mat place = vmap::test::place_image(71);
+  const cv::Mat revisit = vmap::test::lap_frame(9, 8, 70);  // place 1 (seed 71), second lap
+  cv::Mat impostor = vmap::test::place_image(99);
+  place(cv::Rect(120, 80, 80, 80)).copyTo(impostor(cv::Rect(20, 20, 80, 80)));
+  vmap::OrbDescriptor orb({.features = 1000});
+  const vmap::Features fp = orb.extract(place), fr = orb.extract(revisit), fi = orb.extract(impostor);
+  const vmap::BruteForceMatcher matcher;
+  const vmap::FundamentalEstimator estimator({.seed = 3});
+  const auto evidence = [&](const vmap::Features& q) {
+    const auto m = matcher.match(q, fp);
+    return vmap::measure_place_evidence(q, fp, m, estimator.verify(q, fp, m), vmap::PlaceModel::fundamental);
+  };
+  const vmap::PlaceEvidence real = evidence(fr), patch = evidence(fi);
+  CAPTURE(real.inliers);
+  CAPTURE(patch.inliers);
+  CAPTURE(real.spread);
+  CAPTURE(patch.spread);
+  REQUIRE(patch.inliers >= 12);  // the patch does verify
+  CHECK(patch.spread * 2 <= real.spread);
+  const double c_real = vmap::place_confidence(real), c_patch = vmap::place_confidence(patch);
+  CAPTURE(c_real);
+  CAPTURE(c_patch);
+  CHECK(c_real >= 0.5);
+  CHECK(c_patch < c_real);
+}
+
+TEST_CASE("revisit rule: a camera that stays is no loop and is reported stationary; one that leaves and comes back is") {
+  // Eight textured places; frames are pushed as a scripted chain and the ranker scores
+  // frames of one place 1, other places 0.05.
+  vmap::OrbDescriptor orb({.features = 500});
+  SUBCASE("the camera rests on one place: every older frame is its place, never left") {
+    std::vector<vmap::Features> frames;
+    // Place 0 with the camera trembling by up to 2 px (identical images would give no
+    // F-matrix).
+    const cv::Mat still = vmap::test::place_image(300);
+    for (int k = 0; k < 20; ++k) {
+      cv::Mat moved;
+      cv::warpAffine(still, moved, cv::Matx23d(1, 0, 0.5 * (k % 5), 0, 1, 0.4 * (k % 3)), still.size(),
+                     cv::INTER_LINEAR, cv::BORDER_REFLECT);
+      frames.push_back(orb.extract(moved));
+    }
+    Engine e(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}),
+             {.window = 3, .index = vmap::CandidateIndex::bow}, ScriptedRanker([](std::size_t, std::size_t) { return 1.0; }));
+    const auto lookup = [&](std::size_t j) -> const vmap::Features& { return frames[j]; };
+    for (std::size_t k = 0; k < frames.size(); ++k) {
+      const auto d = e.add(frames[k], {}, lookup);
+      CAPTURE(k);
+      CHECK_FALSE(d.accepted());
+      if (k > 3) {
+        CHECK(d.status == PlaceStatus::not_a_revisit);
+        CHECK(d.reason == "the camera never left the candidates' place");
+        for (const auto& c : d.considered)
+          CHECK((c.stage == vmap::CandidateStage::not_a_revisit || c.stage == vmap::CandidateStage::verification_failed));
+      }
+    }
+    CHECK(e.stationary());
+    CHECK(e.not_a_revisit_queries() == 16);
+  }
+  SUBCASE("places 0..7, then 0..7 again: the second visit of each is a loop") {
+    std::vector<vmap::Features> frames;
+    for (int k = 0; k < 16; ++k) frames.push_back(orb.extract(vmap::test::lap_frame(k, 8, 300)));
+    Engine e(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}),
+             {.window = 3, .index = vmap::CandidateIndex::bow},
+             ScriptedRanker([](std::size_t a, std::size_t b) { return a % 8 == b % 8 ? 1.0 : 0.05; }));
+    const auto lookup = [&](std::size_t j) -> const vmap::Features& { return frames[j]; };
+    for (std::size_t k = 0; k < frames.size(); ++k) {
+      const auto d = e.add(frames[k], {}, lookup);
+      CAPTURE(k);
+      if (k < 8) {
+        CHECK_FALSE(d.accepted());
+        continue;
+      }
+      CHECK(d.status == PlaceStatus::accepted);
+      REQUIRE(d.best.has_value());
+      CHECK(*d.best == k - 8);
+      CHECK(d.reason.rfind("confidence", 0) == 0);
+    }
+    CHECK_FALSE(e.stationary());
+  }
+}
+
+TEST_CASE("place decision: each rejection says why") {
+  vmap::OrbDescriptor orb({.features = 500});
+  std::vector<vmap::Features> frames;
+  for (int k = 0; k < 16; ++k) frames.push_back(orb.extract(vmap::test::lap_frame(k, 8, 400)));
+  const auto lookup = [&](std::size_t j) -> const vmap::Features& { return frames[j]; };
+  const auto run = [&](const vmap::LoopOptions& o) {
+    Engine e(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}), o,
+             ScriptedRanker([](std::size_t a, std::size_t b) { return a % 8 == b % 8 ? 1.0 : 0.05; }));
+    std::vector<vmap::PlaceDecision> out;
+    for (const auto& f : frames) out.push_back(e.add(f, {}, lookup));
+    return out;
+  };
+  const vmap::LoopOptions base{.window = 3, .index = vmap::CandidateIndex::bow};
+  // No candidates: the first frames.
+  CHECK(run(base)[0].reason == "no candidates");
+  // Below the bag-of-words score.
+  auto floor = base;
+  floor.min_bow_score = 2.0;
+  CHECK(run(floor)[9].reason == "every candidate below the bag-of-words score");
+  // Too few inliers for the floor.
+  auto strict = base;
+  strict.decision.min_inliers = 100000;
+  const auto few = run(strict)[9];
+  CHECK(few.status == PlaceStatus::too_little_evidence);
+  CHECK(few.reason.find(" inliers < 100000") != std::string::npos);
+  // Not confident enough: an unknown place, with its confidence.
+  auto high = base;
+  high.decision.min_confidence = 1.0;
+  const auto unknown = run(high)[9];
+  CHECK(unknown.status == PlaceStatus::unknown_place);
+  CHECK(unknown.reason.find("< 1.00") != std::string::npos);
+  CHECK(unknown.confidence > 0.5);
+  // Two places that do not look alike, both verified and equally confident: ambiguous.
+  // Frames 0 and 5 are the same image, seen again (rotated) by query 9; the ranker scores both
+  // 0.9 against the query but 0.01 against each other (two look-alike places).
+  std::vector<vmap::Features> twins = {frames[1], frames[2], frames[3], frames[4], frames[5], frames[1],
+                                       frames[6], frames[7], frames[0], frames[9]};
+  vmap::LoopOptions amb{.window = 2, .index = vmap::CandidateIndex::bow, .top_k = 2, .left_ratio = 1.0,
+                        .decision = {.ambiguity_ratio = 0.5}};
+  Engine a(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}), amb,
+           ScriptedRanker([](std::size_t x, std::size_t y) {
+             if ((x == 9 && (y == 0 || y == 5)) || (y == 9 && (x == 0 || x == 5))) return 0.9;
+             return x == y ? 1.0 : 0.01;
+           }));
+  const auto twin_lookup = [&](std::size_t j) -> const vmap::Features& { return twins[j]; };
+  vmap::PlaceDecision last;
+  for (const auto& f : twins) last = a.add(f, {}, twin_lookup);
+  CHECK(last.status == PlaceStatus::ambiguous);
+  REQUIRE(last.second.has_value());
+  CHECK(((*last.best == 0 && *last.second == 5) || (*last.best == 5 && *last.second == 0)));
+  CHECK(last.reason.find("frames") == 0);
+  // Temporal consistency holds a first sighting back until the next query agrees.
+  auto held = base;
+  held.temporal_consistency = 1;
+  const auto t = run(held);
+  CHECK(t[8].status == PlaceStatus::too_little_evidence);
+  CHECK(t[8].reason == "not yet confirmed: 0 of 1 earlier queries agree");
+  CHECK(t[9].status == PlaceStatus::accepted);
+}
+
+TEST_CASE("loop engine: LoopDetector and VisualMemory find the same loops over the same key images") {
+  // The memory's key images of the sample frames; a LoopDetector over their features
+  // with the memory's vocabulary and loop options gives the memory's loop edges.
+  auto src = vmap::FrameSource::open(vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt", {.grey = true});
+  vmap::MemoryOptions o;
+  o.vocabulary_after = 3;
+  o.vocabulary = {.branching = 8, .depth = 2, .seed = 5};
+  o.loops.window = 2;
+  o.loops.left_ratio = 1.0;  // a vocabulary of 64 words: the strictest revisit rule
+  vmap::OrbVisualMemory mem(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                            vmap::FundamentalEstimator({.check_degeneracy = false}), vmap::InlierRatio{}, o);
+  while (auto f = src.next()) mem.push(*f);
+  REQUIRE(mem.key_images() > 5);
+  auto voc = std::make_shared<const vmap::AnyVocabulary>(mem.vocabulary());
+  vmap::LoopOptions lo = o.loops;
+  lo.index = vmap::CandidateIndex::bow;
+  vmap::LoopDetector det(vmap::LabelSchema{}, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                         vmap::FundamentalEstimator({.check_degeneracy = false}), lo, vmap::PlaceRanker(voc));
+  std::vector<std::pair<std::size_t, std::size_t>> detector_loops, memory_loops;
+  for (std::size_t k = 0; k < mem.key_images(); ++k) {
+    const auto r = det.add(mem.map().keys[k].features, {});
+    if (r.loop()) detector_loops.emplace_back(k, *r.best);
+  }
+  for (const auto& e : mem.loops()) memory_loops.emplace_back(e.from, e.link.key);
+  MESSAGE(mem.key_images() << " key images, " << memory_loops.size() << " loops");
+  CHECK(detector_loops == memory_loops);
+  CHECK(det.stationary() == mem.stationary());
+}
+
+TEST_SUITE("data") {
+  TEST_CASE("place decision: a memory of rtabmap_loop knows its own frames and refuses other places") {
+    auto read = [](const std::filesystem::path& input, std::size_t step) {
+      auto src = vmap::FrameSource::open(input, {.grey = true});
+      std::vector<vmap::Frame> out;
+      while (auto f = src.next())
+        if (f->index % step == 0) out.push_back(std::move(*f));
+      return out;
+    };
+    const auto rt = read(vmap::test::data_path("rtabmap_loop/images"), 1);
+    vmap::OrbVisualMemory mem;
+    for (const auto& f : rt) mem.push(f);
+    std::size_t foreign = 0, accepted = 0;
+    for (const char* other : {"kitti07_160/image_0", "tum_fr3_cabinet_kf/rgb.txt"}) {
+      for (const auto& f : read(vmap::test::data_path(other), 5)) {
+        const auto a = mem.localize(f.image);
+        ++foreign;
+        if (a.ok()) MESSAGE(other << " frame " << f.index << " accepted: " << a.reason);
+        accepted += a.ok() ? 1 : 0;
+        CHECK(a.status != PlaceStatus::accepted);
+        CHECK(!a.reason.empty());
+      }
+    }
+    CHECK(foreign >= 40);
+    CHECK(accepted == 0);
+    // Its own frames: every 7th localizes to a key image within 5 frames or to the
+    // other traverse's view of the place (the ground truth's loop frames, 3 frames
+    // tolerance).
+    const auto gt = vmap::LoopGroundTruth::load(vmap::test::data_path("rtabmap_loop/gt_loop_matrix_84x84.txt"), 84);
+    std::size_t own = 0, right = 0;
+    for (std::size_t i = 3; i < rt.size(); i += 7) {
+      const auto a = mem.localize(rt[i].image);
+      ++own;
+      if (!a.ok()) continue;
+      const std::size_t k = mem.map().keys[a.best()->key].frame_index;
+      bool ok = (k > i ? k - i : i - k) <= 5;
+      for (std::size_t d = k > 3 ? k - 3 : 0; d <= k + 3 && d < 84; ++d) ok = ok || gt(i, d) || gt(d, i);
+      right += ok ? 1 : 0;
+      CHECK(ok);
+    }
+    CHECK(right * 10 >= own * 8);
+  }
+
+  TEST_CASE("revisit rule: a real frame repeated with sensor noise and sub-pixel jitter closes no loop") {
+    const cv::Mat base = cv::imread(vmap::test::data_path("rtabmap_loop/images/1.jpg").string(), cv::IMREAD_GRAYSCALE);
+    REQUIRE_FALSE(base.empty());
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> jitter(-0.5, 0.5);
+    vmap::OrbDescriptor orb;
+    std::vector<vmap::Features> frames;
+    std::vector<cv::Mat> sets;
+    for (int i = 0; i < 40; ++i) {
+      cv::Mat moved, noise(base.size(), CV_16SC1), wide;
+      cv::warpAffine(base, moved, cv::Matx23d(1, 0, jitter(rng), 0, 1, jitter(rng)), base.size(), cv::INTER_LINEAR,
+                     cv::BORDER_REFLECT);
+      cv::RNG(static_cast<std::uint64_t>(1000 + i)).fill(noise, cv::RNG::NORMAL, 0, 2.0);
+      moved.convertTo(wide, CV_16SC1);
+      wide += noise;
+      wide.convertTo(moved, CV_8UC1);
+      frames.push_back(orb.extract(moved));
+      sets.push_back(frames.back().descriptors);
+    }
+    auto voc = std::make_shared<const vmap::AnyVocabulary>(
+        vmap::AnyVocabulary::learn(sets, {.branching = 10, .depth = 3, .seed = 1}));
+    vmap::LoopDetector det(vmap::LabelSchema{}, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                           vmap::FundamentalEstimator({.check_degeneracy = false}),
+                           {.index = vmap::CandidateIndex::bow}, vmap::PlaceRanker(voc));
+    std::size_t loops = 0, not_revisit = 0;
+    for (const auto& f : frames) {
+      const auto r = det.add(f, {});
+      loops += r.loop() ? 1 : 0;
+      not_revisit += r.status == PlaceStatus::not_a_revisit ? 1 : 0;
+    }
+    CHECK(loops == 0);
+    CHECK(not_revisit >= 25);
+    CHECK(det.stationary());
+  }
+}
