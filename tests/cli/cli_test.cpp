@@ -536,7 +536,7 @@ TEST_CASE("cli: loops --memory prints the memory's loop edges; --gt evaluates th
   for (const auto& l : j["loops"]) {
     const auto from = l["from"].get<std::size_t>(), to = l["to"].get<std::size_t>();
     REQUIRE(from < keys.size());
-    CHECK(to + 10 < from);  // the memory's exclude_recent
+    CHECK(to + 10 < from);  // the memory's loop window
     CHECK(l["query"] == keys[from]);
     CHECK(l["match"] == keys[to]);
     CHECK(l["confidence"].get<double>() >= j["min_confidence"].get<double>());
