@@ -216,7 +216,7 @@ std::vector<vmap::Frame> static_clip(const vmap::Frame& source, std::size_t n, s
     moved.convertTo(noisy, CV_16SC1);
     noisy += noise;
     noisy.convertTo(moved, CV_8UC1);
-    out.push_back({moved, i, static_cast<double>(i) / 30.0, "static#" + std::to_string(i)});
+    out.push_back({moved, i, "static#" + std::to_string(i), static_cast<double>(i) / 30.0});
   }
   return out;
 }
