@@ -229,12 +229,12 @@ class LoopEngine {
     detail::check_label_min_score(o.labels.min_score);
     detail::check_place_decision_options(o.decision, owner);
     detail::check(std::isfinite(o.min_bow_score) && o.min_bow_score >= 0,
-                  [&] { return std::string(owner) + ".min_bow_score must be finite and >= 0"; });
+                  [&] { return detail::option_name(owner, ".min_bow_score must be finite and >= 0"); });
     detail::check(std::isfinite(o.left_ratio) && o.left_ratio >= 0 && o.left_ratio <= 1,
-                  [&] { return std::string(owner) + ".left_ratio must be in [0, 1]"; });
+                  [&] { return detail::option_name(owner, ".left_ratio must be in [0, 1]"); });
     if (ranks(o.index))
       detail::check(o.top_k >= 1, [&] {
-        return std::string(owner) + ".top_k must be >= 1 for the " + std::string(to_string(o.index)) +
+        return detail::option_name(owner, ".top_k must be >= 1 for the ") + std::string(to_string(o.index)) +
                " candidate source";
       });
   }

@@ -1,5 +1,8 @@
 #include <vmap/features/orb.hpp>
+#include <vmap/geometry/essential.hpp>
 #include <vmap/geometry/fundamental.hpp>
+#include <vmap/io/calibration.hpp>
+#include <vmap/io/files.hpp>
 #include <vmap/lcd/evaluation.hpp>
 #include <vmap/lcd/loop_detector.hpp>
 #include <vmap/lcd/loop_engine.hpp>
@@ -323,6 +326,46 @@ TEST_CASE("loop engine: LoopDetector and VisualMemory find the same loops over t
   MESSAGE(mem.key_images() << " key images, " << memory_loops.size() << " loops");
   CHECK(detector_loops == memory_loops);
   CHECK(det.stationary() == mem.stationary());
+}
+
+TEST_CASE("place decision: with a calibrated camera, localize gives the query's pose relative to the key image") {
+  // The memory's estimator fits an essential matrix (TUM fr1 intrinsics): the evidence
+  // counts its 5-point minimal sample, and an accepted answer holds R and the unit t.
+  const vmap::Camera camera =
+      vmap::parse_camera(vmap::read_file(vmap::test::source_dir() / "examples/data/tum_fr1_camera.yaml", 1 << 20, "camera"),
+                         "tum_fr1_camera.yaml");
+  using EssentialMemory =
+      vmap::VisualMemory<vmap::OrbDescriptor, vmap::BruteForceMatcher, vmap::EssentialEstimator, vmap::InlierRatio>;
+  vmap::MemoryOptions o;
+  o.vocabulary_after = 3;
+  o.vocabulary = {.branching = 8, .depth = 2, .seed = 5};
+  EssentialMemory mem(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, vmap::EssentialEstimator(camera, {.seed = 3}),
+                      vmap::InlierRatio{}, o);
+  auto src = vmap::FrameSource::open(vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt", {.grey = true});
+  std::vector<vmap::Frame> held;
+  while (auto f = src.next()) {
+    if (f->index % 10 == 5) held.push_back(*f);
+    else mem.push(*f);
+  }
+  std::size_t accepted = 0;
+  for (const auto& f : held) {
+    const auto a = mem.localize(f.image);
+    CHECK(a.evidence.model == vmap::PlaceModel::essential);
+    if (!a.ok()) continue;
+    ++accepted;
+    REQUIRE(a.relative_pose.has_value());
+    CHECK(cv::norm(a.relative_pose->translation) == doctest::Approx(1.0).epsilon(1e-6));
+    const cv::Matx33d rtr = a.relative_pose->rotation.t() * a.relative_pose->rotation;
+    CHECK(cv::norm(rtr - cv::Matx33d::eye()) < 1e-6);
+    // (A camera that mostly turns, as here, triangulates few points in front: no floor.)
+    CHECK(a.relative_pose->points_in_front >= 0);
+    CHECK(a.relative_pose->points_in_front <= a.evidence.inliers);
+  }
+  CHECK(accepted * 2 >= held.size());
+  // Without a camera there is no relative pose.
+  vmap::OrbVisualMemory plain;
+  for (std::size_t i = 0; i < 4; ++i) plain.push(held[i].image);
+  CHECK_FALSE(plain.localize(held[0].image).relative_pose.has_value());
 }
 
 TEST_SUITE("data") {
