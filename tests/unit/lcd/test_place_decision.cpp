@@ -10,6 +10,7 @@
 #include <vmap/matching/brute_force.hpp>
 #include <vmap/memory/visual_memory.hpp>
 
+#include "support/scripted_ranker.hpp"
 #include "support/shared_data.hpp"
 #include "support/two_laps.hpp"
 
@@ -62,34 +63,7 @@ Pair grid_pair(int w, int h, int step, const std::function<bool(cv::Point2f)>& i
   return p;
 }
 
-// A ranker whose bag of words is the frame index and whose scores come from the test.
-class ScriptedRanker {
- public:
-  using Bow = std::size_t;
-  ScriptedRanker() = default;
-  explicit ScriptedRanker(std::function<double(std::size_t, std::size_t)> score) : score_(std::move(score)) {}
-  [[nodiscard]] bool ready() const { return static_cast<bool>(score_); }
-  [[nodiscard]] Bow describe(const vmap::Features&) const { return next_++; }
-  void add(std::size_t id, Bow) { indexed_.push_back(id); }
-  [[nodiscard]] std::vector<vmap::RankedFrame> rank(Bow query, std::size_t n, const std::vector<std::size_t>* only,
-                                                    std::size_t below = static_cast<std::size_t>(-1)) const {
-    std::vector<vmap::RankedFrame> out;
-    for (std::size_t id : only ? *only : indexed_)
-      if (only || id < below) out.push_back({id, score_(query, id)});
-    std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.score > b.score; });
-    if (out.size() > n) out.resize(n);
-    return out;
-  }
-  // The bag of words is the frame index, so one overload scores a query and two frames alike.
-  [[nodiscard]] double similarity(std::size_t a, std::size_t b) const { return score_(a, b); }
-  [[nodiscard]] std::size_t memory_bytes() const { return indexed_.size() * sizeof(std::size_t); }
-
- private:
-  std::function<double(std::size_t, std::size_t)> score_;
-  mutable std::size_t next_ = 0;
-  std::vector<std::size_t> indexed_;
-};
-static_assert(vmap::PlaceRanking<ScriptedRanker>);
+using vmap::test::ScriptedRanker;
 
 using Engine = vmap::LoopEngine<vmap::BruteForceMatcher, vmap::FundamentalEstimator, ScriptedRanker>;
 
