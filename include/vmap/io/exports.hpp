@@ -77,6 +77,13 @@ inline std::string shortest(double v) {
   return r.ec == std::errc() ? std::string(buf, r.ptr) : std::string("nan");
 }
 
+// Appends " field". Written as two appends, not `" " + field`: GCC 12 at -O3 reports a
+// false -Wrestrict on operator+(const char*, string&&).
+inline void append_field(std::string& out, const std::string& field) {
+  out += ' ';
+  out += field;
+}
+
 }  // namespace detail
 
 /// A TUM trajectory of `poses` (their timestamps, positions and rotations), with a '#'
@@ -86,7 +93,7 @@ inline std::string shortest(double v) {
   for (const auto& p : poses) {
     const auto q = quaternion_from_rotation(p.rotation);
     out += detail::shortest(p.timestamp);
-    for (double v : {p.position[0], p.position[1], p.position[2], q[0], q[1], q[2], q[3]}) out += " " + detail::shortest(v);
+    for (double v : {p.position[0], p.position[1], p.position[2], q[0], q[1], q[2], q[3]}) detail::append_field(out, detail::shortest(v));
     out += "\n";
   }
   return out;
@@ -96,7 +103,12 @@ inline std::string shortest(double v) {
 /// image came from, its name (file name, "<video>#<index>") and its time in seconds.
 [[nodiscard]] inline std::string key_images_text(const std::vector<KeyImage>& keys) {
   std::string out = "# frame_index name timestamp\n";
-  for (const auto& k : keys) out += std::to_string(k.frame_index) + " " + k.name + " " + detail::shortest(k.timestamp) + "\n";
+  for (const auto& k : keys) {
+    out += std::to_string(k.frame_index);
+    detail::append_field(out, k.name);
+    detail::append_field(out, detail::shortest(k.timestamp));
+    out += '\n';
+  }
   return out;
 }
 
@@ -118,9 +130,14 @@ struct LoopPair {
     return s.empty() ? std::string("-") : s;
   };
   std::string out = "# query_time match_time query_name match_name inliers\n";
-  for (const auto& l : loops)
-    out += detail::shortest(l.from_time) + " " + detail::shortest(l.to_time) + " " + token(l.from_name) + " " +
-           token(l.to_name) + " " + std::to_string(l.inliers) + "\n";
+  for (const auto& l : loops) {
+    out += detail::shortest(l.from_time);
+    detail::append_field(out, detail::shortest(l.to_time));
+    detail::append_field(out, token(l.from_name));
+    detail::append_field(out, token(l.to_name));
+    detail::append_field(out, std::to_string(l.inliers));
+    out += '\n';
+  }
   return out;
 }
 
@@ -133,12 +150,15 @@ struct LoopPair {
   const cv::Matx33d r = from.rotation.t() * to.rotation;
   const cv::Vec3d t = from.rotation.t() * (to.position - from.position);
   const auto q = quaternion_from_rotation(r);
-  std::string out = "EDGE_SE3:QUAT " + std::to_string(from_id) + " " + std::to_string(to_id);
-  for (double v : {t[0], t[1], t[2], q[0], q[1], q[2], q[3]}) out += " " + detail::shortest(v);
+  std::string out = "EDGE_SE3:QUAT";
+  detail::append_field(out, std::to_string(from_id));
+  detail::append_field(out, std::to_string(to_id));
+  for (double v : {t[0], t[1], t[2], q[0], q[1], q[2], q[3]}) detail::append_field(out, detail::shortest(v));
   for (int i = 0; i < 6; ++i)
     for (int j = i; j < 6; ++j)
-      out += " " + detail::shortest(i != j ? 0.0 : i < 3 ? translation_information : rotation_information);
-  return out + "\n";
+      detail::append_field(out, detail::shortest(i != j ? 0.0 : i < 3 ? translation_information : rotation_information));
+  out += '\n';
+  return out;
 }
 
 }  // namespace vmap
