@@ -636,6 +636,18 @@ class Progress {
   bool finished_ = false;
 };
 
+/// "DIR/{a, b}": the files a command wrote into its output folder, for its last line.
+inline std::string written_files(const std::string& dir, const std::vector<std::string>& files) {
+  std::string out = dir;
+  out += "/{";
+  for (std::size_t k = 0; k < files.size(); ++k) {
+    if (k > 0) out += ", ";
+    out += files[k];
+  }
+  out += '}';
+  return out;
+}
+
 /// A figure for JSON: finite numbers as numbers, inf/NaN as null (and `ok` says so).
 inline nlohmann::json finite_or_null(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
 

@@ -42,17 +42,22 @@ inline double seconds_since(std::chrono::steady_clock::time_point t0) {
 /// The features of every frame of a sequence, extracted once.
 struct SequenceFeatures {
   std::vector<Features> frames;
+  std::vector<std::string> names;  ///< per frame of `frames`: its file name, or "<video>#<index>"
+  std::vector<double> times;       ///< per frame of `frames`: its time in seconds (with the time offset)
   double seconds = 0.0;     ///< reading and extraction of all frames
   std::size_t skipped = 0;  ///< unreadable frames (each reported on stderr; not in `frames`)
 };
 
 /// Extracts the features of every frame of `input` with the chosen descriptor;
-/// `progress(done, total)` (optional) is called after each frame.
+/// `progress(done, total)` (optional) is called after each frame. `time_offset` is added
+/// to every frame time (FrameSourceOptions::time_offset).
 inline SequenceFeatures extract_features(const std::filesystem::path& input, const DescriptorChoice& choice,
-                                         const std::function<void(std::size_t, std::size_t)>& progress = {}) {
+                                         const std::function<void(std::size_t, std::size_t)>& progress = {},
+                                         double time_offset = 0.0) {
   SequenceFeatures out;
   // XFeat runs on colour input; the classic detectors on grey.
   FrameSourceOptions so;
+  so.time_offset = time_offset;
   so.grey = choice.name != "xfeat";
   so.on_skip = [](const SkippedFrame& sk) {
     std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", sk.index, sk.name.c_str(), sk.reason.c_str());
@@ -63,6 +68,8 @@ inline SequenceFeatures extract_features(const std::filesystem::path& input, con
   with_descriptor(choice, [&](auto descriptor) {
     while (auto frame = source.next()) {
       out.frames.push_back(descriptor.extract(frame->image));
+      out.names.push_back(frame->name);
+      out.times.push_back(frame->timestamp);
       if (progress) progress(out.frames.size(), total);
     }
   });
@@ -85,10 +92,37 @@ struct VocabularyChoice {
     detail::check(depth >= 1, "--depth must be >= 1, got " + std::to_string(depth));
     detail::check(words >= 2, "--words must be >= 2, got " + std::to_string(words));
     int k = 2;
-    while (std::pow(static_cast<double>(k), depth) < static_cast<double>(words)) ++k;
+    while (k <= BinaryVocabularyTree::max_branching && std::pow(static_cast<double>(k), depth) < static_cast<double>(words))
+      ++k;
     return k;
   }
+
+  /// A usage error (exit 2) when --words and --depth ask for a branching the tree cannot
+  /// have: checked when the command starts, not after the features are extracted.
+  void check_usage() const {
+    if (branching() > BinaryVocabularyTree::max_branching) {
+      std::string what = "--words ";
+      what += std::to_string(words);
+      what += " with --depth ";
+      what += std::to_string(depth);
+      what += " needs a branching above ";
+      what += std::to_string(BinaryVocabularyTree::max_branching);
+      what += "; raise --depth or lower --words";
+      usage_error(what);
+    }
+  }
 };
+
+/// --words and --depth of a vocabulary learned by the command, with their bounds (the
+/// same in every subcommand that learns one).
+inline void add_vocabulary_options(CLI::App& app, VocabularyChoice& c, const std::string& context) {
+  app.add_option("--words", c.words, context + "at most this many words (branching k: smallest with k^depth >= words)")
+      ->capture_default_str()
+      ->check(count_in(2, 100000000));
+  app.add_option("--depth", c.depth, context + "depth L of the tree")
+      ->capture_default_str()
+      ->check(count_in(1, 16));
+}
 
 /// Learns a vocabulary from the descriptors of a set of frames (binary descriptors by
 /// k-majority, float ones by k-means: the Features say which).

@@ -59,11 +59,7 @@ inline std::vector<std::string> export_memory(const CliMemory& mem, const std::f
     posed[k] = pose3(mem.poses()[k], keys[k].timestamp);
     if (!posed[k]) continue;
     trajectory.push_back(*posed[k]);
-    const auto q = quaternion_from_rotation(posed[k]->rotation);
-    vertices += "VERTEX_SE3:QUAT " + std::to_string(k);
-    for (double v : {posed[k]->position[0], posed[k]->position[1], posed[k]->position[2], q[0], q[1], q[2], q[3]})
-      vertices += " " + detail::shortest(v);
-    vertices += "\n";
+    vertices += g2o_vertex_line(k, *posed[k]);
   }
   std::vector<LoopPair> pairs;
   std::string edges;

@@ -253,9 +253,7 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
                  memory->loops, memory->stream.loops.size(), memory->last_frame.value_or(0),
                  static_cast<std::uintmax_t>(memory->bytes));
   if (out_dir) {
-    std::string list;
-    for (const auto& f : written) list += (list.empty() ? "" : ", ") + f;
-    std::fprintf(out, "\n  wrote %s/{%s}\n", a.out.c_str(), list.c_str());
+    std::fprintf(out, "\n  wrote %s\n", ex::written_files(a.out, written).c_str());
   }
   return 0;
 }

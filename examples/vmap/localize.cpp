@@ -42,6 +42,7 @@ struct Settings {
   std::string posters;
   std::string train, poses, pose_format = "auto";
   std::string query, query_poses;
+  double time_offset = 0.0;  // --time-offset: added to the frame times of --train and --query
   bool every_other = false;
   std::size_t neurons = 100, lambda = 50, max_epochs = 1000;
   std::string histogram = "bow";
@@ -147,9 +148,10 @@ vmap::PoseFormat format_of(const std::string& name, const std::string& file) {
 // theta lists); otherwise each frame takes the pose nearest in time (TUM
 // groundtruth.txt at 100 Hz against rgb.txt at 30 Hz), within 20 ms.
 Sequence read_sequence(const std::string& images, const std::string& poses, const std::string& format,
-                       std::size_t& skipped) {
+                       double time_offset, std::size_t& skipped) {
   Sequence out;
   vmap::FrameSourceOptions so;
+  so.time_offset = time_offset;
   so.on_skip = [](const vmap::SkippedFrame& sk) {
     std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", sk.index, sk.name.c_str(), sk.reason.c_str());
   };
@@ -181,7 +183,7 @@ void add_queries(Experiment& e, const Sequence& q, const std::vector<std::size_t
 
 Experiment sequence_experiment(const Settings& s) {
   Experiment e;
-  const Sequence all = read_sequence(s.train, s.poses, s.pose_format, e.skipped);
+  const Sequence all = read_sequence(s.train, s.poses, s.pose_format, s.time_offset, e.skipped);
   if (s.every_other) {
     std::vector<std::size_t> odd;
     for (std::size_t i = 0; i < all.images.size(); ++i) {
@@ -196,7 +198,7 @@ Experiment sequence_experiment(const Settings& s) {
   } else {
     e.train_images = all.images;
     e.train_poses = all.poses;
-    const Sequence q = read_sequence(s.query, s.query_poses, s.pose_format, e.skipped);
+    const Sequence q = read_sequence(s.query, s.query_poses, s.pose_format, s.time_offset, e.skipped);
     std::vector<std::size_t> idx(q.images.size());
     std::iota(idx.begin(), idx.end(), std::size_t{0});
     add_queries(e, q, idx, s.query_images);
@@ -354,7 +356,7 @@ int run_with(const Settings& s, H histogram, const CLI::App& app) {
 void check_settings(const Settings& s, const CLI::App& app) {
   auto given = [&](const char* name) { return app.get_option(name)->count() > 0; };
   if (s.room) {
-    for (const char* o : {"--train", "--poses", "--query", "--query-poses", "--every-other", "--pose-format"})
+    for (const char* o : {"--train", "--poses", "--query", "--query-poses", "--every-other", "--pose-format", "--time-offset"})
       if (given(o)) ex::usage_error(std::string("--room and ") + o + " conflict (the room makes its own images)");
   } else {
     if (s.train.empty()) ex::usage_error("give --room, --train or --memory (see vmap localize --help)");
@@ -380,6 +382,7 @@ std::function<int()> setup(CLI::App& app) {
       ->check(CLI::IsMember({"auto", "tum", "kitti", "xytheta"}));
   app.add_option("--query", s->query, "Query images (with --query-poses for their true poses)");
   app.add_option("--query-poses", s->query_poses, "True poses of the query images");
+  ex::add_time_offset_option(app, s->time_offset);
   app.add_flag("--every-other", s->every_other, "Train on the even frames of --train, localize the odd ones");
   app.add_option("--neurons", s->neurons, "GCS cells (the paper: 100, 200, 300), at most 5000 (training time grows with the square of the cells)")
       ->check(ex::count_in(3, 5000));

@@ -27,6 +27,7 @@
 #include <vmap/hooks/class_names.hpp>
 #include <vmap/hooks/dnn_detectors.hpp>
 #include <vmap/io/atomic_file.hpp>
+#include <vmap/io/exports.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
 #include <vmap/lcd/evaluation.hpp>
@@ -206,6 +207,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
     ex::usage_error("--model is the detector's model: give --detector yolox|nanodet|fastestdet (the descriptor's "
                     "model is --features-model)");
   c.descriptor.model = a.features_model;
+  if (a.vocabulary.file.empty()) a.vocabulary.check_usage();
   // Every input, and every output checked against them, before any frame is read.
   std::vector<std::filesystem::path> inputs{a.input};
   for (const auto& [file, option] : {std::pair{a.gt, "--gt"}, std::pair{a.gt_poses, "--gt-poses"},
@@ -222,20 +224,22 @@ int run(LoopsArgs& a, const CLI::App& app) {
     inputs.push_back(l);
   }
   std::optional<ex::OutputFolder> out_dir;
-  if (!a.out.empty()) out_dir.emplace(a.out, "--out", inputs, std::vector<std::string>{"pr.csv", "pr.png"});
+  if (!a.out.empty())
+    out_dir.emplace(a.out, "--out", inputs, std::vector<std::string>{"pr.csv", "pr.png", "loops.txt", "loops.g2o"});
   const std::vector<std::string> names = a.names.empty() ? std::vector<std::string>{} : vmap::read_class_names(a.names);
 
   // The ground truth is checked against the sequence before any frame is processed.
   const auto sequence = vmap::FrameSource::open(a.input, {.time_offset = a.time_offset});
   const std::size_t total = sequence.total().value_or(0);
   std::optional<vmap::LoopGroundTruth> gt;
+  std::vector<vmap::CameraPose> frame_poses;  // with --gt-poses: one per frame, for loops.g2o
   if (!a.gt_poses.empty()) {
     // One pose per frame: by order when the counts agree, else the nearest in time
     // (TUM's 100 Hz groundtruth.txt against rgb.txt at 30 Hz). 50 ms rather than
     // associate.py's 20 ms: fr1's ground truth has gaps of up to 49 ms (tum_fr1_rpy).
-    const auto poses = vmap::poses_for_frames(vmap::load_camera_poses(a.gt_poses), sequence.timestamps(), a.gt_poses, 0.05);
+    frame_poses = vmap::poses_for_frames(vmap::load_camera_poses(a.gt_poses), sequence.timestamps(), a.gt_poses, 0.05);
     gt = vmap::ground_truth_from_poses(
-        poses, {.max_distance = a.gt_distance, .max_angle_deg = a.gt_angle, .window = c.detector.window});
+        frame_poses, {.max_distance = a.gt_distance, .max_angle_deg = a.gt_angle, .window = c.detector.window});
   } else if (!a.gt.empty()) {
     gt = vmap::LoopGroundTruth::load(a.gt, total);
   }
@@ -264,7 +268,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
   std::optional<ex::Progress> extracting;
   extracting.emplace("vmap loops: features", total);
   const auto features = vmap::examples::extract_features(
-      a.input, c.descriptor, [&](std::size_t done, std::size_t) { extracting->update(done); });
+      a.input, c.descriptor, [&](std::size_t done, std::size_t) { extracting->update(done); }, a.time_offset);
   extracting->done(std::to_string(features.skipped) + " skipped");
   if (features.skipped > 0 && (gt || have_labels))
     vmap::detail::fail(std::to_string(features.skipped) + " frame(s) of '" + a.input +
@@ -299,10 +303,23 @@ int run(LoopsArgs& a, const CLI::App& app) {
   const double fps = result.seconds > 0 ? static_cast<double>(frames) / result.seconds : 0.0;
 
   nlohmann::json loops = nlohmann::json::array();
+  std::vector<vmap::LoopPair> pairs;
+  std::string g2o_edges;
+  std::vector<bool> g2o_vertex(frame_poses.size(), false);
   for (const auto& r : result.results)
-    if (r.loop())
-      loops.push_back({{"query", r.frame},
-                       {"match", *r.best},
+    if (r.loop()) {
+      const std::size_t q = r.frame, m = *r.best;
+      pairs.push_back({q, m, features.times[q], features.times[m], features.names[q], features.names[m], r.evidence.inliers});
+      if (q < frame_poses.size() && m < frame_poses.size()) {
+        g2o_edges += vmap::g2o_edge_line(q, m, frame_poses[q], frame_poses[m]);
+        g2o_vertex[q] = g2o_vertex[m] = true;
+      }
+      loops.push_back({{"query", q},
+                       {"match", m},
+                       {"query_name", features.names[q]},
+                       {"match_name", features.names[m]},
+                       {"query_time", features.times[q]},
+                       {"match_time", features.times[m]},
                        {"confidence", r.confidence},
                        {"inliers", r.evidence.inliers},
                        {"matches", r.evidence.matches},
@@ -310,8 +327,25 @@ int run(LoopsArgs& a, const CLI::App& app) {
                        {"significance", r.evidence.significance},
                        {"spread", r.evidence.spread},
                        {"bow_score", r.evidence.bow_score}});
+    }
   const bool stationary = result.stationary;
+
+  // --out: the loops as a timestamp-pair list, and with --gt-poses as g2o edges between
+  // the frames' ground-truth poses; pr.csv and pr.png below when there is a ground truth.
+  std::vector<std::string> written;
+  if (out_dir) {
+    vmap::write_file_atomically(out_dir->operator/("loops.txt"), vmap::loop_pairs_text(pairs));
+    written.push_back("loops.txt");
+    if (!frame_poses.empty()) {
+      std::string g2o;
+      for (std::size_t k = 0; k < frame_poses.size(); ++k)
+        if (g2o_vertex[k]) g2o += vmap::g2o_vertex_line(k, frame_poses[k]);
+      vmap::write_file_atomically(out_dir->operator/("loops.g2o"), g2o + g2o_edges);
+      written.push_back("loops.g2o");
+    }
+  }
   if (!gt) {
+    if (out_dir) out_dir->commit();
     if (a.json) {
       nlohmann::json j = {{"command", "loops"},
                           {"input", ex::path_string(a.input)},
@@ -324,6 +358,8 @@ int run(LoopsArgs& a, const CLI::App& app) {
                           {"fps", fps},
                           {"min_confidence", c.detector.decision.min_confidence},
                           {"stationary", stationary},
+                          {"out", a.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(a.out))},
+                          {"files", written},
                           {"loops", loops}};
       ex::print_json(j);
       return 0;
@@ -336,16 +372,18 @@ int run(LoopsArgs& a, const CLI::App& app) {
     if (stationary) std::printf("the camera never left its place: no frame is a revisit\n");
     std::printf("%zu loops (confidence >= %.2f):\n", loops.size(), c.detector.decision.min_confidence);
     for (const auto& l : loops)
-      std::printf("  frame %4zu -> frame %4zu  confidence %.2f  inliers %4d of %4d  bow score %.3f\n",
-                  l["query"].get<std::size_t>(), l["match"].get<std::size_t>(), l["confidence"].get<double>(),
-                  l["inliers"].get<int>(), l["matches"].get<int>(), l["bow_score"].get<double>());
+      std::printf("  frame %4zu (%s) -> frame %4zu (%s)  confidence %.2f  inliers %4d of %4d  bow score %.3f\n",
+                  l["query"].get<std::size_t>(), l["query_name"].get<std::string>().c_str(),
+                  l["match"].get<std::size_t>(), l["match_name"].get<std::string>().c_str(),
+                  l["confidence"].get<double>(), l["inliers"].get<int>(), l["matches"].get<int>(),
+                  l["bow_score"].get<double>());
+    if (!written.empty()) std::printf("wrote %s\n", ex::written_files(a.out, written).c_str());
     return 0;
   }
 
   const auto s = vmap::examples::summarize(result, *gt, c.detector.decision.min_confidence);
   const auto agree = result.agreement(*gt, c.detector.window);
 
-  std::vector<std::string> written;
   if (out_dir) {
     std::string csv = "threshold,true_positives,false_positives,precision,recall\n";
     char buf[160];
@@ -363,7 +401,8 @@ int run(LoopsArgs& a, const CLI::App& app) {
     vmap::write_image_atomically(out_dir->operator/("pr.png"),
                                  vmap::examples::draw_pr_curves({{s.curve, "vmap " + a.rank}}, title));
     out_dir->commit();
-    written = {"pr.csv", "pr.png"};
+    written.push_back("pr.csv");
+    written.push_back("pr.png");
   }
 
   if (a.json) {
@@ -429,7 +468,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
   std::printf("at confidence >= %.2f: TP %zu, FP %zu, precision %.3f, recall %.3f\n", c.detector.decision.min_confidence,
               s.at_decision.true_positives, s.at_decision.false_positives, s.at_decision.precision,
               s.at_decision.recall);
-  if (!a.out.empty()) std::printf("wrote %s/{pr.csv, pr.png}\n", a.out.c_str());
+  if (!written.empty()) std::printf("wrote %s\n", ex::written_files(a.out, written).c_str());
   if (s.at_full_precision.true_positives > 0)
     std::printf("recall@100%%P %.3f (at confidence >= %.3f)\n", s.at_full_precision.recall, s.at_full_precision.threshold);
   else
@@ -471,10 +510,7 @@ std::function<int()> setup(CLI::App& app) {
       ->check(ex::count_in(0, 1000));
   app.add_option("--vocabulary", a->vocabulary.file,
                  "tree_ranked / bow: a vocabulary from `vmap vocabulary` (default: learn one on the sequence)");
-  app.add_option("--words", a->vocabulary.words, "Vocabulary learned here: at most this many words")
-      ->check(ex::count_in(2, 100000000));
-  app.add_option("--depth", a->vocabulary.depth, "Vocabulary learned here: depth L of the tree")
-      ->check(ex::count_in(1, 16));
+  ex::add_vocabulary_options(app, a->vocabulary, "Vocabulary learned here: ");
   app.add_option("--window", d.window, "Frames this recent are never candidates")->check(ex::count_in(0, 1000000));
   app.add_option("--left-ratio", d.left_ratio,
                  "Revisit rule: a candidate's place was left when a frame in between scored below this fraction of "
@@ -505,7 +541,10 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--nfeatures", a->config.descriptor.features,
                  "Keypoint budget per image (ORB, SIFT; top-k for XFeat), at most " + std::to_string(ex::max_nfeatures))
       ->check(ex::count_in(1, ex::max_nfeatures));
-  app.add_option("--out", a->out, "Folder for pr.csv (threshold, TP, FP, precision, recall) and pr.png (created if missing)");
+  app.add_option("--out", a->out,
+                 "Folder (created if missing) for loops.txt (each loop as query_time match_time query_name match_name "
+                 "inliers), with --gt-poses loops.g2o (the loops as g2o edges between the frames' ground-truth poses), "
+                 "and with a ground truth pr.csv (threshold, TP, FP, precision, recall) and pr.png");
   app.add_flag("--json", a->json, "Print the figures as one JSON object on stdout");
   app.add_flag("--verbose", a->verbose,
                "Print one line per frame to stderr (candidates, best, inliers, confidence, status and reason)");

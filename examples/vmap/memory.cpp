@@ -32,6 +32,7 @@ struct MemoryArgs {
   bool resume = false, json = false, edges = false;
   std::string export_out;
   double tau = 0.3;
+  double time_offset = 0.0;  // build: added to the frame times the key images keep
   std::optional<double> min_confidence;  // localize: the query's threshold; build: of loop edges
   std::string storage = "none";
   std::size_t start = 0, end = 0, stride = 1, save_every = 0;
@@ -42,7 +43,7 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   ex::current_inputs() = {a.input};
   const fs::path file = ex::memory_file(a.out);
   std::optional<ex::CliMemory> mem;
-  vmap::FrameSourceOptions so{.start = a.start, .stride = a.stride, .grey = true};
+  vmap::FrameSourceOptions so{.start = a.start, .stride = a.stride, .grey = true, .time_offset = a.time_offset};
   if (a.end > 0) so.end = a.end;
   if (a.resume) {
     mem.emplace(ex::memory_to_resume(file, app, {"--threshold", "--images", "--vocabulary", "--min-confidence"}));
@@ -113,10 +114,8 @@ int export_files(const MemoryArgs& a) {
                     {"key_images", mem.key_images()}, {"loops", mem.loops().size()}});
     return 0;
   }
-  std::string list;
-  for (const auto& f : written) list += (list.empty() ? "" : ", ") + f;
-  std::printf("%zu key images, %zu loop edges: wrote %s/{%s}\n", mem.key_images(), mem.loops().size(),
-              a.export_out.c_str(), list.c_str());
+  std::printf("%zu key images, %zu loop edges: wrote %s\n", mem.key_images(), mem.loops().size(),
+              ex::written_files(a.export_out, written).c_str());
   return 0;
 }
 
@@ -138,6 +137,7 @@ std::function<int()> setup(CLI::App& app) {
   b->add_option("--end", a->end, "One past the last frame index read (0: all)")->check(ex::count_in(0, ex::max_frame_index));
   b->add_option("--stride", a->stride, "Read every n-th frame")->check(ex::count_in(1, ex::max_frame_index));
   b->add_flag("--json", a->json, "Print the result as JSON");
+  ex::add_time_offset_option(*b, a->time_offset);
   b->add_option("--min-confidence", a->min_confidence, "A loop edge needs this place-decision confidence in [0, 1]")
       ->check(ex::real_in(0.0, 1.0));
   auto* l = app.add_subcommand("localize", "The key image(s) each query image matches");

@@ -20,6 +20,7 @@
 #include <filesystem>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <string>
 
 namespace {
@@ -57,15 +58,19 @@ int convert(const VocabularyArgs& a) {
 int run(const VocabularyArgs& a) {
   if (a.input.empty() || a.out.empty())
     throw vmap::examples::UsageError("learning needs FRAMES and --out (converting: vmap vocabulary convert INPUT OUTPUT)");
+  a.vocabulary.check_usage();
   const int branching = a.vocabulary.branching();
-  const auto features = vmap::examples::extract_features(a.input, a.descriptor, [](std::size_t done, std::size_t n) {
-    if (done == n || done % 10 == 0) std::fprintf(stderr, "\rfeatures: frame %zu/%zu", done, n);
-    if (done == n) std::fprintf(stderr, "\n");
+  std::optional<vmap::examples::Progress> progress;
+  const auto features = vmap::examples::extract_features(a.input, a.descriptor, [&](std::size_t done, std::size_t n) {
+    if (!progress) progress.emplace("vmap vocabulary: features", n);
+    progress->update(done);
   });
+  if (progress) progress->done();
   std::size_t descriptors = 0;
   for (const auto& f : features.frames) descriptors += f.size();
-  std::fprintf(stderr, "learning: %zu descriptors of %zu frames, branching %d, depth %d...\n", descriptors,
-               features.frames.size(), branching, a.vocabulary.depth);
+  if (isatty(STDERR_FILENO) != 0)
+    std::fprintf(stderr, "learning: %zu descriptors of %zu frames, branching %d, depth %d...\n", descriptors,
+                 features.frames.size(), branching, a.vocabulary.depth);
   const auto t0 = std::chrono::steady_clock::now();
   const vmap::AnyVocabulary v = vmap::examples::learn_vocabulary(features.frames, a.vocabulary);
   const double learn_s = vmap::examples::seconds_since(t0);
@@ -81,13 +86,14 @@ std::function<int()> setup(CLI::App& app) {
   auto a = std::make_shared<VocabularyArgs>();
   app.add_option("FRAMES", a->input, "Frames: image folder, list file, video or TUM rgb.txt");
   app.add_option("--out", a->out, "The vocabulary file to write");
-  app.add_option("--words", a->vocabulary.words, "At most this many words (branching k: smallest with k^depth >= words)")
-      ->capture_default_str();
-  app.add_option("--depth", a->vocabulary.depth, "Depth L of the tree")->capture_default_str();
+  vmap::examples::add_vocabulary_options(app, a->vocabulary, "");
   app.add_option("--seed", a->vocabulary.seed, "Seed of the sample and the clustering")->capture_default_str();
   app.add_option("--features", a->descriptor.name, "orb, akaze, sift or xfeat")->capture_default_str();
-  app.add_option("--nfeatures", a->descriptor.features, "Keypoint budget per image (ORB, SIFT; top-k for XFeat)")
-      ->capture_default_str();
+  app.add_option("--nfeatures", a->descriptor.features,
+                 "Keypoint budget per image (ORB, SIFT; top-k for XFeat), at most " +
+                     std::to_string(vmap::examples::max_nfeatures))
+      ->capture_default_str()
+      ->check(vmap::examples::count_in(1, vmap::examples::max_nfeatures));
   app.add_option("--model", a->descriptor.model, "--features xfeat: the XFeat ONNX model");
   auto* c = app.add_subcommand("convert", "Convert a vocabulary file (vmap, ORBvoc.txt, DBoW2 .yml/.yml.gz, FBoW) to vmap's "
                                           "format, or to ORBvoc text (OUTPUT *.txt) or FBoW (OUTPUT *.fbow)");

@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -968,6 +969,8 @@ TEST_SUITE("data") {
     const Run csv = run_vmap({"build", cam0 + "/data.csv", "--end", "30", "--json"});
     REQUIRE(csv.code == 0);
     CHECK(without_times(nlohmann::json::parse(csv.out))["key_images"] == without_times(j)["key_images"]);
+    // The recording's top folder holds one sequence per camera: the error names them.
+    fails_with({"build", mav0.string()}, 1, "it is a EuRoC recording: give one of its camera folders (" + cam0 + ")");
     const std::string gt = (mav0 / "state_groundtruth_estimate0" / "data.csv").string();
     const Run loops = run_vmap({"loops", cam0, "--gt-poses", gt, "--json"});
     INFO(loops.err);
@@ -1018,5 +1021,111 @@ TEST_SUITE("data") {
     }
     CHECK(vertices == tum.size());
     CHECK(edges == info["loops"].size());
+  }
+}
+
+TEST_CASE("cli: vocabulary value errors exit 2 before any frame is read; one summary line to a non-terminal") {
+  const std::string out = (work_dir() / "v.vmapvoc").string();
+  usage_error({"vocabulary", sample, "--out", out, "--depth", "0"}, "--depth: must be >= 1, got '0'");
+  usage_error({"vocabulary", sample, "--out", out, "--words", "0"}, "--words: must be >= 2, got '0'");
+  usage_error({"vocabulary", sample, "--out", out, "--nfeatures", "-5"}, "--nfeatures: must be >= 1, got '-5'");
+  usage_error({"vocabulary", sample, "--out", out, "--words", "99999999999999999999"}, "--words: must be <= 100000000");
+  // A branching above the tree's 4096: refused before the features are extracted.
+  const Run wide = run_vmap({"vocabulary", sample, "--out", out, "--words", "100000000", "--depth", "2"});
+  CHECK(wide.code == 2);
+  CHECK(wide.err.find("--words 100000000 with --depth 2 needs a branching above 4096") != std::string::npos);
+  CHECK(wide.err.find("features") == std::string::npos);
+  usage_error({"loops", sample, "--words", "100000000", "--depth", "1"}, "needs a branching above 4096");
+  CHECK(!fs::exists(out));
+
+  // stderr is a file here: no carriage return, at most the one summary line of the run.
+  const Run r = run_vmap({"vocabulary", sample, "--out", out, "--words", "64", "--depth", "2"});
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  CHECK(r.err.find('\r') == std::string::npos);
+  CHECK(std::count(r.err.begin(), r.err.end(), '\n') <= 1);
+  CHECK(r.out.find(out + ": ") == 0);
+}
+
+TEST_SUITE("data") {
+  TEST_CASE("cli: loops on a sequence names each loop's frames and times; --out writes loops.txt and loops.g2o") {
+    // Poses for rtabmap_loop's 84 frames (paired by order): frame k on a circle of
+    // radius 5 m, one turn per 42 frames, looking along the circle, so that the g2o
+    // edges have rotation and translation to check.
+    const fs::path dir = fresh_dir("loops_exports");
+    std::string tum = "# timestamp tx ty tz qx qy qz qw\n";
+    for (int k = 0; k < 84; ++k) {
+      const double a = 2.0 * 3.14159265358979 * k / 42.0;
+      char row[160];
+      std::snprintf(row, sizeof row, "%d %.12f %.12f 0 0 0 %.12f %.12f\n", k + 1, 5 * std::cos(a), 5 * std::sin(a),
+                    std::sin(a / 2), std::cos(a / 2));
+      tum += row;
+    }
+    write(dir / "poses.txt", tum);
+    const std::string images = vmap::test::data_path("rtabmap_loop/images").string();
+    const Run r = run_vmap({"loops", images, "--gt-poses", (dir / "poses.txt").string(), "--out", (dir / "out").string(),
+                            "--json"});
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+    const auto j = nlohmann::json::parse(r.out);
+    const auto& loops = j["loops"];
+    REQUIRE(loops.size() >= 10);
+    CHECK(j["files"] == nlohmann::json({"loops.txt", "loops.g2o", "pr.csv", "pr.png"}));
+    for (const auto& l : loops) {
+      // Frame k is images/(k+1).jpg, whose name is its time in seconds.
+      const auto q = l["query"].get<std::size_t>(), m = l["match"].get<std::size_t>();
+      CHECK(l["query_name"] == std::to_string(q + 1) + ".jpg");
+      CHECK(l["match_name"] == std::to_string(m + 1) + ".jpg");
+      CHECK(l["query_time"].get<double>() == static_cast<double>(q + 1));
+      CHECK(l["match_time"].get<double>() == static_cast<double>(m + 1));
+    }
+    std::istringstream pairs(slurp(dir / "out" / "loops.txt"));
+    std::string line;
+    std::getline(pairs, line);
+    CHECK(line == "# query_time match_time query_name match_name inliers");
+    for (const auto& l : loops) {
+      REQUIRE(std::getline(pairs, line));
+      CHECK(line == std::to_string(l["query"].get<std::size_t>() + 1) + " " + std::to_string(l["match"].get<std::size_t>() + 1) +
+                        " " + l["query_name"].get<std::string>() + " " + l["match_name"].get<std::string>() + " " +
+                        std::to_string(l["inliers"].get<int>()));
+    }
+    CHECK(!std::getline(pairs, line));
+    const auto poses = vmap::load_tum_poses(dir / "poses.txt");
+    std::istringstream g2o(slurp(dir / "out" / "loops.g2o"));
+    std::size_t edges = 0;
+    std::vector<std::size_t> vertices;
+    for (; std::getline(g2o, line);) {
+      std::istringstream row(line);
+      std::vector<std::string> t;
+      for (std::string s; row >> s;) t.push_back(s);
+      if (t[0] == "VERTEX_SE3:QUAT") {
+        REQUIRE(t.size() == 9);
+        const auto id = std::stoul(t[1]);
+        vertices.push_back(id);
+        CHECK(std::stod(t[2]) == doctest::Approx(poses[id].position[0]).epsilon(1e-9));
+        CHECK(std::stod(t[3]) == doctest::Approx(poses[id].position[1]).epsilon(1e-9));
+        continue;
+      }
+      REQUIRE(t[0] == "EDGE_SE3:QUAT");
+      REQUIRE(t.size() == 31);
+      REQUIRE(edges < loops.size());
+      const auto from = std::stoul(t[1]), to = std::stoul(t[2]);
+      CHECK(from == loops[edges]["query"].get<std::size_t>());
+      CHECK(to == loops[edges]["match"].get<std::size_t>());
+      // The pose of `to` in the frame of `from`: R_from^T (p_to - p_from), and about z
+      // the angle between them (qz = sin(d/2)).
+      const cv::Vec3d d = poses[from].rotation.t() * (poses[to].position - poses[from].position);
+      for (std::size_t k = 0; k < 3; ++k) CHECK(std::stod(t[3 + k]) == doctest::Approx(d[static_cast<int>(k)]).epsilon(1e-6));
+      const double turn = 2.0 * 3.14159265358979 * (static_cast<double>(to) - static_cast<double>(from)) / 42.0;
+      CHECK(std::abs(std::stod(t[8])) == doctest::Approx(std::abs(std::sin(turn / 2))).epsilon(1e-5));
+      ++edges;
+    }
+    CHECK(edges == loops.size());
+    CHECK(std::is_sorted(vertices.begin(), vertices.end()));
+    const Run text = run_vmap({"loops", images, "--out", (dir / "text").string()});
+    REQUIRE(text.code == 0);
+    CHECK(text.out.find(".jpg) -> frame") != std::string::npos);
+    CHECK(text.out.find("wrote " + (dir / "text").string() + "/{loops.txt}") != std::string::npos);
+    CHECK(slurp(dir / "text" / "loops.txt") == slurp(dir / "out" / "loops.txt"));
   }
 }

@@ -7,7 +7,8 @@
 //                   by load_tum_poses): the key images' poses with their frame times.
 //   loop pairs      "query_time match_time query_name match_name inliers" a line: each
 //                   loop edge as the two frames' timestamps and names.
-//   g2o             "EDGE_SE3:QUAT from to dx dy dz qx qy qz qw I11 I12 .. I66" a line
+//   g2o             "VERTEX_SE3:QUAT id x y z qx qy qz qw" a line per pose, and
+//                   "EDGE_SE3:QUAT from to dx dy dz qx qy qz qw I11 I12 .. I66" a line
 //                   (g2o's and GTSAM's readers): a constraint between two key images,
 //                   the pose of `to` in the frame of `from`, with the upper triangle of
 //                   a 6x6 information matrix (translation first, then rotation).
@@ -138,6 +139,17 @@ struct LoopPair {
     detail::append_field(out, std::to_string(l.inliers));
     out += '\n';
   }
+  return out;
+}
+
+/// A g2o VERTEX_SE3:QUAT line: vertex `id` at `pose` (its position and rotation).
+[[nodiscard]] inline std::string g2o_vertex_line(std::size_t id, const CameraPose& pose) {
+  const auto q = quaternion_from_rotation(pose.rotation);
+  std::string out = "VERTEX_SE3:QUAT";
+  detail::append_field(out, std::to_string(id));
+  for (double v : {pose.position[0], pose.position[1], pose.position[2], q[0], q[1], q[2], q[3]})
+    detail::append_field(out, detail::shortest(v));
+  out += '\n';
   return out;
 }
 

@@ -34,6 +34,7 @@
 #include <vmap/io/detail/lines.hpp>
 #include <vmap/io/files.hpp>
 #include <vmap/io/image.hpp>
+#include <vmap/io/timestamps.hpp>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -232,7 +233,7 @@ inline std::vector<ListEntry> read_euroc_csv(const std::filesystem::path& file) 
     const std::string name = trim(line.substr(comma + 1));
     if (name.empty() || name.find(',') != std::string::npos)
       fail(where + "'" + line + "' is not '<timestamp [ns]>,<file name>' (EuRoC data.csv)");
-    out.push_back({images / name, static_cast<double>(ns / 1000000000ULL) + static_cast<double>(ns % 1000000000ULL) * 1e-9});
+    out.push_back({images / name, seconds_from_nanoseconds(ns)});
   });
   if (out.empty()) fail("frame source: EuRoC data.csv '" + file.string() + "' names no image");
   return out;
@@ -273,8 +274,7 @@ inline std::optional<std::vector<double>> times_from_names(const std::vector<std
     const std::string stem = std::filesystem::path(names[k]).stem().string();
     std::uint64_t v = 0;
     (void)std::from_chars(stem.data(), stem.data() + stem.size(), v);
-    const auto per_second = static_cast<std::uint64_t>(std::llround(1.0 / unit));
-    values[k] = static_cast<double>(v / per_second) + static_cast<double>(v % per_second) * unit;
+    values[k] = seconds_from_count(v, static_cast<std::uint64_t>(std::llround(1.0 / unit)));
   }
   return values;
 }
@@ -329,7 +329,7 @@ class FrameSource {
         if (detail::is_image_file(it->path()) && !it->is_directory(sub)) names.push_back(it->path().filename().string());
       }
       if (ec) detail::fail("frame source: cannot read folder '" + input.string() + "': " + ec.message());
-      if (names.empty()) detail::fail("frame source: folder '" + input.string() + "' contains no image file");
+      if (names.empty()) fail_no_image(input);
       std::sort(names.begin(), names.end(), detail::natural_less);
       const auto times = detail::times_from_names(names);
       for (std::size_t k = 0; k < names.size(); ++k)
@@ -402,6 +402,30 @@ class FrameSource {
 
   [[noreturn]] static void fail_missing(const std::filesystem::path& p) {
     detail::fail("frame source: '" + p.string() + "' does not exist");
+  }
+
+  /// A folder without images; a EuRoC recording (`mav0`, whose cameras are `cam0`,
+  /// `cam1`, ... with `data.csv` and `data/`) gets its camera folders named, as it holds
+  /// one sequence per camera and which one is meant is the user's choice.
+  [[noreturn]] static void fail_no_image(const std::filesystem::path& folder) {
+    std::vector<std::string> cameras;
+    std::error_code ec;
+    for (std::filesystem::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec))
+      if (std::filesystem::is_regular_file(it->path() / "data.csv", ec) && std::filesystem::is_directory(it->path() / "data", ec))
+        cameras.push_back((folder / it->path().filename()).string());
+    std::sort(cameras.begin(), cameras.end());
+    std::string what = "frame source: folder '";
+    what += folder.string();
+    what += "' contains no image file";
+    if (!cameras.empty()) {
+      what += "; it is a EuRoC recording: give one of its camera folders (";
+      for (std::size_t k = 0; k < cameras.size(); ++k) {
+        if (k > 0) what += ", ";
+        what += cameras[k];
+      }
+      what += ')';
+    }
+    detail::fail(what);
   }
 
   /// A camera index, device, URL or pipeline through cv::VideoCapture: no existence

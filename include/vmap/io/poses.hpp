@@ -18,6 +18,7 @@
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/detail/lines.hpp>
+#include <vmap/io/timestamps.hpp>
 
 #include <opencv2/core.hpp>
 
@@ -186,12 +187,6 @@ inline bool is_euroc_csv(std::string_view text) {
 }
 
 }  // namespace detail
-
-/// Seconds from a whole number of nanoseconds, exact to the nanosecond at Unix times (a
-/// direct division of the 19-digit number would round it to a double first).
-[[nodiscard]] inline double seconds_from_nanoseconds(std::uint64_t ns) noexcept {
-  return static_cast<double>(ns / 1000000000ULL) + static_cast<double>(ns % 1000000000ULL) * 1e-9;
-}
 
 /// Poses from an ASL / EuRoC CSV such as `mav0/state_groundtruth_estimate0/data.csv`:
 /// `timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z[, ...]` a line (comma-separated,
