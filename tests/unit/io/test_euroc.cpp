@@ -4,6 +4,7 @@
 #include <vmap/io/calibration.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
+#include <vmap/io/timestamps.hpp>
 
 #include "support/euroc_layout.hpp"
 #include "support/images.hpp"
@@ -180,4 +181,14 @@ TEST_SUITE("data") {
     const auto same = vmap::poses_for_frames(tum, t, "tum", 0.02, false);
     for (std::size_t k = 0; k < 100; ++k) CHECK(cv::norm(poses[k].position - same[k].position) < 1e-12);
   }
+}
+
+TEST_CASE("whole sub-second counts are seconds exact to the unit at Unix times") {
+  // 1305031229528748035 ns divided as one double would be 1305031229.5287480 (rounded to
+  // the double nearest the 19-digit count first); the split keeps the last digits.
+  CHECK(vmap::seconds_from_nanoseconds(1305031229528748035ULL) == 1305031229.0 + 528748035e-9);
+  CHECK(vmap::seconds_from_count(1305031229528748ULL, 1000000ULL) == 1305031229.0 + 528748e-6);
+  CHECK(vmap::seconds_from_count(1305031229528ULL, 1000ULL) == 1305031229.0 + 0.528);
+  CHECK(vmap::seconds_from_count(42, 1) == 42.0);
+  CHECK(vmap::seconds_from_nanoseconds(0) == 0.0);
 }
