@@ -284,6 +284,8 @@ struct GraphNeighbour {
   Kind kind = Kind::link;
 };
 
+class MemoryStore;
+
 namespace detail {
 
 inline constexpr char memory_magic[8] = {'V', 'M', 'A', 'P', 'M', 'E', 'M', 'O'};
@@ -534,6 +536,11 @@ inline BinaryReader memory_open_section(BinaryReader& file, const char (&tag)[5]
 /// Similarity; keyframe/selector.hpp).
 template <Descriptor D, Matcher M, Estimator E, Similarity S>
 class VisualMemory {
+  // The store (memory/store.hpp) writes the file's sections apart: one row per key
+  // image, link and loop edge, the rest as small rows; it joins them back into the
+  // sections deserialize() reads.
+  friend class MemoryStore;
+
  public:
   using Selector = KeyframeSelector<D, M, E, S>;
   /// The loop engine over the key images (32-bit key indices in the place database).
@@ -684,6 +691,7 @@ class VisualMemory {
     for (const auto& v : vectors) winners.push_back(network.bmu(v).cell);
     gcs_.emplace(GcsPart{options, std::move(histogram), PoseMap<GcsXf>::from_assignments(std::move(network), winners, poses),
                          std::move(keys), std::move(winners)});
+    ++gcs_generation_;
     return stats;
   }
 
@@ -758,37 +766,12 @@ class VisualMemory {
   /// only the pixels the memory kept).
   [[nodiscard]] std::string serialize(std::optional<ImageStorage> images = {}) const {
     const ImageStorage storage = images.value_or(options_.images);
-    detail::MemorySectionWriter s;
-    s.add("opts", options_bytes(storage));
-    s.add("keys", keys_bytes(storage));
-    s.add("link", links_bytes());
-    s.add("loop", loops_bytes());
-    s.add("selc", selector_bytes(storage));
-    detail::BinaryWriter v;
-    v.u8(vocabulary_->empty() ? 0 : 1);
-    if (!vocabulary_->empty()) {
-      const std::string bytes =
-          vocabulary_->binary() ? vocabulary_->binary()->serialize() : vocabulary_->floating()->serialize();
-      v.u64(bytes.size());
-      v.bytes(bytes);
-    }
-    s.add("voca", std::move(v).take());
-    detail::BinaryWriter d;
-    const std::string db =
-        engine_ ? database().serialize() : PlaceDatabase<std::uint32_t>(vocabulary_->size(), options_.scoring).serialize();
-    d.u64(db.size());
-    d.bytes(db);
-    s.add("plcd", std::move(d).take());
-    s.add("plcy", policies_bytes());
-    s.add("labl", labels_bytes());
-    s.add("gcsl", gcs_bytes());
-    s.add("dcsn", decision_bytes());
-    detail::BinaryWriter h;
-    h.bytes(detail::memory_magic, 8);
-    h.u32(memory_format_version);
-    h.u32(detail::memory_sections);
-    h.bytes(s.out_.data());
-    return std::move(h).take();
+    return file_bytes({options_bytes(storage), keys_bytes(storage), links_bytes(), loops_bytes(),
+                       selector_bytes(storage), vocabulary_bytes(),
+                       database_section(engine_ ? database().serialize()
+                                                : PlaceDatabase<std::uint32_t>(vocabulary_->size(), options_.scoring)
+                                                      .serialize()),
+                       policies_bytes(), labels_bytes(), gcs_bytes(), decision_bytes()});
   }
 
   /// Writes the memory atomically (temporary file, fsync, rename, fsync of the folder):
@@ -1104,6 +1087,41 @@ class VisualMemory {
 
   // ---- file sections ------------------------------------------------------------
 
+  /// The file of the current version from its 11 sections' bytes, in the order of the
+  /// format at the top of this header.
+  static std::string file_bytes(const std::array<std::string, detail::memory_sections>& sections) {
+    static constexpr const char tags[detail::memory_sections][5] = {"opts", "keys", "link", "loop", "selc", "voca",
+                                                                    "plcd", "plcy", "labl", "gcsl", "dcsn"};
+    detail::MemorySectionWriter s;
+    for (std::size_t i = 0; i < sections.size(); ++i) s.add(tags[i], sections[i]);
+    detail::BinaryWriter h;
+    h.bytes(detail::memory_magic, 8);
+    h.u32(memory_format_version);
+    h.u32(detail::memory_sections);
+    h.bytes(s.out_.data());
+    return std::move(h).take();
+  }
+
+  std::string vocabulary_bytes() const {
+    detail::BinaryWriter v;
+    v.u8(vocabulary_->empty() ? 0 : 1);
+    if (!vocabulary_->empty()) {
+      const std::string bytes =
+          vocabulary_->binary() ? vocabulary_->binary()->serialize() : vocabulary_->floating()->serialize();
+      v.u64(bytes.size());
+      v.bytes(bytes);
+    }
+    return std::move(v).take();
+  }
+
+  /// "plcd" around a place database file's bytes.
+  static std::string database_section(std::string_view database_file) {
+    detail::BinaryWriter d;
+    d.u64(database_file.size());
+    d.bytes(database_file);
+    return std::move(d).take();
+  }
+
   std::string options_bytes(ImageStorage storage) const {
     const MemoryOptions& o = options_;
     detail::BinaryWriter w;
@@ -1184,41 +1202,52 @@ class VisualMemory {
     return k;
   }
 
+  /// Key image i as "keys" holds it: the key image, then its pose.
+  void write_key_record(detail::BinaryWriter& w, std::size_t i, ImageStorage storage) const {
+    const KeyImage& k = selector_.map().keys[i];
+    write_key(w, k.frame_index, k.timestamp, k.name, k.features, k.image, storage);
+    detail::memory_write_pose(w, poses_[i]);
+  }
+
   std::string keys_bytes(ImageStorage storage) const {
     const VisualMap& map = selector_.map();
     detail::BinaryWriter w;
     w.u64(map.frames);
     w.u32(static_cast<std::uint32_t>(map.keys.size()));
-    for (std::size_t i = 0; i < map.keys.size(); ++i) {
-      const KeyImage& k = map.keys[i];
-      write_key(w, k.frame_index, k.timestamp, k.name, k.features, k.image, storage);
-      detail::memory_write_pose(w, poses_[i]);
-    }
+    for (std::size_t i = 0; i < map.keys.size(); ++i) write_key_record(w, i, storage);
     return std::move(w).take();
+  }
+
+  /// Link i (key image i to i + 1) as "link" holds it.
+  void write_link_record(detail::BinaryWriter& w, std::size_t i) const {
+    const auto& p = selector_.map().pairs[i];
+    w.u8(static_cast<std::uint8_t>(p.status));
+    detail::memory_write_matx(w, p.fundamental);
+    w.i32(p.matches);
+    w.i32(p.inliers);
+    w.f64(p.similarity);
   }
 
   std::string links_bytes() const {
     detail::BinaryWriter w;
     const auto& pairs = selector_.map().pairs;
     w.u32(static_cast<std::uint32_t>(pairs.size()));
-    for (const auto& p : pairs) {
-      w.u8(static_cast<std::uint8_t>(p.status));
-      detail::memory_write_matx(w, p.fundamental);
-      w.i32(p.matches);
-      w.i32(p.inliers);
-      w.f64(p.similarity);
-    }
+    for (std::size_t i = 0; i < pairs.size(); ++i) write_link_record(w, i);
     return std::move(w).take();
+  }
+
+  /// Loop edge i as "loop" holds it (its confidence is in "dcsn").
+  void write_loop_record(detail::BinaryWriter& w, std::size_t i) const {
+    const LoopEdge& e = loops_[i];
+    w.u32(e.from);
+    w.u32(e.link.key);
+    detail::memory_write_link(w, e.link);
   }
 
   std::string loops_bytes() const {
     detail::BinaryWriter w;
     w.u32(static_cast<std::uint32_t>(loops_.size()));
-    for (const auto& e : loops_) {
-      w.u32(e.from);
-      w.u32(e.link.key);
-      detail::memory_write_link(w, e.link);
-    }
+    for (std::size_t i = 0; i < loops_.size(); ++i) write_loop_record(w, i);
     return std::move(w).take();
   }
 
@@ -1271,7 +1300,9 @@ class VisualMemory {
     r.expect_end("the policies");
   }
 
-  std::string labels_bytes() const {
+  /// "labl" up to the key images' detections: the label options, whether the frames are
+  /// labelled, the schema.
+  std::string labels_head_bytes() const {
     const MemoryLabelOptions& o = options_.labels;
     detail::BinaryWriter w;
     w.f32(options_.loops.labels.min_score);
@@ -1288,13 +1319,26 @@ class VisualMemory {
     w.u8(labelled_ ? 1 : 0);
     w.u8(schema_ ? 1 : 0);
     if (schema_) write_labels(schema_->labels());
-    w.u32(static_cast<std::uint32_t>(key_detections_.size()));
-    for (const auto& d : key_detections_) detail::memory_write_detections(w, d);
-    // Those of I_{j-1} only while the selector holds it (not when the last frame is the
-    // last key image): the only case a later key image can be that frame.
+    return std::move(w).take();
+  }
+
+  /// "labl"'s last part: the detections of I_{j-1} only while the selector holds it (not
+  /// when the last frame is the last key image): the only case a later key image can be
+  /// that frame.
+  std::string previous_detections_bytes() const {
+    detail::BinaryWriter w;
     const auto& keys = selector_.map().keys;
     const bool has_previous = last_index_ && !(!keys.empty() && keys.back().frame_index == *last_index_);
     detail::memory_write_detections(w, has_previous ? previous_detections_ : std::vector<Detection>{});
+    return std::move(w).take();
+  }
+
+  std::string labels_bytes() const {
+    detail::BinaryWriter w;
+    w.bytes(labels_head_bytes());
+    w.u32(static_cast<std::uint32_t>(key_detections_.size()));
+    for (const auto& d : key_detections_) detail::memory_write_detections(w, d);
+    w.bytes(previous_detections_bytes());
     return std::move(w).take();
   }
 
@@ -1369,7 +1413,9 @@ class VisualMemory {
     ConsistencyState<std::size_t> consistency{};
   };
 
-  std::string decision_bytes() const {
+  /// "dcsn" without the loop edges' confidences: the decision's options and the
+  /// engine's state.
+  std::string decision_head_bytes() const {
     const LoopOptions& o = options_.loops;
     detail::BinaryWriter w;
     w.u64(o.temporal_consistency);
@@ -1398,6 +1444,12 @@ class VisualMemory {
     w.u64(c.island_begin);
     w.u64(c.island_end);
     w.u8(c.accepted ? 1 : 0);
+    return std::move(w).take();
+  }
+
+  std::string decision_bytes() const {
+    detail::BinaryWriter w;
+    w.bytes(decision_head_bytes());
     w.u32(static_cast<std::uint32_t>(loops_.size()));
     for (const LoopEdge& e : loops_) w.f64(e.link.confidence);
     return std::move(w).take();
@@ -1571,6 +1623,7 @@ class VisualMemory {
   std::vector<Detection> previous_detections_;          ///< of the last pushed frame
   std::optional<LabelSchema> schema_;
   std::optional<GcsPart> gcs_;
+  std::uint64_t gcs_generation_ = 0;  ///< counts train_gcs calls (a store rewrites the GCS when it changes)
 };
 
 // Named stacks: the paper's ORB 1000 + mutual NN + MAGSAC++ + eq. 5, and A-KAZE / SIFT.

@@ -233,22 +233,31 @@ class PlaceDatabase {
     requires std::integral<Id>
   {
     detail::BinaryWriter w;
-    w.u8(static_cast<std::uint8_t>(scoring_));
-    w.u64(words_);
-    w.u64(slot_of_.size());
-    for (const auto& [id, slot] : slot_of_) {
-      w.u64(static_cast<std::uint64_t>(static_cast<std::conditional_t<std::is_signed_v<Id>, std::int64_t, std::uint64_t>>(id)));
-      const auto& v = slots_[slot].bow;
-      w.u32(static_cast<std::uint32_t>(v.size()));
-      if constexpr (entries_as_bytes) {
-        if (!v.empty()) w.bytes(v.entries.data(), v.entries.size() * sizeof(BowEntry));  // {u32 word, f32 weight} as stored
-      } else {
-        for (const auto& e : v.entries) {
-          w.u32(e.word);
-          w.f32(e.weight);
-        }
-      }
-    }
+    for (const auto& [id, slot] : slot_of_) write_record(w, id, slots_[slot].bow);
+    return serialize_records(scoring_, words_, slot_of_.size(), std::move(w).take());
+  }
+
+  /// One image's part of the file ("u64 id, u32 e, e x {u32 word, f32 weight}"): a store
+  /// that keeps images apart (memory/store.hpp) joins them with serialize_records.
+  /// Empty when `id` is not in the database.
+  [[nodiscard]] std::string record(const Id& id) const
+    requires std::integral<Id>
+  {
+    const auto it = slot_of_.find(id);
+    if (it == slot_of_.end()) return {};
+    detail::BinaryWriter w;
+    write_record(w, id, slots_[it->second].bow);
+    return std::move(w).take();
+  }
+
+  /// The file's bytes from `count` records (record()) joined in increasing id order.
+  [[nodiscard]] static std::string serialize_records(BowScoring scoring, std::size_t words, std::size_t count,
+                                                     std::string_view records) {
+    detail::BinaryWriter w;
+    w.u8(static_cast<std::uint8_t>(scoring));
+    w.u64(words);
+    w.u64(count);
+    w.bytes(records);
     return detail::wrap_payload(file_magic(), file_version, std::move(w).take());
   }
 
@@ -328,6 +337,22 @@ class PlaceDatabase {
   }
 
   static constexpr std::uint32_t file_version = 1;
+
+ private:
+  static void write_record(detail::BinaryWriter& w, const Id& id, const BowVector& v) {
+    w.u64(static_cast<std::uint64_t>(static_cast<std::conditional_t<std::is_signed_v<Id>, std::int64_t, std::uint64_t>>(id)));
+    w.u32(static_cast<std::uint32_t>(v.size()));
+    if constexpr (entries_as_bytes) {
+      if (!v.empty()) w.bytes(v.entries.data(), v.entries.size() * sizeof(BowEntry));  // {u32 word, f32 weight} as stored
+    } else {
+      for (const auto& e : v.entries) {
+        w.u32(e.word);
+        w.f32(e.weight);
+      }
+    }
+  }
+
+ public:
   static constexpr std::string_view file_magic() noexcept { return {"VMAPBOWD", 8}; }
 
  private:

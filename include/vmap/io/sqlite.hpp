@@ -1,0 +1,267 @@
+#pragma once
+
+// A thin RAII layer over SQLite's C API (Debian's libsqlite3, linked by vmap::vmap) for
+// the memory's store (memory/store.hpp): a connection, prepared statements and
+// transactions. Every failure is a vmap::Error naming the database file, what was being
+// done and SQLite's own message ("memory 'm.vmdb': insert key image 12: database or disk
+// is full"), never an error code to check.
+//
+// Writers open a database with Access::write: the connection uses a write-ahead log
+// (readers keep reading while the writer commits) with synchronous=FULL (a committed
+// transaction survives a power cut), and takes an advisory lock (flock) on the file for
+// as long as it is open, so a second writer is refused at open with a message naming
+// the file, whichever process it is in. flock and SQLite's own POSIX locks do not
+// interact on Linux; the descriptor holding the flock stays open until after SQLite
+// closed the file, so SQLite's locks are never dropped by a close() of ours. Readers
+// (Access::read) take no lock and see the last committed transaction.
+
+#include <vmap/core/error.hpp>
+
+#include <sqlite3.h>
+
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <string>
+#include <string_view>
+#include <utility>
+
+namespace vmap::sqlite {
+
+enum class Access : std::uint8_t {
+  read,   ///< an existing database, read-only; any number at once, also while one writes
+  write,  ///< an existing database, read and write; one at a time
+  create  ///< a new database file (refused when the file exists), then as write
+};
+
+class Statement;
+
+/// One connection to a database file.
+class Database {
+ public:
+  Database() = default;
+
+  /// Opens `path`; `what` names it in every message (e.g. "memory 'm.vmdb'").
+  Database(const std::filesystem::path& path, Access access, std::string what) : what_(std::move(what)) {
+    std::error_code ec;
+    const bool exists = std::filesystem::exists(path, ec);
+    if (access == Access::create && exists) fail("exists already");
+    if (access != Access::create && !exists) fail("does not exist");
+    if (exists && !std::filesystem::is_regular_file(path, ec)) fail("is not a regular file");
+    if (access != Access::read) lock(path, access == Access::create);
+    const int flags = access == Access::read ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE;
+    sqlite3* db = nullptr;
+    const int rc = sqlite3_open_v2(path.c_str(), &db, flags | SQLITE_OPEN_NOMUTEX, nullptr);
+    db_ = db;
+    if (rc != SQLITE_OK) {
+      const std::string why = db ? sqlite3_errmsg(db) : sqlite3_errstr(rc);
+      close();
+      fail("cannot be opened: " + why);
+    }
+    sqlite3_extended_result_codes(db_, 1);
+    // A reader waits up to 5 s for a writer's checkpoint instead of failing at once.
+    sqlite3_busy_timeout(db_, 5000);
+    if (access != Access::read) {
+      exec("PRAGMA journal_mode=WAL", "use a write-ahead log");
+      exec("PRAGMA synchronous=FULL", "set synchronous=FULL");
+    }
+  }
+
+  Database(Database&& o) noexcept
+      : db_(std::exchange(o.db_, nullptr)), lock_fd_(std::exchange(o.lock_fd_, -1)), what_(std::move(o.what_)) {}
+  Database& operator=(Database&& o) noexcept {
+    if (this != &o) {
+      close();
+      db_ = std::exchange(o.db_, nullptr);
+      lock_fd_ = std::exchange(o.lock_fd_, -1);
+      what_ = std::move(o.what_);
+    }
+    return *this;
+  }
+  Database(const Database&) = delete;
+  Database& operator=(const Database&) = delete;
+  ~Database() { close(); }
+
+  [[nodiscard]] bool is_open() const noexcept { return db_ != nullptr; }
+  [[nodiscard]] const std::string& what() const noexcept { return what_; }
+  [[nodiscard]] sqlite3* handle() const noexcept { return db_; }
+
+  /// Runs SQL without results (several statements allowed); `doing` names it in errors.
+  void exec(const std::string& sql, std::string_view doing) {
+    char* message = nullptr;
+    const int rc = sqlite3_exec(db_, sql.c_str(), nullptr, nullptr, &message);
+    if (rc != SQLITE_OK) {
+      const std::string why = message ? message : sqlite3_errstr(rc);
+      sqlite3_free(message);
+      fail(std::string(doing) + ": " + why);
+    }
+  }
+
+  /// A prepared statement (see Statement).
+  [[nodiscard]] Statement prepare(std::string_view sql, std::string_view doing);
+
+  /// An Error "<what> <doing>: <SQLite's message>".
+  [[noreturn]] void fail_sqlite(std::string_view doing) const {
+    fail(std::string(doing) + ": " + (db_ ? sqlite3_errmsg(db_) : "not open"));
+  }
+
+  /// An Error "<what> <message>".
+  [[noreturn]] void fail(const std::string& message) const { vmap::detail::fail(what_ + " " + message); }
+
+ private:
+  void lock(const std::filesystem::path& path, bool create) {
+    lock_fd_ = ::open(path.c_str(), O_RDWR | O_CLOEXEC | (create ? O_CREAT | O_EXCL : 0), 0644);
+    if (lock_fd_ < 0) fail(std::string("cannot be opened for writing: ") + std::strerror(errno));
+    if (::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0) {
+      const int err = errno;
+      ::close(std::exchange(lock_fd_, -1));
+      if (err == EWOULDBLOCK)
+        fail("is being written by another program (one writer at a time; open it read-only to localize while it maps)");
+      fail(std::string("cannot be locked: ") + std::strerror(err));
+    }
+  }
+
+  void close() noexcept {
+    if (db_) sqlite3_close_v2(std::exchange(db_, nullptr));
+    if (lock_fd_ >= 0) ::close(std::exchange(lock_fd_, -1));
+  }
+
+  sqlite3* db_ = nullptr;
+  int lock_fd_ = -1;  ///< holds the writer's flock; closed after the database
+  std::string what_;
+};
+
+/// A prepared statement: bind parameters (1-based), step through rows, read columns
+/// (0-based). Reset before it runs again. It keeps the connection's handle, not the
+/// Database object, so it stays valid when that object is moved.
+class Statement {
+ public:
+  Statement(const Database& db, std::string_view sql, std::string_view doing)
+      : db_(db.handle()), what_(db.what()), doing_(doing) {
+    sqlite3_stmt* s = nullptr;
+    if (sqlite3_prepare_v3(db_, sql.data(), static_cast<int>(sql.size()), SQLITE_PREPARE_PERSISTENT, &s, nullptr) !=
+        SQLITE_OK)
+      fail_sqlite();
+    stmt_ = s;
+  }
+  Statement(Statement&& o) noexcept
+      : db_(o.db_), stmt_(std::exchange(o.stmt_, nullptr)), what_(std::move(o.what_)), doing_(std::move(o.doing_)) {}
+  Statement& operator=(Statement&& o) noexcept {
+    if (this != &o) {
+      sqlite3_finalize(stmt_);
+      db_ = o.db_;
+      stmt_ = std::exchange(o.stmt_, nullptr);
+      what_ = std::move(o.what_);
+      doing_ = std::move(o.doing_);
+    }
+    return *this;
+  }
+  Statement(const Statement&) = delete;
+  Statement& operator=(const Statement&) = delete;
+  ~Statement() { sqlite3_finalize(stmt_); }
+
+  Statement& bind(int i, std::int64_t v) { return check(sqlite3_bind_int64(stmt_, i, v)); }
+  Statement& bind(int i, double v) { return check(sqlite3_bind_double(stmt_, i, v)); }
+  Statement& bind_text(int i, std::string_view v) {
+    return check(sqlite3_bind_text64(stmt_, i, v.data(), v.size(), SQLITE_TRANSIENT, SQLITE_UTF8));
+  }
+  Statement& bind_blob(int i, std::string_view v) {
+    // A zero-length blob is bound as one, not as NULL (a null pointer would be NULL).
+    static const char empty = 0;
+    return check(sqlite3_bind_blob64(stmt_, i, v.empty() ? &empty : v.data(), v.size(), SQLITE_TRANSIENT));
+  }
+  Statement& bind_null(int i) { return check(sqlite3_bind_null(stmt_, i)); }
+
+  /// The next row: true while there is one; false when done.
+  bool step() {
+    const int rc = sqlite3_step(stmt_);
+    if (rc == SQLITE_ROW) return true;
+    if (rc == SQLITE_DONE) return false;
+    fail_sqlite();
+  }
+  /// Runs a statement that returns no row, then resets it for the next bindings.
+  void run() {
+    if (step()) fail("returned a row");
+    reset();
+  }
+  void reset() {
+    sqlite3_reset(stmt_);
+    sqlite3_clear_bindings(stmt_);
+  }
+
+  [[nodiscard]] bool is_null(int c) const { return sqlite3_column_type(stmt_, c) == SQLITE_NULL; }
+  [[nodiscard]] std::int64_t integer(int c) const {
+    expect(c, SQLITE_INTEGER, "an integer");
+    return sqlite3_column_int64(stmt_, c);
+  }
+  [[nodiscard]] double real(int c) const {
+    const int t = sqlite3_column_type(stmt_, c);
+    if (t != SQLITE_FLOAT && t != SQLITE_INTEGER) type_error(c, "a number");
+    return sqlite3_column_double(stmt_, c);
+  }
+  [[nodiscard]] std::string text(int c) const {
+    expect(c, SQLITE_TEXT, "text");
+    const auto* p = reinterpret_cast<const char*>(sqlite3_column_text(stmt_, c));
+    return p ? std::string(p, static_cast<std::size_t>(sqlite3_column_bytes(stmt_, c))) : std::string();
+  }
+  /// The column's bytes, valid until the next step or reset.
+  [[nodiscard]] std::string_view blob(int c) const {
+    expect(c, SQLITE_BLOB, "a blob");
+    const void* p = sqlite3_column_blob(stmt_, c);
+    const int n = sqlite3_column_bytes(stmt_, c);
+    return p ? std::string_view(static_cast<const char*>(p), static_cast<std::size_t>(n)) : std::string_view();
+  }
+
+ private:
+  Statement& check(int rc) {
+    if (rc != SQLITE_OK) fail_sqlite();
+    return *this;
+  }
+  [[noreturn]] void fail_sqlite() const { fail(sqlite3_errmsg(db_)); }
+  [[noreturn]] void fail(const std::string& message) const { vmap::detail::fail(what_ + " " + doing_ + ": " + message); }
+  void expect(int c, int type, const char* name) const {
+    if (sqlite3_column_type(stmt_, c) != type) type_error(c, name);
+  }
+  [[noreturn]] void type_error(int c, const char* name) const {
+    const char* column = sqlite3_column_name(stmt_, c);
+    fail(std::string("column '") + (column ? column : "?") + "' is not " + name);
+  }
+
+  sqlite3* db_ = nullptr;
+  sqlite3_stmt* stmt_ = nullptr;
+  std::string what_, doing_;
+};
+
+inline Statement Database::prepare(std::string_view sql, std::string_view doing) { return Statement(*this, sql, doing); }
+
+/// BEGIN IMMEDIATE (a writer's) or BEGIN (a reader's: one snapshot for every read in
+/// it) .. COMMIT; rolled back when destroyed uncommitted (an exception).
+class Transaction {
+ public:
+  enum class Kind : std::uint8_t { write, read };
+
+  Transaction(Database& db, std::string doing, Kind kind = Kind::write) : db_(&db), doing_(std::move(doing)) {
+    db.exec(kind == Kind::write ? "BEGIN IMMEDIATE" : "BEGIN", doing_ + ": begin");
+  }
+  Transaction(const Transaction&) = delete;
+  Transaction& operator=(const Transaction&) = delete;
+  ~Transaction() {
+    if (db_) sqlite3_exec(db_->handle(), "ROLLBACK", nullptr, nullptr, nullptr);
+  }
+  void commit() {
+    db_->exec("COMMIT", doing_ + ": commit");
+    db_ = nullptr;
+  }
+
+ private:
+  Database* db_;
+  std::string doing_;
+};
+
+}  // namespace vmap::sqlite

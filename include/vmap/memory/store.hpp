@@ -1,0 +1,370 @@
+#pragma once
+
+// A visual memory kept in an SQLite file (io/sqlite.hpp), written key image by key image.
+//
+//   auto store = vmap::MemoryStore::create("run.vmdb");
+//   vmap::OrbVisualMemory memory;
+//   for (...) { memory.push(frame); store.sync(memory); }   // one transaction per call
+//   ...
+//   auto again = vmap::MemoryStore::open("run.vmdb").load<vmap::OrbVisualMemory>();
+//
+// sync() writes what the memory made since the last sync, in one transaction: each new
+// key image (its features, pixels, pose and detections), the link to it, the bag of
+// words of each key image newly checked for loops, each new loop edge, and the few small
+// rows of state (the selector's I_{j-1}, the loop engine's counters, the options); the
+// vocabulary and the GCS only when they change. Rows once written are never rewritten,
+// so a sync costs the same at key image 10 as at key image 10,000, and a key image's
+// JPEG or PNG is encoded once. A crash or power cut loses at most the sync in flight
+// (SQLite's write-ahead log with synchronous=FULL); the file stays a valid memory.
+// load() joins the rows back into the memory file's sections (memory/visual_memory.hpp)
+// and parses them with the same checks as a .vmem file: a memory loaded from a store is
+// the memory that was synced, and pushing on continues exactly as the uninterrupted run.
+//
+// One writer at a time (open(..., write) of a memory another program writes is refused
+// with a message naming the file); any number of readers (open(..., read)) load the
+// last synced state while the writer goes on.
+//
+// Schema (version 1; PRAGMA application_id 0x564D4150 "VMAP", PRAGMA user_version 1),
+// documented for readers without vmap in examples/memory.md:
+//   meta(name TEXT PRIMARY KEY, value BLOB): "options", "policies", "labels",
+//        "previous_detections", "selector", "vocabulary", "database", "gcs", "decision"
+//        (each the bytes of the memory file's section of that content), "frames" (frames
+//        pushed, an integer)
+//   key_images(id INTEGER PRIMARY KEY: the key image's index, from 0; frame_index,
+//        timestamp (s), name, keypoints; record BLOB: the key image and its pose as the
+//        file's "keys" holds one; detections BLOB; bow BLOB: its bag of words as the place
+//        database file holds one, NULL until it is checked for loops)
+//   links(key INTEGER PRIMARY KEY: the link from key image key - 1 to key; matches,
+//        inliers, similarity; record BLOB as the file's "link" holds one)
+//   loops(id INTEGER PRIMARY KEY: the edge's index; from_key (newer), to_key (older),
+//        inliers, confidence; record BLOB as the file's "loop" holds one)
+
+#include <vmap/core/error.hpp>
+#include <vmap/io/binary.hpp>
+#include <vmap/io/sqlite.hpp>
+#include <vmap/memory/visual_memory.hpp>
+#include <vmap/place/database.hpp>
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <utility>
+
+namespace vmap {
+
+/// The store's schema version (PRAGMA user_version).
+inline constexpr std::int64_t memory_store_version = 1;
+/// PRAGMA application_id of a memory store: "VMAP".
+inline constexpr std::int64_t memory_store_application_id = 0x564D4150;
+
+class MemoryStore {
+ public:
+  /// A new, empty store at `path`; refused when the file exists.
+  [[nodiscard]] static MemoryStore create(const std::filesystem::path& path) {
+    MemoryStore s(path, sqlite::Access::create);
+    try {
+      sqlite::Transaction t(s.db_, "create the tables");
+      s.db_.exec(schema_sql(), "create the tables");
+      t.commit();
+    } catch (...) {
+      s.db_ = {};
+      std::error_code ec;
+      for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(path.string() + suffix, ec);
+      throw;
+    }
+    s.prepare();
+    return s;
+  }
+
+  /// An existing store: `write` to sync a memory into it (one writer at a time), `read`
+  /// to load it while another program may write.
+  [[nodiscard]] static MemoryStore open(const std::filesystem::path& path, sqlite::Access access = sqlite::Access::write) {
+    detail::check(access != sqlite::Access::create, "MemoryStore::open: use MemoryStore::create for a new store");
+    MemoryStore s(path, access);
+    s.check_schema();
+    if (access == sqlite::Access::write) s.prepare();
+    s.count_rows();
+    return s;
+  }
+
+  MemoryStore(MemoryStore&&) noexcept = default;
+  MemoryStore& operator=(MemoryStore&&) noexcept = default;
+  MemoryStore(const MemoryStore&) = delete;
+  MemoryStore& operator=(const MemoryStore&) = delete;
+  ~MemoryStore() = default;
+
+  [[nodiscard]] const std::filesystem::path& path() const noexcept { return path_; }
+  /// Rows written (as of open or the last sync of this object).
+  [[nodiscard]] std::size_t key_images() const noexcept { return keys_; }
+  [[nodiscard]] std::size_t loops() const noexcept { return loops_; }
+
+  /// Writes what `memory` made since the last sync into the store, in one transaction.
+  /// `memory` must be the one the store holds, grown: a memory loaded from this store,
+  /// or any memory synced into a new store. Anything else is an Error naming the file.
+  template <Descriptor D, Matcher M, Estimator E, Similarity S>
+  void sync(const VisualMemory<D, M, E, S>& memory) {
+    if (!insert_key_) db_.fail("is open read-only: open it with Access::write to sync a memory into it");
+    const VisualMap& map = memory.selector_.map();
+    const std::size_t m = map.keys.size();
+    const std::size_t e = memory.loops_.size();
+    const auto* database = memory.engine_ ? &memory.engine_->ranker().database() : nullptr;
+    const std::size_t checked = database ? database->size() : 0;
+    if (m < keys_ || e < loops_ || checked < bows_)
+      db_.fail("holds " + std::to_string(keys_) + " key images and " + std::to_string(loops_) +
+               " loop edges, the memory to sync " + std::to_string(m) + " and " + std::to_string(e) +
+               ": sync the memory loaded from this store, or a memory into a new store");
+    if (!matched_ && keys_ > 0) check_same_memory(map);
+    matched_ = true;
+
+    sqlite::Transaction t(db_, "write the memory");
+    const ImageStorage storage = memory.options_.images;
+    for (std::size_t k = keys_; k < m; ++k) {
+      const KeyImage& key = map.keys[k];
+      detail::BinaryWriter record, detections;
+      memory.write_key_record(record, k, storage);
+      detail::memory_write_detections(detections, memory.key_detections_[k]);
+      insert_key_->bind(1, static_cast<std::int64_t>(k))
+          .bind(2, static_cast<std::int64_t>(key.frame_index))
+          .bind(3, key.timestamp)
+          .bind_text(4, key.name)
+          .bind(5, static_cast<std::int64_t>(key.features.keypoints.size()))
+          .bind_blob(6, record.data())
+          .bind_blob(7, detections.data());
+      insert_key_->run();
+    }
+    for (std::size_t k = std::max<std::size_t>(keys_, 1); k < m; ++k) {
+      const KeyPair& p = map.pairs[k - 1];
+      detail::BinaryWriter record;
+      memory.write_link_record(record, k - 1);
+      insert_link_->bind(1, static_cast<std::int64_t>(k))
+          .bind(2, static_cast<std::int64_t>(p.matches))
+          .bind(3, static_cast<std::int64_t>(p.inliers))
+          .bind(4, p.similarity)
+          .bind_blob(5, record.data());
+      insert_link_->run();
+    }
+    for (std::size_t k = bows_; k < checked; ++k) {
+      update_bow_->bind_blob(1, database->record(static_cast<std::uint32_t>(k))).bind(2, static_cast<std::int64_t>(k));
+      update_bow_->run();
+    }
+    for (std::size_t i = loops_; i < e; ++i) {
+      const LoopEdge& edge = memory.loops_[i];
+      detail::BinaryWriter record;
+      memory.write_loop_record(record, i);
+      insert_loop_->bind(1, static_cast<std::int64_t>(i))
+          .bind(2, static_cast<std::int64_t>(edge.from))
+          .bind(3, static_cast<std::int64_t>(edge.link.key))
+          .bind(4, static_cast<std::int64_t>(edge.link.inliers))
+          .bind(5, edge.link.confidence)
+          .bind_blob(6, record.data());
+      insert_loop_->run();
+    }
+    // The small state, rewritten at every sync (a few hundred bytes, and I_{j-1}'s
+    // features).
+    put("options", memory.options_bytes(storage));
+    put("policies", memory.policies_bytes());
+    put("labels", memory.labels_head_bytes());
+    put("previous_detections", memory.previous_detections_bytes());
+    put("selector", memory.selector_bytes(storage));
+    put("decision", memory.decision_head_bytes());
+    detail::BinaryWriter head;
+    head.u8(static_cast<std::uint8_t>(memory.options_.scoring));
+    head.u64(memory.vocabulary_->size());
+    put("database", head.data());
+    detail::BinaryWriter frames;
+    frames.u64(map.frames);
+    put("frames", frames.data());
+    // The vocabulary once learned, the GCS when trained again: written when they change.
+    const bool has_vocabulary = !memory.vocabulary_->empty();
+    if (!vocabulary_written_ || (has_vocabulary && !*vocabulary_written_))
+      put("vocabulary", memory.vocabulary_bytes());
+    if (gcs_written_ != memory.gcs_generation_) put("gcs", memory.gcs_bytes());
+    t.commit();
+    keys_ = m;
+    loops_ = e;
+    bows_ = checked;
+    vocabulary_written_ = has_vocabulary;
+    gcs_written_ = memory.gcs_generation_;
+  }
+
+  /// The memory the store holds, as synced last (a snapshot, also while a writer goes
+  /// on). `policies` are the memory's descriptor, matcher, estimator and similarity when
+  /// they are not default-constructed, as for VisualMemory::load.
+  template <class Memory, class... Policies>
+  [[nodiscard]] Memory load(Policies&&... policies) {
+    sqlite::Transaction snapshot(db_, "read the memory", sqlite::Transaction::Kind::read);
+    std::array<std::string, detail::memory_sections> sections;
+    sections[0] = meta("options");
+    const std::string frames = meta("frames");
+
+    std::string keys, detections, bows;
+    std::size_t m = 0, checked = 0;
+    {
+      auto q = db_.prepare("SELECT id, record, detections, bow FROM key_images ORDER BY id", "read the key images");
+      while (q.step()) {
+        expect_index(q.integer(0), m, "key image");
+        keys += q.blob(1);
+        detections += q.blob(2);
+        if (!q.is_null(3)) {
+          if (checked != m) db_.fail("is corrupt: key image " + std::to_string(m) + " has a bag of words, an earlier one none");
+          bows += q.blob(3);
+          ++checked;
+        }
+        ++m;
+      }
+    }
+    sections[1] = frames + count32(m) + keys;
+
+    std::string links;
+    std::size_t p = 0;
+    {
+      auto q = db_.prepare("SELECT key, record FROM links ORDER BY key", "read the links");
+      while (q.step()) {
+        expect_index(q.integer(0), p + 1, "link");
+        links += q.blob(1);
+        ++p;
+      }
+    }
+    sections[2] = count32(p) + links;
+
+    std::string loops, confidences;
+    std::size_t e = 0;
+    {
+      auto q = db_.prepare("SELECT id, record, confidence FROM loops ORDER BY id", "read the loop edges");
+      while (q.step()) {
+        expect_index(q.integer(0), e, "loop edge");
+        loops += q.blob(1);
+        detail::BinaryWriter c;
+        c.f64(q.real(2));
+        confidences += c.data();
+        ++e;
+      }
+    }
+    sections[3] = count32(e) + loops;
+    sections[4] = meta("selector");
+    sections[5] = meta("vocabulary");
+    {
+      const std::string bytes = meta("database");
+      detail::BinaryReader head(bytes, db_.what() + " state 'database'");
+      const std::uint8_t scoring = head.u8("scoring");
+      const std::uint64_t words = head.u64("words");
+      head.expect_end("the database head");
+      if (scoring > static_cast<std::uint8_t>(BowScoring::cosine)) db_.fail("is corrupt: unknown scoring");
+      sections[6] = Memory::database_section(PlaceDatabase<std::uint32_t>::serialize_records(
+          static_cast<BowScoring>(scoring), static_cast<std::size_t>(words), checked, bows));
+    }
+    sections[7] = meta("policies");
+    sections[8] = meta("labels") + count32(m) + detections + meta("previous_detections");
+    sections[9] = meta("gcs");
+    sections[10] = meta("decision") + count32(e) + confidences;
+    snapshot.commit();
+    return Memory::deserialize(Memory::file_bytes(sections), db_.what(), std::forward<Policies>(policies)...);
+  }
+
+ private:
+  MemoryStore(const std::filesystem::path& path, sqlite::Access access)
+      : path_(path), db_(path, access, "memory '" + path.string() + "'") {}
+
+  static const std::string& schema_sql() {
+    static const std::string sql =
+        "PRAGMA application_id = " + std::to_string(memory_store_application_id) + ";"
+        "PRAGMA user_version = " + std::to_string(memory_store_version) + ";"
+        "CREATE TABLE meta(name TEXT PRIMARY KEY NOT NULL, value BLOB NOT NULL) WITHOUT ROWID;"
+        "CREATE TABLE key_images(id INTEGER PRIMARY KEY, frame_index INTEGER NOT NULL, timestamp REAL NOT NULL,"
+        " name TEXT NOT NULL, keypoints INTEGER NOT NULL, record BLOB NOT NULL, detections BLOB NOT NULL, bow BLOB);"
+        "CREATE TABLE links(key INTEGER PRIMARY KEY, matches INTEGER NOT NULL, inliers INTEGER NOT NULL,"
+        " similarity REAL NOT NULL, record BLOB NOT NULL);"
+        "CREATE TABLE loops(id INTEGER PRIMARY KEY, from_key INTEGER NOT NULL, to_key INTEGER NOT NULL,"
+        " inliers INTEGER NOT NULL, confidence REAL NOT NULL, record BLOB NOT NULL);";
+    return sql;
+  }
+
+  [[nodiscard]] std::int64_t pragma(const char* name) {
+    auto q = db_.prepare(std::string("PRAGMA ") + name, std::string("read ") + name);
+    if (!q.step()) db_.fail(std::string("has no ") + name);
+    return q.integer(0);
+  }
+
+  void check_schema() {
+    if (pragma("application_id") != memory_store_application_id)
+      db_.fail("is not a vmap memory store (an SQLite file without vmap's application id)");
+    const std::int64_t version = pragma("user_version");
+    if (version != memory_store_version)
+      db_.fail("has store version " + std::to_string(version) + "; this build reads version " +
+               std::to_string(memory_store_version));
+  }
+
+  void prepare() {
+    insert_key_.emplace(db_.prepare(
+        "INSERT INTO key_images(id, frame_index, timestamp, name, keypoints, record, detections) VALUES(?,?,?,?,?,?,?)",
+        "insert a key image"));
+    insert_link_.emplace(db_.prepare("INSERT INTO links(key, matches, inliers, similarity, record) VALUES(?,?,?,?,?)",
+                                     "insert a link"));
+    update_bow_.emplace(db_.prepare("UPDATE key_images SET bow = ? WHERE id = ?", "write a bag of words"));
+    insert_loop_.emplace(db_.prepare(
+        "INSERT INTO loops(id, from_key, to_key, inliers, confidence, record) VALUES(?,?,?,?,?,?)", "insert a loop edge"));
+    put_meta_.emplace(db_.prepare("INSERT OR REPLACE INTO meta(name, value) VALUES(?,?)", "write the state"));
+  }
+
+  void count_rows() {
+    const auto count = [&](const char* sql, const char* doing) {
+      auto q = db_.prepare(sql, doing);
+      if (!q.step()) db_.fail(std::string(doing) + ": no row");
+      return static_cast<std::size_t>(q.integer(0));
+    };
+    keys_ = count("SELECT count(*) FROM key_images", "count the key images");
+    loops_ = count("SELECT count(*) FROM loops", "count the loop edges");
+    bows_ = count("SELECT count(bow) FROM key_images", "count the bags of words");
+  }
+
+  /// The first sync into a store that holds key images: the memory must be the one it
+  /// holds (its last stored key image is the memory's key image of that index).
+  void check_same_memory(const VisualMap& map) {
+    auto q = db_.prepare("SELECT frame_index FROM key_images WHERE id = ?", "read the last key image");
+    q.bind(1, static_cast<std::int64_t>(keys_ - 1));
+    if (!q.step()) db_.fail("is corrupt: key image " + std::to_string(keys_ - 1) + " is missing");
+    const auto stored = q.integer(0);
+    if (stored != static_cast<std::int64_t>(map.keys[keys_ - 1].frame_index))
+      db_.fail("holds another memory: its key image " + std::to_string(keys_ - 1) + " is frame " + std::to_string(stored) +
+               ", the memory's is frame " + std::to_string(map.keys[keys_ - 1].frame_index));
+  }
+
+  void put(const char* name, std::string_view value) {
+    put_meta_->bind_text(1, name).bind_blob(2, value);
+    put_meta_->run();
+  }
+
+  [[nodiscard]] std::string meta(const char* name) {
+    auto q = db_.prepare("SELECT value FROM meta WHERE name = ?", "read the state");
+    q.bind_text(1, name);
+    if (!q.step()) db_.fail(std::string("holds no '") + name + "' state (an empty store, or not synced)");
+    return std::string(q.blob(0));
+  }
+
+  void expect_index(std::int64_t got, std::size_t want, const char* what) const {
+    if (got != static_cast<std::int64_t>(want))
+      db_.fail("is corrupt: " + std::string(what) + " " + std::to_string(got) + " where " + std::to_string(want) +
+               " was expected");
+  }
+
+  static std::string count32(std::size_t n) {
+    detail::BinaryWriter w;
+    w.u32(static_cast<std::uint32_t>(n));
+    return std::move(w).take();
+  }
+
+  std::filesystem::path path_;
+  sqlite::Database db_;
+  // Prepared once for a writer (absent for a reader).
+  std::optional<sqlite::Statement> insert_key_, insert_link_, update_bow_, insert_loop_, put_meta_;
+  std::size_t keys_ = 0, loops_ = 0, bows_ = 0;  ///< rows in the store
+  bool matched_ = false;                         ///< the synced memory was checked against the stored one
+  std::optional<bool> vocabulary_written_;       ///< whether the stored vocabulary is a learned one
+  std::optional<std::uint64_t> gcs_written_;     ///< the memory's GCS generation stored
+};
+
+}  // namespace vmap

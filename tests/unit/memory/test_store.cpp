@@ -1,0 +1,247 @@
+// MemoryStore: a memory synced frame by frame into an SQLite file loads back as the same
+// memory (the same file bytes), resumes exactly, refuses a second writer, serves readers
+// while it is written, and turns bad files into Errors naming the memory.
+#include "support/errors.hpp"
+#include "support/shared_data.hpp"
+
+#include <vmap/io/sqlite.hpp>
+#include <vmap/memory/store.hpp>
+#include <vmap/memory/visual_memory.hpp>
+
+#include <doctest/doctest.h>
+
+#include <sqlite3.h>
+
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace {
+
+using vmap::test::error_of;
+namespace fs = std::filesystem;
+
+const std::vector<vmap::Frame>& frames() {
+  static const std::vector<vmap::Frame> out = [] {
+    auto src = vmap::FrameSource::open(vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt", {.grey = true});
+    std::vector<vmap::Frame> f;
+    while (auto x = src.next()) f.push_back(std::move(*x));
+    return f;
+  }();
+  return out;
+}
+
+vmap::FundamentalEstimator estimator() { return vmap::FundamentalEstimator({.check_degeneracy = false}); }
+
+// Small enough that the 60 sample frames learn a vocabulary, check key images for loops
+// and find some (as test_memory's options).
+vmap::MemoryOptions options(vmap::ImageStorage images) {
+  vmap::MemoryOptions o;
+  o.selector.tau = 0.3;
+  o.images = images;
+  o.vocabulary_after = 3;
+  o.vocabulary = {.branching = 8, .depth = 2, .seed = 5};
+  o.loops.window = 2;
+  o.loops.decision.min_inliers = 30;
+  return o;
+}
+
+vmap::OrbVisualMemory make(const vmap::MemoryOptions& o) {
+  return vmap::OrbVisualMemory(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(), vmap::InlierRatio{}, o);
+}
+
+vmap::OrbVisualMemory load(vmap::MemoryStore& store) {
+  return store.load<vmap::OrbVisualMemory>(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(),
+                                           vmap::InlierRatio{});
+}
+
+fs::path fresh(const std::string& name) {
+  static const fs::path dir = vmap::test::scratch_dir("store");  // emptied once per run
+  const fs::path p = dir / name;
+  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(p.string() + suffix);
+  return p;
+}
+
+/// Runs raw SQL on a store file, as another program (sqlite3) would.
+void raw_sql(const fs::path& p, const std::string& sql) {
+  sqlite3* db = nullptr;
+  REQUIRE(sqlite3_open(p.c_str(), &db) == SQLITE_OK);
+  char* message = nullptr;
+  const int rc = sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &message);
+  INFO((message ? message : ""));
+  sqlite3_free(message);
+  sqlite3_close(db);
+  REQUIRE(rc == SQLITE_OK);
+}
+
+}  // namespace
+
+TEST_CASE("store: a memory synced at every frame loads back as the same memory, for each pixel storage") {
+  for (auto images : {vmap::ImageStorage::none, vmap::ImageStorage::png, vmap::ImageStorage::jpeg}) {
+    CAPTURE(static_cast<int>(images));
+    const fs::path file = fresh("every_frame.vmdb");
+    auto store = vmap::MemoryStore::create(file);
+    auto memory = make(options(images));
+    std::size_t synced_keys = 0;
+    for (const auto& f : frames()) {
+      memory.push(f);
+      store.sync(memory);
+      // Each sync wrote exactly the key images made since the last one.
+      CHECK(store.key_images() == memory.key_images());
+      CHECK(store.key_images() >= synced_keys);
+      synced_keys = store.key_images();
+    }
+    REQUIRE(memory.loops().size() > 0);
+    REQUIRE(memory.database().size() > 0);
+    const auto back = load(store);
+    CHECK(back.key_images() == memory.key_images());
+    CHECK(back.loops().size() == memory.loops().size());
+    CHECK(back.database().ids() == memory.database().ids());
+    if (images != vmap::ImageStorage::jpeg) {
+      CHECK(back.serialize() == memory.serialize());
+    } else {
+      // Each key image's JPEG was encoded once, when its row was written: the stored
+      // pixels are the ones decoded from it, within JPEG's loss of the original.
+      for (std::size_t k = 0; k < back.key_images(); ++k)
+        CHECK(cv::norm(back.map().keys[k].image, memory.map().keys[k].image, cv::NORM_L1) /
+                  static_cast<double>(back.map().keys[k].image.total()) < 3.0);
+    }
+  }
+}
+
+TEST_CASE("store: stopped and reopened every few frames, the memory goes on exactly as an uninterrupted run") {
+  const auto o = options(vmap::ImageStorage::png);
+  auto whole = make(o);
+  for (const auto& f : frames()) whole.push(f);
+  for (std::size_t every : {5U, 17U}) {
+    CAPTURE(every);
+    const fs::path file = fresh("resumed.vmdb");
+    std::optional<vmap::MemoryStore> store;
+    std::optional<vmap::OrbVisualMemory> memory;
+    store.emplace(vmap::MemoryStore::create(file));
+    memory.emplace(make(o));
+    for (std::size_t i = 0; i < frames().size(); ++i) {
+      if (i > 0 && i % every == 0) {
+        memory.reset();
+        store.reset();
+        store.emplace(vmap::MemoryStore::open(file));
+        memory.emplace(load(*store));
+      }
+      memory->push(frames()[i]);
+      store->sync(*memory);
+    }
+    CHECK(memory->serialize() == whole.serialize());
+    CHECK(load(*store).serialize() == whole.serialize());
+  }
+}
+
+TEST_CASE("store: one writer at a time; readers load the last sync while the writer goes on") {
+  const fs::path file = fresh("shared.vmdb");
+  auto writer = vmap::MemoryStore::create(file);
+  auto memory = make(options(vmap::ImageStorage::none));
+  for (std::size_t i = 0; i < 30; ++i) memory.push(frames()[i]);
+  writer.sync(memory);
+  const std::size_t first = memory.key_images();
+
+  const std::string second = error_of([&] { (void)vmap::MemoryStore::open(file); });
+  CHECK(second.find("memory '" + file.string() + "' is being written by another program") != std::string::npos);
+
+  auto reader = vmap::MemoryStore::open(file, vmap::sqlite::Access::read);
+  CHECK(load(reader).key_images() == first);
+  for (std::size_t i = 30; i < frames().size(); ++i) memory.push(frames()[i]);
+  REQUIRE(memory.key_images() > first);
+  writer.sync(memory);
+  // The reader's next load sees the writer's new sync; a reader cannot write.
+  CHECK(load(reader).serialize() == memory.serialize());
+  CHECK(error_of([&] { reader.sync(memory); }).find("is open read-only") != std::string::npos);
+}
+
+TEST_CASE("store: a memory is synced only into its own store") {
+  const fs::path file = fresh("own.vmdb");
+  auto memory = make(options(vmap::ImageStorage::none));
+  for (std::size_t i = 0; i < 40; ++i) memory.push(frames()[i]);
+  {
+    auto store = vmap::MemoryStore::create(file);
+    store.sync(memory);
+  }
+  // A shorter memory: the store holds more than it.
+  auto shorter = make(options(vmap::ImageStorage::none));
+  for (std::size_t i = 0; i < 10; ++i) shorter.push(frames()[i]);
+  {
+    auto store = vmap::MemoryStore::open(file);
+    CHECK(error_of([&] { store.sync(shorter); }).find("sync the memory loaded from this store") != std::string::npos);
+  }
+  // Another memory (a higher tau: more key images) whose key image of the store's last
+  // index is another frame.
+  auto o = options(vmap::ImageStorage::none);
+  o.selector.tau = 0.6;
+  auto other = make(o);
+  for (const auto& f : frames()) other.push(f);
+  const std::size_t last = memory.key_images() - 1;
+  REQUIRE(other.key_images() > last);
+  REQUIRE(other.map().keys[last].frame_index != memory.map().keys[last].frame_index);
+  {
+    auto store = vmap::MemoryStore::open(file);
+    CHECK(error_of([&] { store.sync(other); }).find("holds another memory") != std::string::npos);
+  }
+  CHECK(error_of([&] { (void)vmap::MemoryStore::create(file); }).find("exists already") != std::string::npos);
+}
+
+TEST_CASE("store: a .vmem memory file converts to a store that loads as the same memory") {
+  auto memory = make(options(vmap::ImageStorage::png));
+  for (const auto& f : frames()) memory.push(f);
+  const fs::path vmem = fresh("converted.vmem");
+  memory.save(vmem);
+  const auto loaded = vmap::OrbVisualMemory::load(vmem, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(),
+                                                  vmap::InlierRatio{});
+  const fs::path file = fresh("converted.vmdb");
+  auto store = vmap::MemoryStore::create(file);
+  store.sync(loaded);
+  CHECK(load(store).serialize() == memory.serialize());
+}
+
+TEST_CASE("store: files that are not stores, other versions and damaged rows are Errors naming the memory") {
+  const fs::path missing = fresh("missing.vmdb");
+  CHECK(error_of([&] { (void)vmap::MemoryStore::open(missing); }).find("'" + missing.string() + "' does not exist") !=
+        std::string::npos);
+
+  const fs::path text = fresh("text.vmdb");
+  std::ofstream(text) << "not a database at all, but long enough to be looked at as one\n";
+  CHECK(error_of([&] { (void)vmap::MemoryStore::open(text, vmap::sqlite::Access::read); }).find(text.string()) !=
+        std::string::npos);
+
+  const fs::path foreign = fresh("foreign.vmdb");
+  raw_sql(foreign, "CREATE TABLE t(x)");
+  CHECK(error_of([&] { (void)vmap::MemoryStore::open(foreign); }).find("is not a vmap memory store") != std::string::npos);
+
+  auto memory = make(options(vmap::ImageStorage::none));
+  for (std::size_t i = 0; i < 30; ++i) memory.push(frames()[i]);
+  const fs::path file = fresh("damaged.vmdb");
+  {
+    auto store = vmap::MemoryStore::create(file);
+    store.sync(memory);
+  }
+  raw_sql(file, "PRAGMA user_version = 2");
+  CHECK(error_of([&] { (void)vmap::MemoryStore::open(file); }).find("has store version 2; this build reads version 1") !=
+        std::string::npos);
+  raw_sql(file, "PRAGMA user_version = 1");
+
+  // A key image's record cut short, a missing key image, a descriptor blob of another
+  // width: each an Error from the memory's own checks, naming the store.
+  for (const std::string& damage :
+       {std::string("UPDATE key_images SET record = substr(record, 1, 100) WHERE id = 1"),
+        std::string("DELETE FROM key_images WHERE id = 1"), std::string("UPDATE links SET record = x'00' WHERE key = 1"),
+        std::string("UPDATE meta SET value = x'0102' WHERE name = 'options'"),
+        std::string("DELETE FROM meta WHERE name = 'selector'")}) {
+    CAPTURE(damage);
+    const fs::path copy = fresh("damaged_copy.vmdb");
+    fs::copy_file(file, copy);
+    raw_sql(copy, damage);
+    auto store = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read);
+    const std::string e = error_of([&] { (void)load(store); });
+    CHECK(e.find(copy.string()) != std::string::npos);
+    CHECK(e != "no error");
+  }
+}
