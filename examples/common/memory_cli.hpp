@@ -3,14 +3,15 @@
 // What the subcommands that read or write a visual memory file share (`vmap build
 // --memory`, `vmap localize --memory`, `vmap loops --memory`, `vmap memory ...`): the one
 // policy stack they all use, the --memory path rule, loading with errors that name the
-// option, streaming frames into a memory with periodic saves, and the JSON / text of key
-// images, localization answers and loop edges.
+// option, streaming frames into a memory store (memory/store.hpp) synced at every key
+// image, and the JSON / text of key images, localization answers and loop edges.
 
 #include "common/cli_support.hpp"
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
+#include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 #include <vmap/som/pose_io.hpp>
 
@@ -38,9 +39,9 @@ namespace vmap::examples {
 using CliMemory = OrbVisualMemory;
 
 /// The file name used when --memory names a folder.
-inline constexpr const char* memory_file_name = "memory.vmem";
+inline constexpr const char* memory_file_name = "memory.vmdb";
 
-/// --memory DIR|FILE: an existing folder, or a path ending in '/', means DIR/memory.vmem;
+/// --memory DIR|FILE: an existing folder, or a path ending in '/', means DIR/memory.vmdb;
 /// anything else is the memory file itself.
 inline std::filesystem::path memory_file(const std::string& arg) {
   std::error_code ec;
@@ -49,12 +50,28 @@ inline std::filesystem::path memory_file(const std::string& arg) {
   return arg;
 }
 
+/// What a file given as a memory is, by its first bytes: a memory store (an SQLite file;
+/// memory/store.hpp), a memory file of the library's single-file format (.vmem, "VMAPMEMO"),
+/// or something else.
+enum class MemoryFileKind : std::uint8_t { store, file, other };
+
+inline MemoryFileKind memory_file_kind(const std::filesystem::path& file) {
+  std::ifstream f(file, std::ios::binary);
+  char head[16] = {};
+  f.read(head, sizeof head);
+  const std::string_view h(head, static_cast<std::size_t>(std::max<std::streamsize>(f.gcount(), 0)));
+  if (h == std::string_view("SQLite format 3\0", 16)) return MemoryFileKind::store;
+  if (h.size() >= 8 && h.substr(0, 8) == std::string_view(vmap::detail::memory_magic, 8)) return MemoryFileKind::file;
+  return MemoryFileKind::other;
+}
+
 /// Checks the memory file a command will write (not an input, not a link or folder, its
-/// folder created and writable) before any frame is read. An existing file is replaced
-/// only when it is a memory (its first bytes "VMAPMEMO"): a mistyped path never
-/// overwrites another file.
+/// folder created and writable) before any frame is read. An existing file is kept: it
+/// is continued (`resume`), replaced only with `force` and only when it is a memory (a
+/// mistyped path never overwrites another file), and refused otherwise.
 inline void prepare_memory_output(const std::filesystem::path& file, const std::string& option,
-                                  const std::vector<std::filesystem::path>& inputs) {
+                                  const std::vector<std::filesystem::path>& inputs, bool resume = false,
+                                  bool force = false) {
   const std::filesystem::path dir = file.has_parent_path() ? file.parent_path() : std::filesystem::path(".");
   std::error_code ec;
   // An --out folder is replaced as a whole by the next --out run: a memory kept there
@@ -64,35 +81,121 @@ inline void prepare_memory_output(const std::filesystem::path& file, const std::
                 "' is an --out folder of vmap, which the next --out run replaces as a whole; keep the memory in "
                 "another folder");
   prepare_output_dir(dir, option, inputs, {file.filename().string()});
-  if (std::filesystem::exists(file, ec)) {
-    std::ifstream f(file, std::ios::binary);
-    char magic[8] = {};
-    f.read(magic, sizeof magic);
-    if (f.gcount() != 8 || std::string_view(magic, 8) != std::string_view(vmap::detail::memory_magic, 8))
-      usage_error(option + ": '" + file.string() + "' exists and is not a vmap memory; refusing to replace it");
-  }
+  if (resume || !std::filesystem::exists(file, ec)) return;
+  if (memory_file_kind(file) == MemoryFileKind::other)
+    usage_error(option + ": '" + file.string() + "' exists and is not a vmap memory; refusing to replace it");
+  if (!force)
+    usage_error(option + ": the memory '" + file.string() +
+                "' exists: give --resume to continue it, or --force to replace it");
 }
 
 /// Reads a memory file: a missing path, a folder or a device is a usage error naming
 /// `option`; anything that is not a valid memory file is a vmap::Error naming the file
 /// and the section (exit 1).
+/// A file given as a memory that is neither kind: a vmap::Error naming it (exit 1).
+inline void check_memory_file(const std::filesystem::path& file) {
+  if (memory_file_kind(file) == MemoryFileKind::other)
+    vmap::detail::fail("'" + file.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file)");
+}
+
 inline CliMemory load_memory(const std::filesystem::path& file, const std::string& option) {
   check_input_file(file, option);
+  check_memory_file(file);
+  if (memory_file_kind(file) == MemoryFileKind::store) {
+    auto store = MemoryStore::open(file, sqlite::Access::read);
+    return store.load<CliMemory>();
+  }
   return CliMemory::load(file);
 }
+
+/// A memory store a run writes into, and the memory it holds.
+struct MemoryWriter {
+  MemoryStore store;
+  CliMemory memory;
+};
+
+/// What a memory records of its input (the "input" note): the input's path, its first
+/// frame's name (lists and folders) and the stride. --resume reads the same input.
+inline std::string input_fingerprint(const std::string& input, const FrameSource& src, std::size_t stride) {
+  std::error_code ec;
+  const auto canonical = std::filesystem::weakly_canonical(input, ec);
+  const auto paths = src.paths();
+  return nlohmann::json{{"input", ec ? input : canonical.string()},
+                        {"first_frame", paths.empty() ? std::string() : paths.front().filename().string()},
+                        {"stride", stride}}
+      .dump();
+}
+
+/// --resume of a store built from another input (path, first frame or stride) is refused
+/// with both named; a store without the note (written by the library, or converted)
+/// takes this run's.
+inline void check_same_input(MemoryWriter& w, const std::string& fingerprint) {
+  const auto recorded = w.store.note("input");
+  if (!recorded) {
+    w.store.set_note("input", fingerprint);
+    return;
+  }
+  if (*recorded == fingerprint) return;
+  const auto describe = [](const std::string& f) {
+    const auto j = nlohmann::json::parse(f, nullptr, false);
+    if (j.is_discarded() || !j.is_object()) return f;
+    return "'" + j.value("input", std::string()) + "' (first frame '" + j.value("first_frame", std::string()) +
+           "', stride " + std::to_string(j.value("stride", std::size_t{0})) + ")";
+  };
+  usage_error("--resume: the memory '" + w.store.path().string() + "' was built from " + describe(*recorded) +
+              "; this run reads " + describe(fingerprint) + ". Give the same input and --stride, or start another memory");
+}
+
+/// A new memory store at `file` (an existing memory removed first when `force`; the
+/// caller checked it with prepare_memory_output).
+inline MemoryWriter create_memory(const std::filesystem::path& file, bool force, CliMemory memory) {
+  if (force) {
+    std::error_code ec;
+    for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(file.string() + suffix, ec);
+  }
+  return MemoryWriter{MemoryStore::create(file), std::move(memory)};
+}
+
+/// Removes the store a run created when the run ends (an error, no frame) before
+/// keep(): no empty memory is left behind. A resumed memory is never removed.
+class NewMemoryGuard {
+ public:
+  NewMemoryGuard(std::optional<MemoryWriter>& w, bool created) : w_(&w), armed_(created) {}
+  NewMemoryGuard(const NewMemoryGuard&) = delete;
+  NewMemoryGuard& operator=(const NewMemoryGuard&) = delete;
+  void keep() noexcept { armed_ = false; }
+  ~NewMemoryGuard() {
+    if (!armed_ || !*w_) return;
+    const std::filesystem::path file = (*w_)->store.path();
+    w_->reset();
+    std::error_code ec;
+    for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(file.string() + suffix, ec);
+  }
+
+ private:
+  std::optional<MemoryWriter>* w_;
+  bool armed_;
+};
 
 /// The memory --resume continues: a missing file is a usage error that says how to start
 /// one; options that would change the memory's own (`options_kept`, given on the command
 /// line) conflict with --resume.
-inline CliMemory memory_to_resume(const std::filesystem::path& file, const CLI::App& app,
-                                  const std::vector<std::string>& options_kept) {
+inline MemoryWriter memory_to_resume(const std::filesystem::path& file, const CLI::App& app,
+                                     const std::vector<std::string>& options_kept) {
   for (const auto& o : options_kept)
     if (app.get_option(o)->count() > 0)
       usage_error("--resume and " + o + " conflict (a resumed memory keeps the options it was started with)");
   std::error_code ec;
   if (!std::filesystem::exists(file, ec))
     usage_error("--resume: no memory file '" + file.string() + "' to continue (run without --resume to start one)");
-  return load_memory(file, "--memory");
+  check_input_file(file, "--memory");
+  check_memory_file(file);
+  if (memory_file_kind(file) == MemoryFileKind::file)
+    usage_error("--resume: '" + file.string() + "' is a single-file memory (.vmem); convert it to a memory store "
+                "first: vmap memory convert " + file.string() + " NEW.vmdb");
+  auto store = MemoryStore::open(file, sqlite::Access::write);
+  auto memory = store.load<CliMemory>();
+  return MemoryWriter{std::move(store), std::move(memory)};
 }
 
 /// What `vmap build --memory` and `vmap memory build` start a memory with.
@@ -142,8 +245,9 @@ inline FrameSourceOptions resume_range(const CliMemory& mem, FrameSourceOptions 
 /// What stream_into did.
 struct StreamResult {
   std::size_t pushed = 0;       ///< frames pushed in this run
-  std::size_t saves = 0;        ///< times the file was written (periodic and final)
-  double seconds = 0.0;         ///< pushing (without the saves)
+  std::size_t saves = 0;        ///< syncs into the store (one transaction each)
+  double seconds = 0.0;         ///< pushing (without the syncs)
+  double save_seconds = 0.0;    ///< the syncs
   std::vector<LoopEdge> loops;  ///< loop edges found in this run
 };
 
@@ -184,33 +288,38 @@ class FramePoses {
   bool by_order_ = false;
 };
 
-/// Pushes every frame of `src` into `mem`, with its pose when `poses` is given; every
-/// `save_every` pushed frames (0: never) and at the end, writes the memory to `file`
-/// atomically, so a run killed half way can be resumed from the last save.
-/// `on_frame(mem)` is called after each push.
+/// Pushes every frame of `src` into the writer's memory, with its pose when `poses` is
+/// given, and syncs the store after each frame that made a key image or a loop edge,
+/// every `save_every` pushed frames besides (0: no others) and after the last frame: a
+/// run killed half way resumes from the last sync. `on_frame(mem)` is called after each
+/// push.
 template <class OnFrame>
-StreamResult stream_into(CliMemory& mem, FrameSource& src, const std::filesystem::path& file, std::size_t save_every,
+StreamResult stream_into(MemoryWriter& w, FrameSource& src, std::size_t save_every,
                          const std::optional<FramePoses>& poses, OnFrame&& on_frame) {
   using clock = std::chrono::steady_clock;
   StreamResult r;
+  const auto sync = [&] {
+    const auto t0 = clock::now();
+    w.store.sync(w.memory);
+    r.save_seconds += std::chrono::duration<double>(clock::now() - t0).count();
+    ++r.saves;
+  };
+  bool unsynced = false;
   while (auto f = src.next()) {
     const OdometryPose pose = poses ? (*poses)(*f) : OdometryPose{};
     const auto t0 = clock::now();
-    auto step = mem.push(*f, pose);
+    auto step = w.memory.push(*f, pose);
     r.seconds += std::chrono::duration<double>(clock::now() - t0).count();
     ++r.pushed;
     r.loops.insert(r.loops.end(), step.loops.begin(), step.loops.end());
-    on_frame(mem);
-    if (save_every > 0 && r.pushed % save_every == 0) {
-      mem.save(file);
-      ++r.saves;
+    on_frame(w.memory);
+    unsynced = true;
+    if (step.new_key || !step.loops.empty() || (save_every > 0 && r.pushed % save_every == 0)) {
+      sync();
+      unsynced = false;
     }
   }
-  // No frame: nothing to save (a fresh memory stays unwritten, a resumed one unchanged).
-  if (r.pushed > 0 && (save_every == 0 || r.pushed % save_every != 0)) {
-    mem.save(file);
-    ++r.saves;
-  }
+  if (unsynced) sync();
   return r;
 }
 

@@ -2,8 +2,8 @@
 // eq. 6), the map's quality (eq. 7), and with --out the map file, a contact sheet of the
 // key images and the verified matches of the first and of the weakest key-image pair.
 // With --memory DIR|FILE the frames go into a visual memory (include/vmap/memory: key
-// images, place database, loop edges) saved to FILE or DIR/memory.vmem, at the end and
-// every --save-every frames; --resume continues that memory after its last frame.
+// images, place database, loop edges) kept in the memory store FILE or DIR/memory.vmdb,
+// written at every key image; --resume continues that memory after its last frame.
 #include "common/cli_support.hpp"
 #include "common/draw.hpp"
 #include "common/keyframe_cli.hpp"
@@ -44,6 +44,7 @@ struct BuildArgs {
   bool single_thread = false;
   std::string memory;  // --memory DIR|FILE; empty: no memory
   bool resume = false;
+  bool force = false;  // --force: replace an existing memory
   std::size_t save_every = 0;
   std::string images = "none";
   std::string vocabulary;
@@ -279,17 +280,18 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   if (given("--vocabulary") && given("--vocabulary-after"))
     ex::usage_error("--vocabulary and --vocabulary-after conflict (the second is for a vocabulary learned online)");
   const fs::path file = ex::memory_file(args.memory);
-  std::optional<ex::CliMemory> mem;
-  if (args.resume)
-    mem.emplace(
-        ex::memory_to_resume(file, app,
-                             {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after", "--min-confidence"}));
+  if (args.resume && args.force) ex::usage_error("--resume and --force conflict (continue the memory, or replace it)");
+  std::optional<ex::MemoryWriter> writer;
   std::vector<fs::path> inputs{a.input};
   if (!args.poses.empty()) {
     ex::check_input_file(args.poses, "--poses");
     inputs.emplace_back(args.poses);
   }
-  ex::prepare_memory_output(file, "--memory", inputs);
+  ex::prepare_memory_output(file, "--memory", inputs, args.resume, args.force);
+  if (args.resume)
+    writer.emplace(
+        ex::memory_to_resume(file, app,
+                             {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after", "--min-confidence"}));
   inputs.push_back(file);
   std::optional<ex::OutputFolder> out_dir;
   if (!a.out.empty()) {
@@ -303,37 +305,48 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   }
   auto so = ex::source_options(a, true);
   if (args.resume)
-    so = ex::resume_range(*mem, so, file.string());
-  else
-    mem.emplace(ex::new_memory({.tau = args.threshold,
-                                .rule = ex::parse_rule(a.rule),
-                                .images = args.images,
-                                .vocabulary = args.vocabulary,
-                                .vocabulary_after = args.vocabulary_after,
-                                .min_confidence = args.min_confidence}));
+    so = ex::resume_range(writer->memory, so, file.string());
   auto src = vmap::FrameSource::open(a.input, so);
-  if (out_dir && src.kind() == vmap::SourceKind::live && mem->options().images == vmap::ImageStorage::none)
+  const bool no_pixels = args.resume ? writer->memory.options().images == vmap::ImageStorage::none : args.images == "none";
+  if (out_dir && src.kind() == vmap::SourceKind::live && no_pixels)
     ex::usage_error("--out with --memory on a live source needs the memory's pixels (--images png or jpeg): a live "
                     "stream cannot be read again");
   std::optional<ex::FramePoses> poses;
   if (args.gcs && args.poses.empty()) ex::usage_error("--gcs needs --poses FILE (the GCS learns a pose per neuron)");
   if (!args.poses.empty()) poses.emplace(args.poses, src, args.gcs);
+  const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
+  if (args.resume) {
+    ex::check_same_input(*writer, fingerprint);
+  } else {
+    writer.emplace(ex::create_memory(file, args.force,
+                                     ex::new_memory({.tau = args.threshold,
+                                                     .rule = ex::parse_rule(a.rule),
+                                                     .images = args.images,
+                                                     .vocabulary = args.vocabulary,
+                                                     .vocabulary_after = args.vocabulary_after,
+                                                     .min_confidence = args.min_confidence})));
+    writer->store.set_note("input", fingerprint);
+  }
+  ex::NewMemoryGuard guard(writer, !args.resume);
+  auto* mem = &writer->memory;
   ex::Progress progress("vmap build", expected_frames(src, so));
   MemoryRun run{file, args.resume, {}, 0, std::nullopt, 0, {}};
-  run.stream = ex::stream_into(*mem, src, file, args.save_every, poses, [&](const ex::CliMemory& m) {
+  run.stream = ex::stream_into(*writer, src, args.save_every, poses, [&](const ex::CliMemory& m) {
     progress.update(src.delivered(), std::to_string(m.key_images()) + " key images");
   });
   progress.done(std::to_string(mem->key_images()) + " key images, " + std::to_string(src.skipped().size()) + " skipped");
   if (run.stream.pushed == 0)
     vmap::detail::fail("'" + a.input + "' gave no frame in the requested range" +
                        (args.resume ? " after the memory's last frame " + std::to_string(mem->last_frame_index().value_or(0)) : ""));
+  guard.keep();
   if (args.gcs) {
     // The GCS (Trujillo-Romero 2024, Algorithms 1 and 4) learns from every key image with
     // a floor pose, the resumed ones included, so it is trained again after each run.
     mem->train_gcs();
-    mem->save(file);
+    writer->store.sync(*mem);
     ++run.stream.saves;
   }
+  writer->store.checkpoint();
   run.loops = mem->loops().size();
   run.last_frame = mem->last_frame_index();
   run.bytes = fs::file_size(file);
@@ -351,11 +364,14 @@ std::function<int()> setup(CLI::App& app) {
                  "Folder for map.vmap, key_images.txt, contact_sheet.png and matches.png (created if missing)");
   app.add_flag("--single-thread", args->single_thread, "Decode and extract on the matching thread");
   app.add_option("--memory", args->memory,
-                 "Keep a visual memory (key images, place database, loop edges) in FILE, or DIR/memory.vmem when "
-                 "DIR is a folder or ends in '/' (replaced atomically); --out is then optional");
+                 "Keep a visual memory (key images, place database, loop edges) in the memory store FILE, or "
+                 "DIR/memory.vmdb when DIR is a folder or ends in '/', written at every key image; --out is then "
+                 "optional");
   app.add_flag("--resume", args->resume,
-               "Continue the --memory file after its last frame (give the same INPUT and --stride)");
-  app.add_option("--save-every", args->save_every, "With --memory: also save it every N frames (0: only at the end)")
+               "Continue the --memory file after its last frame (the same INPUT and --stride, checked)");
+  app.add_flag("--force", args->force, "With --memory: replace an existing memory instead of refusing to");
+  app.add_option("--save-every", args->save_every,
+                 "With --memory: also write it every N frames (0: only at key images, loop edges and the end)")
       ->check(ex::count_in(0, ex::max_frame_index));
   app.add_option("--images", args->images, "With --memory: key image pixels kept in it: none, png or jpeg")
       ->check(CLI::IsMember({"none", "png", "jpeg"}));

@@ -14,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <functional>
@@ -29,7 +30,8 @@ namespace ex = vmap::examples;
 struct MemoryArgs {
   std::string input, out, memory, vocabulary;
   std::vector<std::string> images;
-  bool resume = false, json = false, edges = false;
+  bool resume = false, force = false, json = false, edges = false;
+  std::string convert_in, convert_out;
   std::string export_out;
   double tau = 0.3;
   double time_offset = 0.0;  // build: added to the frame times the key images keep
@@ -42,21 +44,34 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   namespace fs = std::filesystem;
   ex::current_inputs() = {a.input};
   const fs::path file = ex::memory_file(a.out);
-  std::optional<ex::CliMemory> mem;
+  if (a.resume && a.force) ex::usage_error("--resume and --force conflict (continue the memory, or replace it)");
+  std::optional<ex::MemoryWriter> writer;
   vmap::FrameSourceOptions so{.start = a.start, .stride = a.stride, .grey = true, .time_offset = a.time_offset};
   if (a.end > 0) so.end = a.end;
+  ex::prepare_memory_output(file, "--memory", {a.input}, a.resume, a.force);
+  std::optional<ex::CliMemory> fresh;
   if (a.resume) {
-    mem.emplace(ex::memory_to_resume(file, app, {"--threshold", "--images", "--vocabulary", "--min-confidence"}));
-    so = ex::resume_range(*mem, so, file.string());
+    writer.emplace(ex::memory_to_resume(file, app, {"--threshold", "--images", "--vocabulary", "--min-confidence"}));
+    so = ex::resume_range(writer->memory, so, file.string());
   } else {
-    ex::prepare_memory_output(file, "--memory", {a.input});
     ex::NewMemory n{.tau = a.tau, .images = a.storage, .vocabulary = a.vocabulary};
     if (a.min_confidence) n.min_confidence = *a.min_confidence;
-    mem.emplace(ex::new_memory(n));
+    fresh.emplace(ex::new_memory(n));
   }
   auto src = vmap::FrameSource::open(a.input, so);
-  const auto r = ex::stream_into(*mem, src, file, a.save_every, std::nullopt, [](const ex::CliMemory&) {});
+  const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
+  if (a.resume) {
+    ex::check_same_input(*writer, fingerprint);
+  } else {
+    writer.emplace(ex::create_memory(file, a.force, std::move(*fresh)));
+    writer->store.set_note("input", fingerprint);
+  }
+  ex::NewMemoryGuard guard(writer, !a.resume);
+  const auto r = ex::stream_into(*writer, src, a.save_every, std::nullopt, [](const ex::CliMemory&) {});
   if (r.pushed == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
+  guard.keep();
+  writer->store.checkpoint();
+  const auto* mem = &writer->memory;
   const double ms = r.pushed ? 1000.0 * r.seconds / static_cast<double>(r.pushed) : 0.0;
   if (a.json) {
     nlohmann::json loops = nlohmann::json::array();
@@ -69,7 +84,8 @@ int build(const MemoryArgs& a, const CLI::App& app) {
     std::printf("%s %zu frames (%zu in all): %zu key images, %zu loop edges (%zu new), %.1f ms per frame\n",
                 a.resume ? "resumed with" : "pushed", r.pushed, mem->frames(), mem->key_images(), mem->loops().size(),
                 r.loops.size(), ms);
-    std::printf("saved '%s' (%ju bytes); last frame %zu\n", file.c_str(), static_cast<std::uintmax_t>(fs::file_size(file)),
+    std::printf("wrote '%s' (%ju bytes, %zu syncs in %.2f s); last frame %zu\n", file.c_str(),
+                static_cast<std::uintmax_t>(fs::file_size(file)), r.saves, r.save_seconds,
                 mem->last_frame_index().value_or(0));
   }
   return 0;
@@ -101,6 +117,37 @@ int info(const MemoryArgs& a) {
   return 0;
 }
 
+/// `memory convert IN OUT`: a memory of either kind (a .vmem file of any version, or a
+/// store) written into a new memory store.
+int convert(const MemoryArgs& a) {
+  namespace fs = std::filesystem;
+  ex::current_inputs() = {a.convert_in};
+  ex::check_input_file(a.convert_in, "INPUT");
+  ex::check_memory_file(a.convert_in);
+  const fs::path out = a.convert_out;
+  ex::prepare_memory_output(out, "OUTPUT", {a.convert_in}, false, a.force);
+  const auto t0 = std::chrono::steady_clock::now();
+  auto mem = ex::load_memory(a.convert_in, "INPUT");
+  std::optional<ex::MemoryWriter> writer;
+  writer.emplace(ex::create_memory(out, a.force, std::move(mem)));
+  ex::NewMemoryGuard guard(writer, true);
+  writer->store.sync(writer->memory);
+  writer->store.checkpoint();
+  guard.keep();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const auto& m = writer->memory;
+  if (a.json) {
+    ex::print_json({{"input", ex::path_string(a.convert_in)}, {"memory", ex::path_string(out)}, {"frames", m.frames()},
+                    {"key_images", m.key_images()}, {"loops", m.loops().size()}, {"bytes", fs::file_size(out)},
+                    {"seconds", seconds}});
+    return 0;
+  }
+  std::printf("%s: %zu frames, %zu key images, %zu loop edges (memory store, %ju bytes) from %s in %.2f s\n",
+              out.c_str(), m.frames(), m.key_images(), m.loops().size(), static_cast<std::uintmax_t>(fs::file_size(out)),
+              a.convert_in.c_str(), seconds);
+  return 0;
+}
+
 /// `memory export M --out DIR`: key images, trajectory and loop edges for other tools.
 int export_files(const MemoryArgs& a) {
   const auto file = ex::memory_file(a.memory);
@@ -124,10 +171,14 @@ std::function<int()> setup(CLI::App& app) {
   app.require_subcommand(1);
   auto* b = app.add_subcommand("build", "Stream a sequence into a memory file (or --resume one)");
   b->add_option("input", a->input, "Video, image folder, image list or TUM rgb.txt")->required();
-  b->add_option("--memory", a->out, "Memory file written, or DIR/memory.vmem for a folder (read first with --resume)")
+  b->add_option("--memory", a->out,
+                "Memory store written at every key image, or DIR/memory.vmdb for a folder (read first with --resume)")
       ->required();
-  b->add_flag("--resume", a->resume, "Continue the memory in --memory after the last frame it saw (its options are kept)");
-  b->add_option("--save-every", a->save_every, "Also save the memory every N frames (0: only at the end)")
+  b->add_flag("--resume", a->resume,
+              "Continue the memory in --memory after the last frame it saw (its options are kept; the same input and "
+              "--stride, checked)");
+  b->add_flag("--force", a->force, "Replace an existing memory instead of refusing to");
+  b->add_option("--save-every", a->save_every, "Also write the memory every N frames (0: only at key images, loop edges and the end)")
       ->check(ex::count_in(0, ex::max_frame_index));
   b->add_option("--threshold,--tau", a->tau, "Similarity threshold tau: a new key image when S < tau (eq. 6)")
       ->check(ex::real_in(0.0, 1.0, true));
@@ -155,15 +206,21 @@ std::function<int()> setup(CLI::App& app) {
   x->add_option("memory", a->memory, "Memory file")->required();
   x->add_option("--out", a->export_out, "Folder for key_images.txt, key_images.tum, loops.txt, loops.g2o")->required();
   x->add_flag("--json", a->json, "Print the files written as JSON");
-  return [a, b, l, x]() {
+  auto* c = app.add_subcommand("convert", "Write a memory (a .vmem file of any version, or a store) into a new memory store");
+  c->add_option("INPUT", a->convert_in, "Memory file (.vmem) or store")->required();
+  c->add_option("OUTPUT", a->convert_out, "Memory store written (refused when it exists, unless --force)")->required();
+  c->add_flag("--force", a->force, "Replace an existing memory OUTPUT");
+  c->add_flag("--json", a->json, "Print the result as JSON");
+  return [a, b, l, x, c]() {
     if (b->parsed()) return build(*a, *b);
     if (l->parsed())
       return ex::localize_from_memory(ex::memory_file(a->memory), "memory", a->images, a->json, a->min_confidence);
     if (x->parsed()) return export_files(*a);
+    if (c->parsed()) return convert(*a);
     return info(*a);
   };
 }
 
-const bool registered = vmap::cli::add_command({"memory", "A visual memory file: build, resume, localize, info, export", setup});
+const bool registered = vmap::cli::add_command({"memory", "A visual memory: build, resume, localize, info, export, convert", setup});
 
 }  // namespace

@@ -12,6 +12,8 @@
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -341,14 +343,14 @@ const std::pair<fs::path, nlohmann::json>& sample_memory() {
                             "--json"});
     INFO(r.err);
     REQUIRE(r.code == 0);
-    return std::pair{dir / "memory.vmem", nlohmann::json::parse(r.out)};
+    return std::pair{dir / "memory.vmdb", nlohmann::json::parse(r.out)};
   }();
   return built;
 }
 
 }  // namespace
 
-TEST_CASE("cli: build --memory DIR/ writes DIR/memory.vmem; --resume continues it with the same key images") {
+TEST_CASE("cli: build --memory DIR/ writes DIR/memory.vmdb; --resume continues it with the same key images") {
   const auto& [one_file, one] = sample_memory();
   CHECK(fs::is_regular_file(one_file));
   CHECK(one["frames"] == 60);
@@ -360,14 +362,15 @@ TEST_CASE("cli: build --memory DIR/ writes DIR/memory.vmem; --resume continues i
   CHECK(one["key_frames"].size() == one["key_images"].get<std::size_t>());
   CHECK(one["key_images"].get<std::size_t>() >= 12);
   CHECK(one["out"].is_null());
-  // Interrupted after 30 frames (saved every 10), resumed in a second process with --out.
-  const fs::path file = work_dir() / "memory_resumed" / "sample.vmem";
+  // Interrupted after 30 frames (written at every key image and every 10 frames), resumed
+  // in a second process with --out.
+  const fs::path file = work_dir() / "memory_resumed" / "sample.vmdb";
   const Run first = run_vmap({"build", sample, "--memory", file.string(), "--vocabulary-after", "10", "--end",
                               "30", "--save-every", "10", "--json"});
   INFO(first.err);
   REQUIRE(first.code == 0);
   const auto j1 = nlohmann::json::parse(first.out);
-  CHECK(j1["memory"]["saves"] == 3);
+  CHECK(j1["memory"]["saves"].get<std::size_t>() >= j1["key_images"].get<std::size_t>());
   CHECK(j1["memory"]["last_frame_index"] == 29);
   const fs::path out = work_dir() / "memory_resumed_out";
   const Run second = run_vmap({"build", sample, "--memory", file.string(), "--resume", "--out", out.string(), "--json"});
@@ -394,7 +397,7 @@ TEST_CASE("cli: build --memory DIR/ writes DIR/memory.vmem; --resume continues i
 TEST_CASE("cli: build --memory errors: mixed options, --resume without a memory, a non-memory file") {
   const fs::path dir = work_dir() / "memory_errors";
   fs::create_directories(dir);
-  const std::string mem = (dir / "m.vmem").string();
+  const std::string mem = (dir / "m.vmdb").string();
   usage_error({"build", sample, "--resume"}, "--resume needs --memory DIR|FILE");
   usage_error({"build", sample, "--save-every", "5"}, "--save-every needs --memory");
   usage_error({"build", sample, "--images", "png"}, "--images needs --memory");
@@ -404,14 +407,14 @@ TEST_CASE("cli: build --memory errors: mixed options, --resume without a memory,
   usage_error({"build", sample, "--memory", mem, "--vocabulary", mem, "--vocabulary-after", "3"},
               "--vocabulary and --vocabulary-after conflict");
   usage_error({"build", sample, "--memory", sample}, "is also an input");
-  usage_error({"build", sample, "--memory", (dir / "out" / "m.vmem").string(), "--out", (dir / "out").string()},
+  usage_error({"build", sample, "--memory", (dir / "out" / "m.vmdb").string(), "--out", (dir / "out").string()},
               "is inside the --out folder");
   CHECK(!fs::exists(mem));
   write(dir / "notes.txt", "keep\n");  // an existing file that is no memory is not replaced
   usage_error({"build", sample, "--memory", (dir / "notes.txt").string()}, "exists and is not a vmap memory");
   CHECK(slurp(dir / "notes.txt") == "keep\n");
-  write(dir / "not_memory.vmem", "VMAPMAP! this is no memory file at all");
-  const Run bad = run_vmap({"build", sample, "--memory", (dir / "not_memory.vmem").string(), "--resume"});
+  write(dir / "not_memory.vmdb", "VMAPMAP! this is no memory file at all");
+  const Run bad = run_vmap({"build", sample, "--memory", (dir / "not_memory.vmdb").string(), "--resume"});
   CHECK(bad.code == 1);
   CHECK(bad.err.find("not a vmap memory") != std::string::npos);
   CHECK(std::count(bad.err.begin(), bad.err.end(), '\n') == 1);
@@ -509,11 +512,11 @@ TEST_CASE("cli: localize --memory errors: mixed modes, no image, missing or non-
   usage_error({"localize", "--memory", file.string(), frame_a, "--train", sample}, "--memory and --train conflict");
   usage_error({"localize", "--memory", file.string()}, "--memory needs query images");
   usage_error({"localize", "--room", frame_a}, "query images on the command line need --memory M");
-  const fs::path missing = work_dir() / "no_such.vmem";
+  const fs::path missing = work_dir() / "no_such.vmdb";
   usage_error({"localize", "--memory", missing.string(), frame_a}, "--memory: '" + missing.string() + "' does not exist");
   const Run bad = run_vmap({"localize", "--memory", sample, frame_a});
   CHECK(bad.code == 1);
-  CHECK(bad.err.find("memory file '" + sample + "': header") != std::string::npos);
+  CHECK(bad.err.find("'" + sample + "' is not a vmap memory") != std::string::npos);
   const Run img = run_vmap({"localize", "--memory", file.string(), sample});
   CHECK(img.code == 1);
   CHECK(img.err.find("query image '" + sample + "': ") != std::string::npos);
@@ -590,7 +593,7 @@ TEST_CASE("cli: loops --memory prints the memory's loop edges; --gt evaluates th
   CHECK(small.err.find("--gt: '" + gt.string() + "' covers 2 frames") != std::string::npos);
 }
 
-TEST_CASE("cli: memory build / info share the memory code: a folder means DIR/memory.vmem") {
+TEST_CASE("cli: memory build / info share the memory code: a folder means DIR/memory.vmdb") {
   const auto& [file, built] = sample_memory();
   const Run r = run_vmap({"memory", "info", file.parent_path().string(), "--json"});
   INFO(r.err);
@@ -601,7 +604,7 @@ TEST_CASE("cli: memory build / info share the memory code: a folder means DIR/me
   CHECK(j["key_images"].size() == built["key_frames"].size());
   CHECK(j["key_images"][0]["frame_index"] == 0);
   CHECK(j["loops"].size() == built["memory"]["loops"].get<std::size_t>());
-  usage_error({"memory", "build", sample, "--memory", (work_dir() / "none.vmem").string(), "--resume"},
+  usage_error({"memory", "build", sample, "--memory", (work_dir() / "none.vmdb").string(), "--resume"},
               "--resume: no memory file");
 }
 
@@ -665,7 +668,7 @@ TEST_SUITE("data") {
 
   TEST_CASE("cli: build --memory --poses keeps each key image's pose; localize --memory answers it") {
     const std::string gt = vmap::test::data_path("tum_fr1_rpy/groundtruth.txt").string();
-    const fs::path file = work_dir() / "memory_poses.vmem";
+    const fs::path file = work_dir() / "memory_poses.vmdb";
     const Run b = run_vmap({"build", sample, "--memory", file.string(), "--poses", gt, "--end", "12", "--json"});
     INFO(b.err);
     REQUIRE(b.code == 0);
@@ -693,7 +696,7 @@ TEST_SUITE("data") {
 
   TEST_CASE("cli: build --memory --poses --gcs keeps floor poses and trains the GCS; localize answers a position") {
     const std::string gt = vmap::test::data_path("tum_fr1_rpy/groundtruth.txt").string();
-    const fs::path file = work_dir() / "memory_gcs.vmem";
+    const fs::path file = work_dir() / "memory_gcs.vmdb";
     const Run b = run_vmap({"build", sample, "--memory", file.string(), "--poses", gt, "--gcs", "--end", "30"});
     INFO(b.err);
     REQUIRE(b.code == 0);
@@ -712,7 +715,7 @@ TEST_SUITE("data") {
     CHECK(std::abs(q["position"]["y"].get<double>() - 0.6880) < 0.05);
     const Run text = run_vmap({"localize", "--memory", file.string(), frame_a});
     CHECK(text.out.find("GCS position (") != std::string::npos);
-    usage_error({"build", sample, "--memory", (work_dir() / "gcs_nop.vmem").string(), "--gcs"}, "--gcs needs --poses");
+    usage_error({"build", sample, "--memory", (work_dir() / "gcs_nop.vmdb").string(), "--gcs"}, "--gcs needs --poses");
     usage_error({"build", sample, "--gcs"}, "--gcs needs --memory");
   }
 
@@ -843,7 +846,7 @@ TEST_CASE("cli: no memory is lost to --out, and a refused or failed run leaves n
   // A memory is never placed in an --out folder (the next --out run replaces it whole).
   fails_with({"build", sample, "--end", "6", "--memory", maps.string() + "/"}, 2,
              "--memory: '" + maps.string() + "' is an --out folder of vmap");
-  CHECK(!fs::exists(maps / "memory.vmem"));
+  CHECK(!fs::exists(maps / "memory.vmdb"));
   // An --out folder that gained a file vmap did not write there is not replaced.
   write(maps / "notes.txt", "mine\n");
   fails_with({"build", sample, "--end", "6", "--out", maps.string()}, 2,
@@ -853,9 +856,9 @@ TEST_CASE("cli: no memory is lost to --out, and a refused or failed run leaves n
   const fs::path old = dir / "old";
   fs::create_directories(old);
   write(old / ".vmap-output", "written by vmap; the folder is replaced as a whole\n");
-  fs::copy_file(sample_memory().first, old / "memory.vmem");
-  fails_with({"build", sample, "--end", "6", "--out", old.string()}, 2, "holds 'memory.vmem'");
-  CHECK(fs::file_size(old / "memory.vmem") == fs::file_size(sample_memory().first));
+  fs::copy_file(sample_memory().first, old / "memory.vmdb");
+  fails_with({"build", sample, "--end", "6", "--out", old.string()}, 2, "holds 'memory.vmdb'");
+  CHECK(fs::file_size(old / "memory.vmdb") == fs::file_size(sample_memory().first));
   // Refused or failed runs remove the folders they created.
   const fs::path fresh = dir / "new" / "deeper";
   fails_with({"build", (dir / "missing.txt").string(), "--out", fresh.string()}, 1, "missing.txt");
@@ -863,7 +866,7 @@ TEST_CASE("cli: no memory is lost to --out, and a refused or failed run leaves n
   write(dir / "bad.yaml", "%YAML:1.0\nCamera.fx: 1e-300\nCamera.fy: 500\nCamera.cx: 320\nCamera.cy: 240\n");
   fails_with({"build", sample, "--out", fresh.string(), "--camera", (dir / "bad.yaml").string()}, 1, "focal lengths");
   CHECK(!fs::exists(dir / "new"));
-  fails_with({"build", sample, "--memory", (dir / "memnew" / "m.vmem").string(), "--camera", (dir / "bad.yaml").string()},
+  fails_with({"build", sample, "--memory", (dir / "memnew" / "m.vmdb").string(), "--camera", (dir / "bad.yaml").string()},
              2, "conflict");
   CHECK(!fs::exists(dir / "memnew"));
 }
@@ -981,12 +984,12 @@ TEST_SUITE("data") {
     // Poses and memory exports: key_images.tum is read back by vmap's TUM reader, and
     // the g2o edges join key images with their relative pose.
     const fs::path out = fresh_dir("euroc_memory");
-    const Run m = run_vmap({"build", cam0, "--memory", (out / "m.vmem").string(), "--poses", gt, "--vocabulary-after",
+    const Run m = run_vmap({"build", cam0, "--memory", (out / "m.vmdb").string(), "--poses", gt, "--vocabulary-after",
                             "10", "--out", (out / "pictures").string(), "--json"});
     INFO(m.err);
     REQUIRE(m.code == 0);
     const auto tum = vmap::load_tum_poses(out / "pictures" / "key_images.tum");
-    const auto info = nlohmann::json::parse(run_vmap({"memory", "info", (out / "m.vmem").string(), "--json"}).out);
+    const auto info = nlohmann::json::parse(run_vmap({"memory", "info", (out / "m.vmdb").string(), "--json"}).out);
     REQUIRE(tum.size() == info["key_images"].size());
     const auto truth = vmap::load_camera_poses(gt);
     for (std::size_t k = 0; k < tum.size(); ++k) {
@@ -1128,4 +1131,92 @@ TEST_SUITE("data") {
     CHECK(text.out.find("wrote " + (dir / "text").string() + "/{loops.txt}") != std::string::npos);
     CHECK(slurp(dir / "text" / "loops.txt") == slurp(dir / "out" / "loops.txt"));
   }
+}
+
+TEST_CASE("cli: a memory store is replaced only with --force, resumed only from its own input, written by one program") {
+  const fs::path dir = fresh_dir("store_rules");
+  const std::string mem = (dir / "m.vmdb").string();
+  REQUIRE(run_vmap({"memory", "build", sample, "--memory", mem, "--end", "20"}).code == 0);
+  const std::string before = slurp(mem);
+  usage_error({"memory", "build", sample, "--memory", mem}, "exists: give --resume to continue it, or --force to replace it");
+  usage_error({"build", sample, "--memory", mem, "--end", "10"}, "exists: give --resume to continue it, or --force");
+  usage_error({"build", sample, "--memory", mem, "--resume", "--force"}, "--resume and --force conflict");
+  CHECK(slurp(mem) == before);
+  // Another input, or the same with another stride: refused, naming both.
+  const std::string other = "examples/data/tum_fr1_rpy_60/rgb";
+  usage_error({"memory", "build", other, "--memory", mem, "--resume"}, "was built from '");
+  usage_error({"memory", "build", sample, "--memory", mem, "--resume", "--stride", "2"}, "stride 1); this run reads");
+  CHECK(slurp(mem) == before);
+  // Another program writing the memory (a lock held as a writer holds it): a second
+  // writer is refused with the memory named; a reader still reads it.
+  {
+    const int fd = ::open(mem.c_str(), O_RDWR);
+    REQUIRE(fd >= 0);
+    REQUIRE(::flock(fd, LOCK_EX | LOCK_NB) == 0);
+    const Run second = run_vmap({"memory", "build", sample, "--memory", mem, "--resume"});
+    CHECK(second.code == 1);
+    CHECK(second.err.find("memory '" + mem + "' is being written by another program") != std::string::npos);
+    const Run reader = run_vmap({"memory", "info", mem, "--json"});
+    CHECK(reader.code == 0);
+    ::close(fd);
+  }
+  CHECK(slurp(mem) == before);
+  // --force replaces it; --resume continues it after the 20 frames.
+  const Run forced = run_vmap({"memory", "build", sample, "--memory", mem, "--end", "10", "--force", "--json"});
+  REQUIRE(forced.code == 0);
+  CHECK(nlohmann::json::parse(forced.out)["frames"] == 10);
+  const Run resumed = run_vmap({"memory", "build", sample, "--memory", mem, "--resume", "--json"});
+  INFO(resumed.err);
+  REQUIRE(resumed.code == 0);
+  CHECK(nlohmann::json::parse(resumed.out)["frames"] == 60);
+  // A refused fresh run leaves no memory behind.
+  const std::string none = (dir / "none.vmdb").string();
+  fails_with({"memory", "build", (dir / "missing.txt").string(), "--memory", none}, 1, "missing.txt");
+  CHECK(!fs::exists(none));
+}
+
+TEST_CASE("cli: memory convert turns .vmem files of every version into stores that answer the same") {
+  const fs::path dir = fresh_dir("store_convert");
+  for (const char* name : {"labels_gcs.vmem", "labels_gcs_v2.vmem", "v1_five_keys.vmem"}) {
+    CAPTURE(name);
+    const std::string vmem = "tests/fuzz/corpus/memory/" + std::string(name);
+    const std::string store = (dir / (std::string(name) + ".vmdb")).string();
+    const Run c = run_vmap({"memory", "convert", vmem, store, "--json"});
+    INFO(c.err);
+    REQUIRE(c.code == 0);
+    const Run a = run_vmap({"memory", "info", vmem, "--json"});
+    const Run b = run_vmap({"memory", "info", store, "--json"});
+    REQUIRE(a.code == 0);
+    REQUIRE(b.code == 0);
+    CHECK(nlohmann::json::parse(a.out) == nlohmann::json::parse(b.out));
+    usage_error({"memory", "convert", vmem, store}, "exists: give --resume to continue it, or --force");
+    CHECK(run_vmap({"memory", "convert", vmem, store, "--force"}).code == 0);
+  }
+  // A .vmem is read as it is but not resumed: convert it first.
+  usage_error({"memory", "build", sample, "--memory", "tests/fuzz/corpus/memory/labels_gcs.vmem", "--resume"},
+              "convert it to a memory store first");
+  fails_with({"memory", "convert", sample, (dir / "x.vmdb").string()}, 1, "is not a vmap memory");
+  CHECK(!fs::exists(dir / "x.vmdb"));
+}
+
+TEST_CASE("cli: a memory store is read without vmap, by sqlite3 and by Python's sqlite3 module") {
+  const auto& [file, built] = sample_memory();
+  const fs::path out = work_dir() / "sqlite_read.txt";
+  // The documented queries (examples/memory.md, "The memory store").
+  const std::string sql = "SELECT id, frame_index, name, timestamp FROM key_images ORDER BY id LIMIT 3;";
+  REQUIRE(std::system(("sqlite3 -readonly " + quote(file.string()) + " " + quote(sql) + " > " + quote(out.string())).c_str()) == 0);
+  const std::string rows = slurp(out);
+  CHECK(rows.find("0|0|1305031229.528748.jpg|1305031229.52875") == 0);
+  const std::string py =
+      "import sqlite3, sys\n"
+      "db = sqlite3.connect('file:' + sys.argv[1] + '?mode=ro', uri=True)\n"
+      "keys = db.execute('SELECT count(*) FROM key_images').fetchone()[0]\n"
+      "loops = db.execute('SELECT count(*) FROM loops WHERE confidence >= 0.5').fetchone()[0]\n"
+      "print(keys, loops)\n";
+  write(work_dir() / "read_memory.py", py);
+  REQUIRE(std::system(("python3 " + quote((work_dir() / "read_memory.py").string()) + " " + quote(file.string()) + " > " +
+                       quote(out.string()))
+                          .c_str()) == 0);
+  CHECK(slurp(out) == std::to_string(built["key_images"].get<std::size_t>()) + " " +
+                          std::to_string(built["memory"]["loops"].get<std::size_t>()) + "\n");
 }

@@ -24,7 +24,8 @@
 // marker lists the names the set was published with; a marked folder that has since
 // gained anything else (a memory file saved into it, a user's notes) is refused too, so
 // replacing an output never deletes what another command or a person put there. A
-// marker without a list (older vmap) still refuses a folder holding a memory (`*.vmem`).
+// marker without a list (older vmap) still refuses a folder holding a memory (`*.vmem`,
+// `*.vmdb`).
 //
 // Symbolic links: a target file that is a symbolic link is followed on purpose: the
 // file the link points to is replaced (the temporary file is made in that file's
@@ -348,7 +349,7 @@ class AtomicDirectory {
       const std::string name = e.path().filename().string();
       if (name == detail::output_marker) continue;
       const bool own = has_list ? std::find(listed.begin(), listed.end(), name) != listed.end()
-                                : e.path().extension() != ".vmem";
+                                : e.path().extension() != ".vmem" && e.path().extension() != ".vmdb";
       if (!own)
         detail::fail("output folder '" + target_.string() + "' holds '" + name +
                      "', which is not one of the files vmap wrote there; vmap replaces its output folder as a "

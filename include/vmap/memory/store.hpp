@@ -38,6 +38,8 @@
 //        inliers, similarity; record BLOB as the file's "link" holds one)
 //   loops(id INTEGER PRIMARY KEY: the edge's index; from_key (newer), to_key (older),
 //        inliers, confidence; record BLOB as the file's "loop" holds one)
+//   notes(name TEXT PRIMARY KEY, value TEXT): what the program that writes the memory
+//        records about it (vmap's command line: the input it was built from)
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/binary.hpp>
@@ -191,6 +193,28 @@ class MemoryStore {
     gcs_written_ = memory.gcs_generation_;
   }
 
+  /// Records `value` under `name` in the notes table (its own transaction).
+  void set_note(std::string_view name, std::string_view value) {
+    if (!insert_key_) db_.fail("is open read-only: open it with Access::write to write a note");
+    auto q = db_.prepare("INSERT OR REPLACE INTO notes(name, value) VALUES(?,?)", "write a note");
+    q.bind_text(1, name).bind_text(2, value);
+    q.run();
+  }
+
+  /// The note recorded under `name`, if any.
+  [[nodiscard]] std::optional<std::string> note(std::string_view name) {
+    auto q = db_.prepare("SELECT value FROM notes WHERE name = ?", "read a note");
+    q.bind_text(1, name);
+    if (!q.step()) return std::nullopt;
+    return q.text(0);
+  }
+
+  /// Moves the write-ahead log into the database file (the file then holds every sync
+  /// and its size is the memory's); a no-op for a reader.
+  void checkpoint() {
+    if (insert_key_) db_.exec("PRAGMA wal_checkpoint(TRUNCATE)", "checkpoint the write-ahead log");
+  }
+
   /// The memory the store holds, as synced last (a snapshot, also while a writer goes
   /// on). `policies` are the memory's descriptor, matcher, estimator and similarity when
   /// they are not default-constructed, as for VisualMemory::load.
@@ -279,7 +303,8 @@ class MemoryStore {
         "CREATE TABLE links(key INTEGER PRIMARY KEY, matches INTEGER NOT NULL, inliers INTEGER NOT NULL,"
         " similarity REAL NOT NULL, record BLOB NOT NULL);"
         "CREATE TABLE loops(id INTEGER PRIMARY KEY, from_key INTEGER NOT NULL, to_key INTEGER NOT NULL,"
-        " inliers INTEGER NOT NULL, confidence REAL NOT NULL, record BLOB NOT NULL);";
+        " inliers INTEGER NOT NULL, confidence REAL NOT NULL, record BLOB NOT NULL);"
+        "CREATE TABLE notes(name TEXT PRIMARY KEY NOT NULL, value TEXT NOT NULL) WITHOUT ROWID;";
     return sql;
   }
 
