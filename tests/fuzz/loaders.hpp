@@ -17,6 +17,7 @@
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/lcd/binary_tree.hpp>
 #include <vmap/lcd/evaluation.hpp>
+#include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 #include <vmap/place/database.hpp>
 #include <vmap/place/vocabulary.hpp>
@@ -26,6 +27,9 @@
 #include "common/cli_support.hpp"  // the --config reader of the command line
 
 #include <cstddef>
+#include <unistd.h>
+#include <fstream>
+#include <filesystem>
 #include <cstdint>
 #include <cstdlib>
 #include <sstream>
@@ -68,5 +72,25 @@ VMAP_FUZZ_LOADER(memory, {
   } catch (...) {
     std::abort();
   }
+})
+// A memory store (an SQLite file) with mutated pages and blobs: written to a file of its
+// own per process, opened read-only and loaded.
+VMAP_FUZZ_LOADER(memory_store, {
+  const std::filesystem::path p =
+      std::filesystem::temp_directory_path() / ("vmap_fuzz_store_" + std::to_string(::getpid()) + ".vmdb");
+  const auto remove_all = [&] {
+    std::error_code ec;
+    for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(p.string() + suffix, ec);
+  };
+  remove_all();
+  std::ofstream(p, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  try {
+    auto store = vmap::MemoryStore::open(p, vmap::sqlite::Access::read);
+    (void)store.load<vmap::OrbVisualMemory>();
+  } catch (...) {
+    remove_all();
+    throw;
+  }
+  remove_all();
 })
 // clang-format on
