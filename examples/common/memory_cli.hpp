@@ -56,6 +56,11 @@ inline std::filesystem::path memory_file(const std::string& arg) {
 enum class MemoryFileKind : std::uint8_t { store, file, other };
 
 inline MemoryFileKind memory_file_kind(const std::filesystem::path& file) {
+  // An empty file is a store whose creation was interrupted (the file is made before
+  // its tables): a memory, so that --force may replace it.
+  std::error_code ec;
+  if (std::filesystem::is_regular_file(file, ec) && std::filesystem::file_size(file, ec) == 0 && !ec)
+    return MemoryFileKind::store;
   std::ifstream f(file, std::ios::binary);
   char head[16] = {};
   f.read(head, sizeof head);
@@ -194,6 +199,9 @@ inline MemoryWriter memory_to_resume(const std::filesystem::path& file, const CL
     usage_error("--resume: '" + file.string() + "' is a single-file memory (.vmem); convert it to a memory store "
                 "first: vmap memory convert " + file.string() + " NEW.vmdb");
   auto store = MemoryStore::open(file, sqlite::Access::write);
+  if (!store.synced())
+    usage_error("--resume: the memory '" + file.string() + "' holds nothing yet (its first run stopped before its "
+                "first key image was written): start it again with --force");
   auto memory = store.load<CliMemory>();
   return MemoryWriter{std::move(store), std::move(memory)};
 }

@@ -257,7 +257,16 @@ class BasicKeyframeSelector {
 
   /// A copy of everything push() continues from (see SelectorState).
   [[nodiscard]] SelectorState<Item> state() const {
-    SelectorState<Item> s{map_, prev_, std::nullopt};
+    SelectorState<Item> s = pending_state();
+    s.map = map_;
+    return s;
+  }
+
+  /// state() without the map (left empty): I_{j-1} and its score, the part that changes
+  /// at every frame. A store that keeps the map's key images apart rewrites only this,
+  /// without copying the map.
+  [[nodiscard]] SelectorState<Item> pending_state() const {
+    SelectorState<Item> s{{}, prev_, std::nullopt};
     if (prev_scored_) {
       s.previous_score = prev_score_;
       if (prev_degeneracy_pending_) complete_previous_score(*s.previous_score);

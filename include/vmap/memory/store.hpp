@@ -86,6 +86,10 @@ class MemoryStore {
   /// to load it while another program may write.
   [[nodiscard]] static MemoryStore open(const std::filesystem::path& path, sqlite::Access access = sqlite::Access::write) {
     detail::check(access != sqlite::Access::create, "MemoryStore::open: use MemoryStore::create for a new store");
+    std::error_code ec;
+    if (std::filesystem::is_regular_file(path, ec) && std::filesystem::file_size(path, ec) == 0 && !ec)
+      detail::fail("memory '" + path.string() + "' is empty: its creation was interrupted before the tables were "
+                   "written (remove it, or create the memory again)");
     MemoryStore s(path, access);
     s.check_schema();
     if (access == sqlite::Access::write) s.prepare();
@@ -102,6 +106,8 @@ class MemoryStore {
   [[nodiscard]] const std::filesystem::path& path() const noexcept { return path_; }
   /// Rows written (as of open or the last sync of this object).
   [[nodiscard]] std::size_t key_images() const noexcept { return keys_; }
+  /// Whether a memory was ever synced into the store (load() needs one).
+  [[nodiscard]] bool synced() const noexcept { return synced_; }
   [[nodiscard]] std::size_t loops() const noexcept { return loops_; }
 
   /// Writes what `memory` made since the last sync into the store, in one transaction.
@@ -189,6 +195,7 @@ class MemoryStore {
     keys_ = m;
     loops_ = e;
     bows_ = checked;
+    synced_ = true;
     vocabulary_written_ = has_vocabulary;
     gcs_written_ = memory.gcs_generation_;
   }
@@ -344,6 +351,7 @@ class MemoryStore {
     keys_ = count("SELECT count(*) FROM key_images", "count the key images");
     loops_ = count("SELECT count(*) FROM loops", "count the loop edges");
     bows_ = count("SELECT count(bow) FROM key_images", "count the bags of words");
+    synced_ = count("SELECT count(*) FROM meta WHERE name = 'options'", "look for a sync") > 0;
   }
 
   /// The first sync into a store that holds key images: the memory must be the one it
@@ -388,6 +396,7 @@ class MemoryStore {
   std::optional<sqlite::Statement> insert_key_, insert_link_, update_bow_, insert_loop_, put_meta_;
   std::size_t keys_ = 0, loops_ = 0, bows_ = 0;  ///< rows in the store
   bool matched_ = false;                         ///< the synced memory was checked against the stored one
+  bool synced_ = false;                          ///< the store holds a memory (a sync happened)
   std::optional<bool> vocabulary_written_;       ///< whether the stored vocabulary is a learned one
   std::optional<std::uint64_t> gcs_written_;     ///< the memory's GCS generation stored
 };

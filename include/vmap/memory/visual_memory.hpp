@@ -1252,7 +1252,7 @@ class VisualMemory {
   }
 
   std::string selector_bytes(ImageStorage storage) const {
-    const SelectorState<Features> s = selector_.state();
+    const SelectorState<Features> s = selector_.pending_state();
     detail::BinaryWriter w;
     w.u8(s.previous ? 1 : 0);
     if (s.previous) {

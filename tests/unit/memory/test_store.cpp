@@ -212,6 +212,20 @@ TEST_CASE("store: files that are not stores, other versions and damaged rows are
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(text, vmap::sqlite::Access::read); }).find(text.string()) !=
         std::string::npos);
 
+  // A creation killed before its tables were written leaves an empty file.
+  const fs::path empty = fresh("empty.vmdb");
+  std::ofstream(empty).close();
+  CHECK(error_of([&] { (void)vmap::MemoryStore::open(empty); }).find("is empty: its creation was interrupted") !=
+        std::string::npos);
+  {
+    // Created, never synced: open, but nothing to load.
+    const fs::path unsynced = fresh("unsynced.vmdb");
+    (void)vmap::MemoryStore::create(unsynced);
+    auto store = vmap::MemoryStore::open(unsynced, vmap::sqlite::Access::read);
+    CHECK(!store.synced());
+    CHECK(error_of([&] { (void)load(store); }).find("holds no 'options' state") != std::string::npos);
+  }
+
   const fs::path foreign = fresh("foreign.vmdb");
   raw_sql(foreign, "CREATE TABLE t(x)");
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(foreign); }).find("is not a vmap memory store") != std::string::npos);
