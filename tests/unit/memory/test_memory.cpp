@@ -3,6 +3,7 @@
 // hostile memory files (truncated at every section, flipped bytes, wrong version).
 #include "support/errors.hpp"
 #include "support/memory_file.hpp"
+#include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/keyframe/map_io.hpp>
@@ -34,43 +35,19 @@ using vmap::test::section_starts;
 
 std::filesystem::path sample_list() { return vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt"; }
 
-std::vector<vmap::Frame> read_frames(const std::filesystem::path& input, vmap::FrameSourceOptions o = {}) {
-  o.grey = true;
-  auto src = vmap::FrameSource::open(input, o);
-  std::vector<vmap::Frame> out;
-  while (auto f = src.next()) out.push_back(std::move(*f));
-  return out;
-}
+using vmap::test::sample_frames;
+using vmap::test::memory_estimator;
+using vmap::test::small_memory_options;
+using vmap::test::make_small_memory;
 
-const std::vector<vmap::Frame>& sample_frames() {
-  static const std::vector<vmap::Frame> frames = read_frames(sample_list());
-  return frames;
-}
-
-// The benchmark stack (degeneracy check off, as the selector tests run it).
-vmap::FundamentalEstimator estimator() { return vmap::FundamentalEstimator({.check_degeneracy = false}); }
-
-vmap::MemoryOptions small_options(vmap::ImageStorage images = vmap::ImageStorage::none) {
-  vmap::MemoryOptions o;
-  o.selector.tau = 0.3;
-  o.images = images;
-  o.vocabulary_after = 3;
-  o.vocabulary = {.branching = 8, .depth = 2, .seed = 5};
-  o.loops.window = 2;
-  o.loops.decision.min_inliers = 30;
-  return o;
-}
-
-vmap::OrbVisualMemory make_memory(const vmap::MemoryOptions& o) {
-  return vmap::OrbVisualMemory(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(), vmap::InlierRatio{}, o);
-}
+using vmap::test::read_grey_frames;
 
 vmap::OrbVisualMemory load_memory(const std::filesystem::path& p) {
-  return vmap::OrbVisualMemory::load(p, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(), vmap::InlierRatio{});
+  return vmap::OrbVisualMemory::load(p, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(), vmap::InlierRatio{});
 }
 
 vmap::OrbVisualMemory deserialize_memory(const std::string& bytes, const std::string& name = "<memory>") {
-  return vmap::OrbVisualMemory::deserialize(bytes, name, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(),
+  return vmap::OrbVisualMemory::deserialize(bytes, name, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
                                             vmap::InlierRatio{});
 }
 
@@ -79,7 +56,7 @@ vmap::OrbVisualMemory deserialize_memory(const std::string& bytes, const std::st
 vmap::OrbVisualMemory run(const std::vector<vmap::Frame>& frames, const vmap::MemoryOptions& o, std::size_t every,
                           const std::filesystem::path& file) {
   std::optional<vmap::OrbVisualMemory> mem;
-  mem.emplace(make_memory(o));
+  mem.emplace(make_small_memory(o));
   for (std::size_t i = 0; i < frames.size(); ++i) {
     if (every > 0 && i > 0 && i % every == 0) {
       mem->save(file);
@@ -120,8 +97,8 @@ bool names_a_part(const std::string& message) {
 TEST_CASE("memory: key images are the selector's, with links, poses and the graph") {
   const auto& frames = sample_frames();
   REQUIRE(frames.size() == 60);
-  auto mem = make_memory(small_options());
-  vmap::OrbMagsacSelector plain(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(), vmap::InlierRatio{},
+  auto mem = make_small_memory(small_memory_options());
+  vmap::OrbMagsacSelector plain(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(), vmap::InlierRatio{},
                                 {.tau = 0.3});
   std::size_t new_keys = 0;
   for (std::size_t i = 0; i < frames.size(); ++i) {
@@ -167,7 +144,7 @@ TEST_CASE("memory: localize answers the key image a held-out frame shows, with t
   const auto& all = sample_frames();
   std::vector<vmap::Frame> kept, held;
   for (std::size_t i = 0; i < all.size(); ++i) (i % 10 == 5 ? held : kept).push_back(all[i]);
-  auto mem = make_memory(small_options());
+  auto mem = make_small_memory(small_memory_options());
   for (const auto& f : kept) mem.push(f);
   std::size_t near = 0;
   for (const auto& f : held) {
@@ -207,7 +184,7 @@ TEST_CASE("memory: localize answers the key image a held-out frame shows, with t
   CHECK(blank.reason == "the query image has no features");
   CHECK_THROWS_AS((void)mem.localize(cv::Mat()), vmap::Error);
   // An empty memory answers so.
-  auto empty = make_memory(small_options());
+  auto empty = make_small_memory(small_memory_options());
   const auto none = empty.localize(all[0].image);
   CHECK(none.status == vmap::PlaceStatus::too_little_evidence);
   CHECK(none.reason == "the memory has no key image");
@@ -218,7 +195,7 @@ TEST_CASE("memory: save, load and push continue exactly where an uninterrupted r
   const auto& frames = sample_frames();
   for (auto images : {vmap::ImageStorage::none, vmap::ImageStorage::png, vmap::ImageStorage::jpeg}) {
     CAPTURE(static_cast<int>(images));
-    const auto o = small_options(images);
+    const auto o = small_memory_options(images);
     const auto whole = run(frames, o, 0, dir / "m.vmem");
     for (std::size_t every : {7U, 13U, 30U}) {
       CAPTURE(every);
@@ -247,8 +224,8 @@ TEST_CASE("memory: a vocabulary given by the user is used from the first key ima
   for (std::size_t i = 0; i < frames.size(); i += 10) sets.push_back(orb.extract(frames[i].image).descriptors);
   auto voc = vmap::BinaryVocabularyTree::learn(sets, {.branching = 8, .depth = 2, .seed = 3});
   const std::size_t words = voc.size();
-  auto o = small_options();
-  vmap::OrbVisualMemory mem(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(), vmap::InlierRatio{}, o,
+  auto o = small_memory_options();
+  vmap::OrbVisualMemory mem(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(), vmap::InlierRatio{}, o,
                             std::move(voc));
   mem.push(frames[0]);
   CHECK(mem.database().size() == 1);
@@ -256,16 +233,16 @@ TEST_CASE("memory: a vocabulary given by the user is used from the first key ima
   // A float vocabulary does not fit ORB's binary descriptors: an Error naming both.
   cv::Mat fwords(4, 8, CV_32FC1);
   cv::randu(fwords, 0.0f, 1.0f);
-  vmap::OrbVisualMemory wrong(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(), vmap::InlierRatio{}, o,
+  vmap::OrbVisualMemory wrong(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(), vmap::InlierRatio{}, o,
                               vmap::FloatVocabularyTree::from_words(fwords));
   CHECK(vmap::test::error_of([&] { wrong.push(frames[0]); }).find("do not fit the vocabulary") != std::string::npos);
 }
 
 TEST_CASE("memory: invalid options are errors naming the option") {
   auto with = [](auto change) {
-    auto o = small_options();
+    auto o = small_memory_options();
     change(o);
-    return vmap::test::error_of([&] { (void)make_memory(o); });
+    return vmap::test::error_of([&] { (void)make_small_memory(o); });
   };
   CHECK(with([](vmap::MemoryOptions& o) { o.vocabulary_after = 0; }).find("vocabulary_after") != std::string::npos);
   CHECK(with([](vmap::MemoryOptions& o) { o.loops.top_k = 0; }).find("loops.top_k") != std::string::npos);
@@ -280,7 +257,7 @@ TEST_CASE("memory: invalid options are errors naming the option") {
 
 TEST_CASE("memory files: truncated at every section, flipped bytes, wrong version: an Error naming the part") {
   const auto& frames = sample_frames();
-  auto mem = make_memory(small_options(vmap::ImageStorage::jpeg));
+  auto mem = make_small_memory(small_memory_options(vmap::ImageStorage::jpeg));
   for (std::size_t i = 0; i < 25; ++i) mem.push(frames[i]);
   REQUIRE(mem.key_images() >= 3);
   const std::string file = mem.serialize();
@@ -342,7 +319,7 @@ TEST_CASE("memory files: truncated at every section, flipped bytes, wrong versio
 
 TEST_CASE("memory: bare images with timestamps and SE(3) poses; blank frames postpone the vocabulary") {
   const auto& frames = sample_frames();
-  auto mem = make_memory(small_options());
+  auto mem = make_small_memory(small_memory_options());
   // Blank frames: key images without descriptors; no vocabulary can be learned from them.
   const cv::Mat blank(480, 640, CV_8UC1, cv::Scalar(90));
   mem.push(blank, 0.5);
@@ -374,7 +351,7 @@ TEST_CASE("memory: bare images with timestamps and SE(3) poses; blank frames pos
 TEST_CASE("memory: two memories loaded from one file answer the same from two threads as serially") {
   const auto dir = vmap::test::scratch_dir("memory_threads");
   const auto& frames = sample_frames();
-  auto mem = make_memory(small_options());
+  auto mem = make_small_memory(small_memory_options());
   for (std::size_t i = 0; i < 40; i += 2) mem.push(frames[i]);
   mem.save(dir / "m.vmem");
   auto answers = [&](vmap::OrbVisualMemory& m) {
@@ -400,7 +377,7 @@ TEST_CASE("memory: two memories loaded from one file answer the same from two th
 TEST_CASE("memory files: a save that dies before commit leaves the previous file loadable") {
   const auto dir = vmap::test::scratch_dir("memory_failed_save");
   const auto& frames = sample_frames();
-  auto mem = make_memory(small_options());
+  auto mem = make_small_memory(small_memory_options());
   for (std::size_t i = 0; i < 20; ++i) mem.push(frames[i]);
   mem.save(dir / "m.vmem");
   for (std::size_t i = 20; i < 40; ++i) mem.push(frames[i]);
@@ -421,16 +398,16 @@ TEST_CASE("memory files: a save that dies before commit leaves the previous file
 
 TEST_CASE("map files: a map built with a start and a stride round-trips (frame indices in the sequence's space)") {
   const auto dir = vmap::test::scratch_dir("memory_stride");
-  const auto frames = read_frames(sample_list(), {.start = 8, .stride = 4});
+  const auto frames = read_grey_frames(sample_list(), {.start = 8, .stride = 4});
   REQUIRE(frames.size() == 13);
   CHECK(frames[1].index == 12);
-  vmap::OrbMagsacSelector sel(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(), vmap::InlierRatio{},
+  vmap::OrbMagsacSelector sel(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(), vmap::InlierRatio{},
                               {.tau = 0.5});
   for (const auto& f : frames) sel.push(f);
   const auto& map = sel.map();
   CHECK(map.frames == 13);
   // The memory records where a resumed stream goes on, in the sequence's index space.
-  auto mem = make_memory(small_options());
+  auto mem = make_small_memory(small_memory_options());
   CHECK(!mem.last_frame_index());
   for (const auto& f : frames) mem.push(f);
   CHECK(mem.last_frame_index() == 8 + 4 * 12);
@@ -459,7 +436,7 @@ TEST_SUITE("data") {
                           {vmap::test::data_path("rtabmap_loop/images"), 84, 20}};
     for (const auto& c : cases) {
       CAPTURE(c.input.string());
-      const auto frames = read_frames(c.input, {.end = c.end});
+      const auto frames = read_grey_frames(c.input, {.end = c.end});
       auto o = vmap::MemoryOptions{};
       o.vocabulary_after = 10;
       o.loops.window = 5;

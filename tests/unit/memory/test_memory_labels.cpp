@@ -3,6 +3,7 @@
 // format version 2 against version 1.
 #include "support/errors.hpp"
 #include "support/memory_file.hpp"
+#include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/hooks/precomputed_detections.hpp>
@@ -25,21 +26,8 @@ namespace {
 
 using vmap::test::section_starts;
 
-std::vector<vmap::Frame> read_frames(const std::filesystem::path& input, vmap::FrameSourceOptions o = {}) {
-  o.grey = true;
-  auto src = vmap::FrameSource::open(input, o);
-  std::vector<vmap::Frame> out;
-  while (auto f = src.next()) out.push_back(std::move(*f));
-  return out;
-}
-
-const std::vector<vmap::Frame>& sample_frames() {
-  static const std::vector<vmap::Frame> frames =
-      read_frames(vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt");
-  return frames;
-}
-
-vmap::FundamentalEstimator estimator() { return vmap::FundamentalEstimator({.check_degeneracy = false}); }
+using vmap::test::sample_frames;
+using vmap::test::memory_estimator;
 
 vmap::MemoryOptions small_options() {
   vmap::MemoryOptions o;
@@ -54,11 +42,11 @@ vmap::MemoryOptions small_options() {
 }
 
 vmap::OrbVisualMemory make_memory(const vmap::MemoryOptions& o) {
-  return vmap::OrbVisualMemory(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(), vmap::InlierRatio{}, o);
+  return vmap::OrbVisualMemory(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(), vmap::InlierRatio{}, o);
 }
 
 vmap::OrbVisualMemory from_bytes(const std::string& bytes, const std::string& name = "<memory>") {
-  return vmap::OrbVisualMemory::deserialize(bytes, name, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(),
+  return vmap::OrbVisualMemory::deserialize(bytes, name, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
                                             vmap::InlierRatio{});
 }
 
@@ -290,7 +278,7 @@ TEST_CASE("memory files v2: policies' options are checked on load; version 1 fil
   // Another ORB budget, another estimator: an Error naming the section and the policy.
   const std::string orb = vmap::test::error_of([&] {
     (void)vmap::OrbVisualMemory::deserialize(file, "m.vmem", vmap::OrbDescriptor({.features = 500}),
-                                             vmap::BruteForceMatcher{}, estimator(), vmap::InlierRatio{});
+                                             vmap::BruteForceMatcher{}, memory_estimator(), vmap::InlierRatio{});
   });
   CHECK(orb.find("section 'plcy'") != std::string::npos);
   CHECK(orb.find("the descriptor given to load (OrbDescriptor features=500") != std::string::npos);
@@ -366,7 +354,7 @@ TEST_CASE("memory files v2: truncated or flipped label, GCS and policy sections 
 TEST_SUITE("data") {
   TEST_CASE("memory with YOLOX labels on rtabmap_loop: resumed every 20 frames equals one run; online schema "
             "equals the offline one of the same key images") {
-    const auto frames = read_frames(vmap::test::data_path("rtabmap_loop/images"));
+    const auto frames = vmap::test::read_grey_frames(vmap::test::data_path("rtabmap_loop/images"));
     REQUIRE(frames.size() == 84);
     CHECK(frames[9].name.find("10.jpg") != std::string::npos);  // frame k is images/(k+1).jpg
     const auto labels =

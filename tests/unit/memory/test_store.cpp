@@ -2,6 +2,7 @@
 // memory (the same file bytes), resumes exactly, refuses a second writer, serves readers
 // while it is written, and turns bad files into Errors naming the memory.
 #include "support/errors.hpp"
+#include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/io/sqlite.hpp>
@@ -23,37 +24,14 @@ namespace {
 using vmap::test::error_of;
 namespace fs = std::filesystem;
 
-const std::vector<vmap::Frame>& frames() {
-  static const std::vector<vmap::Frame> out = [] {
-    auto src = vmap::FrameSource::open(vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt", {.grey = true});
-    std::vector<vmap::Frame> f;
-    while (auto x = src.next()) f.push_back(std::move(*x));
-    return f;
-  }();
-  return out;
-}
+using vmap::test::memory_estimator;
 
-vmap::FundamentalEstimator estimator() { return vmap::FundamentalEstimator({.check_degeneracy = false}); }
-
-// Small enough that the 60 sample frames learn a vocabulary, check key images for loops
-// and find some (as test_memory's options).
-vmap::MemoryOptions options(vmap::ImageStorage images) {
-  vmap::MemoryOptions o;
-  o.selector.tau = 0.3;
-  o.images = images;
-  o.vocabulary_after = 3;
-  o.vocabulary = {.branching = 8, .depth = 2, .seed = 5};
-  o.loops.window = 2;
-  o.loops.decision.min_inliers = 30;
-  return o;
-}
-
-vmap::OrbVisualMemory make(const vmap::MemoryOptions& o) {
-  return vmap::OrbVisualMemory(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(), vmap::InlierRatio{}, o);
-}
+const std::vector<vmap::Frame>& frames() { return vmap::test::sample_frames(); }
+vmap::MemoryOptions options(vmap::ImageStorage images) { return vmap::test::small_memory_options(images); }
+vmap::OrbVisualMemory make(const vmap::MemoryOptions& o) { return vmap::test::make_small_memory(o); }
 
 vmap::OrbVisualMemory load(vmap::MemoryStore& store) {
-  return store.load<vmap::OrbVisualMemory>(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(),
+  return store.load<vmap::OrbVisualMemory>(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
                                            vmap::InlierRatio{});
 }
 
@@ -194,7 +172,7 @@ TEST_CASE("store: a .vmem memory file converts to a store that loads as the same
   for (const auto& f : frames()) memory.push(f);
   const fs::path vmem = fresh("converted.vmem");
   memory.save(vmem);
-  const auto loaded = vmap::OrbVisualMemory::load(vmem, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(),
+  const auto loaded = vmap::OrbVisualMemory::load(vmem, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
                                                   vmap::InlierRatio{});
   const fs::path file = fresh("converted.vmdb");
   auto store = vmap::MemoryStore::create(file);
