@@ -185,10 +185,18 @@ class Statement {
     if (rc == SQLITE_DONE) return false;
     fail_sqlite();
   }
-  /// Runs a statement that returns no row, then resets it for the next bindings.
+  /// Runs a statement that returns no row, then resets it for the next bindings (also
+  /// when it fails, so that the statement can be used again).
   void run() {
-    if (step()) fail("returned a row");
+    bool row = false;
+    try {
+      row = step();
+    } catch (...) {
+      reset();
+      throw;
+    }
     reset();
+    if (row) fail("returned a row");
   }
   void reset() {
     sqlite3_reset(stmt_);
