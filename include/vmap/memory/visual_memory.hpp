@@ -28,7 +28,9 @@
 // position estimate of Algorithm 5.
 //
 // The whole state saves to one file and loads back; push() after load() continues
-// exactly as the uninterrupted run would (same key images, same loops).
+// exactly as the uninterrupted run would (same key images, same loops). A memory that
+// grows over a long run is better kept in a memory store (memory/store.hpp): an SQLite
+// file written key image by key image from the same records as the file's sections.
 //
 // Memory file format, version 3 (io/binary.hpp's encoding: little-endian fixed width,
 // f32/f64 as IEEE-754 bit patterns, str = u32 length + bytes). Version 2 is the same
