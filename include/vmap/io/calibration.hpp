@@ -32,6 +32,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstddef>
+#include <exception>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -83,10 +84,11 @@ inline std::string indent_block_sequences(std::string_view text) {
 
 /// OpenCV's YAML reader needs the "%YAML:1.0" directive that ROS files do not have.
 /// Size and nesting are bounded first (io/yaml_limits.hpp): OpenCV's parser recurses
-/// once per level.
+/// once per level, and never returns on some top levels that are not a map.
 inline cv::FileStorage open_yaml_text(const std::string& text, const std::string& name) {
   check_yaml_limits(text, name);
   std::string yaml = indent_block_sequences(text);
+  check_yaml_top_level(yaml, name);
   if (yaml.rfind("%YAML", 0) != 0) yaml = "%YAML:1.0\n" + yaml;
   try {
     cv::FileStorage fs(yaml, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
@@ -97,6 +99,10 @@ inline cv::FileStorage open_yaml_text(const std::string& text, const std::string
     return fs;
   } catch (const cv::Exception& e) {
     fail(name + ": not a valid YAML file (" + e.err + ")");
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& e) {  // OpenCV's parser lets std::length_error and the like out
+    fail(name + ": not a valid YAML file (" + e.what() + ")");
   }
 }
 

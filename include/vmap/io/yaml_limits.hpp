@@ -4,11 +4,15 @@
 // parser recurses once per nesting level, so a small file nested tens of thousands of
 // levels deep ("[[[[...", "- - - - ...") overflows the stack; calibration and settings
 // files are a few levels deep and a few kilobytes long, so both bounds are generous.
+// OpenCV 4.6's parser also never returns on some short inputs (see yaml_top_level_error),
+// so the lines at the top level are checked too.
 
 #include <vmap/core/error.hpp>
 
 #include <algorithm>
+#include <cctype>
 #include <cstddef>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -73,6 +77,46 @@ inline constexpr std::size_t max_yaml_depth = 32;
   return deepest;
 }
 
+/// Why YAML text is refused at its top level (column 0), or nothing. After it has read a
+/// document, OpenCV 4.6's YAMLParser::parse loops forever, without advancing, when the
+/// text goes on with a '-' that does not start "---" (for example "----x", or "- item"
+/// at column 0 after a map), and a second document can end the same way. Calibration,
+/// settings and vocabulary files are one map of keys, so at column 0 only keys,
+/// comments, directives (before the document), one "---" before the first key and
+/// "..." are accepted.
+[[nodiscard]] inline std::optional<std::string> yaml_top_level_error(std::string_view text) {
+  bool content = false;  // the document has begun
+  bool key = false;      // a line at column 0 has begun a key
+  std::size_t number = 0;
+  std::size_t i = 0;
+  while (i < text.size()) {
+    const std::size_t end = std::min(text.find('\n', i), text.size());
+    std::string_view line = text.substr(i, end - i);
+    i = end + 1;
+    ++number;
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.remove_suffix(1);
+    if (line.empty() || line[0] == '#') continue;
+    const char c = line[0];
+    const std::string at = "line " + std::to_string(number) + " ";
+    if (c == ' ' || c == '\t') {
+      if (!key) return at + "is indented before the first key at column 0";
+    } else if (c == '%') {
+      if (content) return at + "is a directive ('%') after the document began";
+    } else if (line == "---") {
+      if (content) return at + "starts a second YAML document ('---'); one document is read";
+      content = true;
+    } else if (line == "...") {
+      content = true;
+    } else if (std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_' || c == '"' || c == '\'') {
+      content = true;
+      key = true;
+    } else {
+      return at + "starts with '" + std::string(1, c) + "' at the top level, where a key is expected (the file must be a map of keys)";
+    }
+  }
+  return std::nullopt;
+}
+
 /// Fails (vmap::Error naming `name`) when YAML text is larger than `max_bytes` or nested
 /// deeper than `max_depth`; called before the text reaches cv::FileStorage.
 inline void check_yaml_limits(std::string_view text, const std::string& name, std::size_t max_bytes = max_yaml_bytes,
@@ -84,6 +128,12 @@ inline void check_yaml_limits(std::string_view text, const std::string& name, st
   if (depth > max_depth)
     detail::fail(name + ": YAML nested " + std::to_string(depth) + " levels deep, more than the " +
                  std::to_string(max_depth) + " accepted");
+}
+
+/// Fails (vmap::Error naming `name`) when YAML text is not a map of keys at its top level
+/// (yaml_top_level_error); called on the text exactly as cv::FileStorage will get it.
+inline void check_yaml_top_level(std::string_view text, const std::string& name) {
+  if (const auto why = yaml_top_level_error(text)) detail::fail(name + ": " + *why);
 }
 
 }  // namespace vmap

@@ -30,6 +30,7 @@
 // anything wrong is a vmap::Error naming the file and what is wrong.
 
 #include <vmap/core/error.hpp>
+#include <vmap/io/yaml_limits.hpp>
 #include <vmap/place/detail/format.hpp>
 #include <vmap/place/vocabulary_tree.hpp>
 
@@ -350,28 +351,15 @@ inline BinaryVocabularyTree import_dbow2_yaml(const cv::FileStorage& fs, const s
 
 namespace detail {
 
-/// Refuses YAML that would make OpenCV's recursive parser recurse deeply: flow
-/// collections nested deeper than `max_depth`, or block indentation deeper than it
-/// (the DBoW2 vocabulary needs 3 levels).
-inline void check_yaml_nesting(std::string_view text, const std::string& source, int max_depth = 16) {
-  int flow = 0;
-  std::size_t line_start = 0;
-  for (std::size_t i = 0; i < text.size(); ++i) {
-    const char c = text[i];
-    if (c == '{' || c == '[') {
-      if (++flow > max_depth) bad_vocabulary(source, "YAML nested deeper than " + std::to_string(max_depth) + " levels");
-    } else if (c == '}' || c == ']') {
-      flow = std::max(0, flow - 1);
-    } else if (c == '\n') {
-      line_start = i + 1;
-    } else if (c != ' ' && c != '-' && i > line_start && i - line_start > static_cast<std::size_t>(8 * max_depth)) {
-      // indentation (spaces and "- " items) longer than 8 columns a level
-      bool indentation = true;
-      for (std::size_t j = line_start; j < i; ++j) indentation = indentation && (text[j] == ' ' || text[j] == '-');
-      if (indentation) bad_vocabulary(source, "YAML indented deeper than " + std::to_string(max_depth) + " levels");
-      line_start = text.size();  // one check a line
-    }
-  }
+/// Refuses YAML OpenCV's parser cannot be trusted with (io/yaml_limits.hpp): nested
+/// deeper than `max_depth` (it recurses once per level; the DBoW2 vocabulary needs 4:
+/// the vocabulary map, its nodes list, an item and its flow map), or a top level that is
+/// not a map of keys (it never returns on some).
+inline void check_vocabulary_yaml(std::string_view text, const std::string& source, std::size_t max_depth = 16) {
+  const std::size_t depth = yaml_depth(text);
+  if (depth > max_depth)
+    bad_vocabulary(source, "YAML nested " + std::to_string(depth) + " levels deep, more than the " + std::to_string(max_depth) + " accepted");
+  if (const auto why = yaml_top_level_error(text)) bad_vocabulary(source, "YAML " + *why);
 }
 
 }  // namespace detail
@@ -409,7 +397,7 @@ BinaryVocabularyTree read_dbow2_storage(Open open, const std::string& name) {
 /// Reads DBoW2's YAML vocabulary from text (not gzipped).
 inline BinaryVocabularyTree import_dbow2_yaml(std::string_view text, const std::string& name = "<memory>") {
   const std::string source = "DBoW2 YAML vocabulary '" + name + "'";
-  detail::check_yaml_nesting(text, source);
+  detail::check_vocabulary_yaml(text, source);
   return detail::read_dbow2_storage(
       [&](cv::FileStorage& fs) {
         fs.open(std::string(text), cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);

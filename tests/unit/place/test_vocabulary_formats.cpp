@@ -258,6 +258,11 @@ TEST_SUITE("data") {
     CHECK_THROWS_WITH_AS((void)vmap::import_orbslam_text("10 3  2 0\n0 1 1  0.5\n", "chi"), doctest::Contains("CHI_SQUARE"), vmap::Error);
     CHECK_THROWS_WITH_AS((void)vmap::import_dbow2_yaml(std::string_view("%YAML:1.0\n" + std::string(100, '[')), "deep"),
                          doctest::Contains("nested"), vmap::Error);
+    // OpenCV 4.6's parser never returns on a '-' at the top level after a document.
+    CHECK_THROWS_WITH_AS((void)vmap::import_dbow2_yaml("%YAML:1.0\n---\nvocabulary:\n   k: 10\n----e\n", "dash"),
+                         "DBoW2 YAML vocabulary 'dash': YAML line 5 starts with '-' at the "
+                         "top level, where a key is expected (the file must be a map of keys)",
+                         vmap::Error);
     CHECK_THROWS_AS((void)vmap::AnyVocabulary::load(dir), vmap::Error);  // a folder
   }
 }
