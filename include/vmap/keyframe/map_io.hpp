@@ -61,7 +61,8 @@ namespace vmap {
 
 inline constexpr std::uint32_t map_format_version = 1;
 
-/// Limits of `load_map` / `deserialize_map` (a map file is untrusted input).
+/// Limits of `load_map` / `deserialize_map` (a map file is untrusted input), and of a
+/// visual memory's key images (`VisualMemory::deserialize` / `load`, `MemoryStore::load`).
 struct MapLoadOptions {
   /// Pixels of one key image (default 64 Mi pixels), checked before decoding it.
   std::uint64_t max_image_pixels = default_max_image_pixels;
@@ -186,13 +187,14 @@ inline std::uint32_t big_endian32(std::string_view b, std::size_t at) {
   return v;
 }
 
-inline cv::Mat read_image(BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels) {
-  const std::uint8_t has = r.u8("image flag");
-  if (has == 0) return {};
-  if (has != 1) r.corrupt("image flag is " + std::to_string(has) + ", not 0 or 1");
+/// Reads a stored key image's recorded rows, cols and type and checks them against the
+/// load limits, counting its pixels into `total_pixels`: all before anything is decoded,
+/// so a file can make the reader allocate no more than the limits state (maps and
+/// memories both store key images this way).
+inline cv::Size read_key_image_size(BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels, int& type) {
   const int rows = r.i32("image rows");
   const int cols = r.i32("image cols");
-  const int type = r.i32("image type");
+  type = r.i32("image type");
   if (rows <= 0 || cols <= 0 || rows > map_max_image_side || cols > map_max_image_side)
     r.corrupt("invalid key image size " + std::to_string(cols) + "x" + std::to_string(rows));
   if (!valid_image_type(type)) r.corrupt("invalid key image type " + std::to_string(type));
@@ -204,6 +206,17 @@ inline cv::Mat read_image(BinaryReader& r, const MapLoadOptions& limits, std::ui
   if (total_pixels > limits.max_total_image_pixels)
     r.corrupt("the key images hold more than " + std::to_string(limits.max_total_image_pixels) +
               " pixels together (MapLoadOptions::max_total_image_pixels)");
+  return {cols, rows};
+}
+
+inline cv::Mat read_image(BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels) {
+  const std::uint8_t has = r.u8("image flag");
+  if (has == 0) return {};
+  if (has != 1) r.corrupt("image flag is " + std::to_string(has) + ", not 0 or 1");
+  int type = 0;
+  const cv::Size size = read_key_image_size(r, limits, total_pixels, type);
+  const int rows = size.height;
+  const int cols = size.width;
   const std::uint32_t len = r.u32("image length");
   const std::string_view png = r.bytes(len, "image");
   // Check the PNG's own header before the decoder sees it, so a hostile size field

@@ -224,7 +224,8 @@ class MemoryStore {
 
   /// The memory the store holds, as synced last (a snapshot, also while a writer goes
   /// on). `policies` are the memory's descriptor, matcher, estimator and similarity when
-  /// they are not default-constructed, as for VisualMemory::load.
+  /// they are not default-constructed, and then the MapLoadOptions bounding the key
+  /// images' pixels, as for VisualMemory::load.
   template <class Memory, class... Policies>
   [[nodiscard]] Memory load(Policies&&... policies) {
     sqlite::Transaction snapshot(db_, "read the memory", sqlite::Transaction::Kind::read);

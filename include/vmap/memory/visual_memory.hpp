@@ -412,17 +412,15 @@ inline void write_memory_image(BinaryWriter& w, const cv::Mat& image, ImageStora
   w.bytes(buf.data(), buf.size());
 }
 
-inline cv::Mat read_memory_image(BinaryReader& r) {
+inline cv::Mat read_memory_image(BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels) {
   const std::uint8_t kind = r.u8("image kind");
   if (kind == 0) return {};
   if (kind > 2) r.corrupt("image kind " + std::to_string(kind) + " is not 0, 1 or 2");
-  const int rows = r.i32("image rows");
-  const int cols = r.i32("image cols");
-  const int type = r.i32("image type");
-  if (rows <= 0 || cols <= 0 || rows > map_max_image_side || cols > map_max_image_side)
-    r.corrupt("invalid key image size " + std::to_string(cols) + "x" + std::to_string(rows));
-  if (!valid_image_type(type) || (kind == 2 && CV_MAT_DEPTH(type) != CV_8U))
-    r.corrupt("invalid key image type " + std::to_string(type));
+  int type = 0;
+  const cv::Size size = read_key_image_size(r, limits, total_pixels, type);
+  const int rows = size.height;
+  const int cols = size.width;
+  if (kind == 2 && CV_MAT_DEPTH(type) != CV_8U) r.corrupt("invalid key image type " + std::to_string(type));
   const std::uint32_t len = r.u32("image length");
   const std::string_view bytes = r.bytes(len, "image");
   // The encoded header's size is checked before decoding, so a hostile file cannot make
@@ -785,9 +783,11 @@ class VisualMemory {
   /// Parses a memory file's bytes; the policies are the caller's (their options are not
   /// in the file), the options are the file's. Anything invalid is a vmap::Error naming
   /// the file and the section.
+  /// `limits` bound the key images' pixels (each, and all together, checked before any
+  /// is decoded): the most pixels a memory file can make the reader allocate.
   [[nodiscard]] static VisualMemory deserialize(std::string_view bytes, const std::string& name = "<memory>",
                                                 D descriptor = D(), M matcher = M(), E estimator = E(),
-                                                S similarity = S()) {
+                                                S similarity = S(), const MapLoadOptions& limits = {}) {
     detail::BinaryReader file(bytes, "memory file '" + name + "'");
     if (bytes.size() < 16) file.corrupt("header: too short (" + std::to_string(bytes.size()) + " bytes)");
     if (file.bytes(8, "magic") != std::string_view(detail::memory_magic, 8))
@@ -808,13 +808,14 @@ class VisualMemory {
     VisualMemory mem(std::move(descriptor), std::move(matcher), std::move(estimator), std::move(similarity), options);
 
     SelectorState<Features> state;
+    std::uint64_t total_pixels = 0;
     auto keys = detail::memory_open_section(file, "keys");
     state.map.frames = static_cast<std::size_t>(keys.u64("frame count"));
     const std::uint32_t m = keys.u32("key image count");
     keys.require_items(m, 50, "key image count");
     if (m > state.map.frames) keys.corrupt(std::to_string(m) + " key images for " + std::to_string(state.map.frames) + " frames");
     for (std::uint32_t i = 0; i < m; ++i) {
-      KeyImage k = read_key(keys);
+      KeyImage k = read_key(keys, limits, total_pixels);
       if (!state.map.keys.empty() && k.frame_index <= state.map.keys.back().frame_index)
         keys.corrupt("key image frame indices are not increasing");
       state.map.keys.push_back(std::move(k));
@@ -857,7 +858,7 @@ class VisualMemory {
     if (has_prev == 1) {
       if (m == 0) sel.corrupt("a previous frame without a key image");
       PreparedFrame<Features> prev;
-      KeyImage k = read_key(sel);
+      KeyImage k = read_key(sel, limits, total_pixels);
       if (k.frame_index <= state.map.keys.back().frame_index) sel.corrupt("previous frame is not after the key image");
       prev.item = std::move(k.features);
       prev.index = k.frame_index;
@@ -939,9 +940,9 @@ class VisualMemory {
   }
 
   [[nodiscard]] static VisualMemory load(const std::filesystem::path& path, D descriptor = D(), M matcher = M(),
-                                         E estimator = E(), S similarity = S()) {
-    return deserialize(read_file(path, default_max_file_bytes, "memory file"), path.string(), std::move(descriptor),
-                       std::move(matcher), std::move(estimator), std::move(similarity));
+                                         E estimator = E(), S similarity = S(), const MapLoadOptions& limits = {}) {
+    return deserialize(read_file(path, limits.max_file_bytes, "memory file"), path.string(), std::move(descriptor),
+                       std::move(matcher), std::move(estimator), std::move(similarity), limits);
   }
 
  private:
@@ -1194,13 +1195,13 @@ class VisualMemory {
     detail::write_memory_image(w, image, storage, options_.jpeg_quality);
   }
 
-  static KeyImage read_key(detail::BinaryReader& r) {
+  static KeyImage read_key(detail::BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels) {
     KeyImage k;
     k.frame_index = static_cast<std::size_t>(r.u64("frame index"));
     k.timestamp = r.f64("timestamp");
     k.name = r.str("name", detail::map_max_string);
     k.features = detail::read_features(r);
-    k.image = detail::read_memory_image(r);
+    k.image = detail::read_memory_image(r, limits, total_pixels);
     return k;
   }
 

@@ -89,6 +89,42 @@ TEST_CASE("store: a memory synced at every frame loads back as the same memory, 
   }
 }
 
+// The key images' pixels are counted from their recorded sizes before any is decoded:
+// a memory (file or store) holding more than the budget is refused, naming the limit.
+TEST_CASE("store: a memory's key images are loaded within a pixel budget") {
+  const fs::path file = fresh("budget.vmdb");
+  auto store = vmap::MemoryStore::create(file);
+  auto memory = make(options(vmap::ImageStorage::png));
+  for (const auto& f : frames()) memory.push(f);
+  store.sync(memory);
+  const std::uint64_t keys = memory.key_images();
+  REQUIRE(keys >= 3);
+  const std::uint64_t pixels = memory.map().keys[0].image.total();  // 640x480 each
+  CHECK(pixels == 640 * 480);
+  // The selector's pending frame (its last frame, a possible next key image) counts too.
+  const std::uint64_t held = (keys + 1) * pixels;
+  const auto with = [](vmap::MapLoadOptions limits) {
+    return [limits](const std::string& bytes) {
+      return vmap::OrbVisualMemory::deserialize(bytes, "m", vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
+                                                vmap::InlierRatio{}, limits);
+    };
+  };
+  const std::string bytes = memory.serialize();
+  CHECK(with({.max_total_image_pixels = held})(bytes).serialize() == bytes);
+  // The pending frame is the one over the budget: its section names it.
+  CHECK(error_of([&] { (void)with({.max_total_image_pixels = held - 1})(bytes); })
+            .find("memory file 'm' section 'selc': the key images hold more than " + std::to_string(held - 1) +
+                  " pixels together (MapLoadOptions::max_total_image_pixels)") == 0);
+  CHECK(error_of([&] { (void)with({.max_image_pixels = pixels - 1})(bytes); })
+            .find("key image of 640x480 pixels is above the limit of 307199 pixels (MapLoadOptions::max_image_pixels)") !=
+        std::string::npos);
+  // The store's load takes the same limits after the policies.
+  CHECK(error_of([&] {
+          (void)store.load<vmap::OrbVisualMemory>(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
+                                                  vmap::InlierRatio{}, vmap::MapLoadOptions{.max_total_image_pixels = 2 * pixels});
+        }).find("the key images hold more than 614400 pixels together") != std::string::npos);
+}
+
 TEST_CASE("store: stopped and reopened every few frames, the memory goes on exactly as an uninterrupted run") {
   const auto o = options(vmap::ImageStorage::png);
   auto whole = make(o);
