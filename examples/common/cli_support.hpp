@@ -235,22 +235,13 @@ class YamlConfig : public CLI::Config {
     std::string text(max_yaml_bytes + 1, '\0');
     in.read(text.data(), static_cast<std::streamsize>(text.size()));
     text.resize(static_cast<std::size_t>(in.gcount()));
+    cv::FileStorage fs;
     try {
-      check_yaml_limits(text, "--config");
+      fs = vmap::detail::open_yaml_text(text, "--config");  // bounded, PyYAML's lists indented
     } catch (const vmap::Error& e) {
       throw CLI::ConfigError(e.what());
     }
-    cv::FileStorage fs;
-    try {
-      const std::string yaml = vmap::detail::indent_block_sequences(text);  // PyYAML's lists
-      fs.open(yaml.rfind("%YAML", 0) == 0 ? yaml : "%YAML:1.0\n" + yaml,
-              cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
-    } catch (const cv::Exception& e) {
-      throw CLI::ConfigError("--config: not a YAML file OpenCV can read (" + std::string(e.err) + ")");
-    }
-    if (!fs.isOpened()) throw CLI::ConfigError("--config: not a YAML file OpenCV can read");
-    cv::FileNode root = fs.root();
-    if (!root.isMap()) throw CLI::ConfigError("--config: the file must be a YAML map of option names to values");
+    cv::FileNode root = fs.root();  // a map: open_yaml_text checks it
     const cv::FileNode section = root[subcommand_];
     std::vector<CLI::ConfigItem> found;
     auto add = [&](const cv::FileNode& map, bool top) {

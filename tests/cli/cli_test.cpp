@@ -781,6 +781,13 @@ TEST_CASE("cli: YAML nested 40000 levels deep is refused before OpenCV parses it
   fails_with({"build", sample, "--camera", (dir / "dashes.yaml").string()}, 1, "levels deep, more than the 32 accepted");
   write(dir / "big.yaml", "# " + std::string(std::size_t{2} << 20, 'x') + "\n");
   fails_with({"build", sample, "--config", (dir / "big.yaml").string()}, 2, "more than the 1048576 a settings file may have");
+  // OpenCV 4.6's parser never returns on the first (refused before it parses) and throws
+  // std::length_error on the second (found by the fuzz targets): both usage errors.
+  write(dir / "dash.yaml", "----e\ns\n");
+  fails_with({"build", sample, "--config", (dir / "dash.yaml").string()}, 2,
+             "--config: line 1 starts with '-' at the top level, where a key is expected");
+  write(dir / "length.yaml", "features: or&\nnuild:\n  json: 0\n  : 0.4\n");
+  fails_with({"build", sample, "--config", (dir / "length.yaml").string()}, 2, "--config: not a valid YAML file (");
 }
 
 TEST_CASE("cli: --config and query images that are devices, FIFOs or too many pixels are refused unread") {

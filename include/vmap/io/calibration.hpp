@@ -95,7 +95,7 @@ inline cv::FileStorage open_yaml_text(const std::string& text, const std::string
     if (!fs.isOpened()) fail(name + ": cannot be read as a YAML file");
     // Keys are looked up at the top level: OpenCV asserts (throws) on a lookup in a
     // list or a scalar.
-    if (!fs.root().isMap()) fail(name + ": not a YAML map of keys (a calibration file is one)");
+    if (!fs.root().isMap()) fail(name + ": not a YAML map of keys");
     return fs;
   } catch (const cv::Exception& e) {
     fail(name + ": not a valid YAML file (" + e.err + ")");
