@@ -1,10 +1,9 @@
-#pragma once
-
 // The loaders under fuzzing: one VMAP_FUZZ_LOADER(name, body) line each, where `body`
 // parses `bytes` (a std::string_view of the fuzzer's input). tests/fuzz/CMakeLists.txt
 // reads the names from this file and builds one libFuzzer executable `fuzz_<name>` per
 // line, seeded from tests/fuzz/corpus/<name>/ when that folder exists. Adding a loader
-// is one line here (and, optionally, a few seed files).
+// is one line here (and, optionally, a few seed files). This file, which includes every
+// reader of the library, is compiled once; each executable adds fuzz_main.cpp.
 //
 // A loader may throw vmap::Error for bad input (that is the contract); any other
 // exception, a crash, a sanitizer report, a leak or a timeout is a finding.
@@ -37,10 +36,15 @@
 #include <string_view>
 
 #define VMAP_FUZZ_LOADER(name, body) \
-  inline void fuzz_load_##name([[maybe_unused]] std::string_view bytes) body
+  void fuzz_load_##name([[maybe_unused]] std::string_view bytes); \
+  void fuzz_load_##name([[maybe_unused]] std::string_view bytes) body
+
+// Key images of at most 1 Mi pixels, 8 Mi together: a decoded image stays far below the
+// fuzzer's memory limit.
+inline constexpr vmap::MapLoadOptions fuzz_pixel_limits{.max_image_pixels = 1 << 20, .max_total_image_pixels = 1 << 23};
 
 // clang-format off
-VMAP_FUZZ_LOADER(map, { (void)vmap::deserialize_map(bytes, "fuzz", {.max_image_pixels = 1 << 20}); })
+VMAP_FUZZ_LOADER(map, { (void)vmap::deserialize_map(bytes, "fuzz", fuzz_pixel_limits); })
 VMAP_FUZZ_LOADER(gcs, { (void)vmap::GcsXf::deserialize(bytes, "fuzz"); (void)vmap::Gcs2d::deserialize(bytes, "fuzz"); })
 VMAP_FUZZ_LOADER(tree, { (void)vmap::BinaryClassifiedTree<int>::from_text(bytes, "fuzz"); })
 VMAP_FUZZ_LOADER(detections, { (void)vmap::PrecomputedDetections::parse(bytes, "fuzz"); })
@@ -66,7 +70,8 @@ VMAP_FUZZ_LOADER(place_database, { (void)vmap::PlaceDatabase<std::uint32_t>::des
 // A memory file that loads is written back by the loaded memory into bytes that load
 // again (whatever it accepted is a state it can save); anything else is a bug: abort.
 VMAP_FUZZ_LOADER(memory, {
-  const std::string again = vmap::OrbVisualMemory::deserialize(bytes, "fuzz").serialize();
+  const std::string again = vmap::OrbVisualMemory::deserialize(bytes, "fuzz", vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                                                                vmap::FundamentalEstimator{}, vmap::InlierRatio{}, fuzz_pixel_limits).serialize();
   try {
     (void)vmap::OrbVisualMemory::deserialize(again, "fuzz again");
   } catch (...) {
@@ -86,7 +91,8 @@ VMAP_FUZZ_LOADER(memory_store, {
   std::ofstream(p, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
   try {
     auto store = vmap::MemoryStore::open(p, vmap::sqlite::Access::read);
-    (void)store.load<vmap::OrbVisualMemory>();
+    (void)store.load<vmap::OrbVisualMemory>(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, vmap::FundamentalEstimator{},
+                                            vmap::InlierRatio{}, fuzz_pixel_limits);
   } catch (...) {
     remove_all();
     throw;
