@@ -10,6 +10,7 @@
 #include <opencv2/core.hpp>
 
 #include <concepts>
+#include <string>
 
 namespace vmap {
 
@@ -75,5 +76,24 @@ template <class S>
 concept Similarity = std::move_constructible<S>  // held by value
                      && ScoresPair<S>            // double operator()(a, b, v) const
                      && BoundsPair<S>;           // double upper_bound(a, b, raw) const
+
+// ---- What a policy may state about itself -----------------------------------------
+// Not required by the four concepts; what holds state a robot keeps (a visual memory)
+// uses them when a policy offers them.
+
+/// `p.describe()` names the policy and every option that changes its results, as text
+/// ("OrbDescriptor features=1000 ..."). A visual memory records it and refuses to load
+/// with a policy that describes itself otherwise; a policy without it is not recorded.
+template <class P>
+concept DescribesItself = requires(const P& p) {
+  { p.describe() } -> std::convertible_to<std::string>;
+};
+
+/// `d.layout()` is what every descriptor row it makes looks like, so features read from
+/// a file can be checked against the descriptor before they are matched with its own.
+template <class D>
+concept StatesLayout = requires(const D& d) {
+  { d.layout() } -> std::same_as<DescriptorLayout>;
+};
 
 }  // namespace vmap

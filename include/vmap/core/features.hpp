@@ -3,6 +3,7 @@
 #include <opencv2/core.hpp>
 
 #include <cstddef>
+#include <string>
 #include <vector>
 
 namespace vmap {
@@ -19,6 +20,27 @@ struct Features {
   [[nodiscard]] std::size_t size() const noexcept { return keypoints.size(); }
   [[nodiscard]] bool empty() const noexcept { return keypoints.empty(); }
 };
+
+/// What each descriptor row of a Descriptor looks like: its OpenCV type (CV_8UC1 for
+/// binary, CV_32FC1 for float), its width in elements, and the norm that compares two.
+struct DescriptorLayout {
+  int type = CV_8UC1;
+  int cols = 0;
+  int norm = cv::NORM_HAMMING;
+
+  friend bool operator==(const DescriptorLayout&, const DescriptorLayout&) = default;
+};
+
+/// The layout of `f`'s descriptors (their type, width and norm).
+[[nodiscard]] inline DescriptorLayout layout_of(const Features& f) {
+  return {f.descriptors.type(), f.descriptors.cols, f.norm};
+}
+
+/// "8U x 32, Hamming": a layout as it reads in a message.
+[[nodiscard]] inline std::string to_string(const DescriptorLayout& l) {
+  const char* norm = l.norm == cv::NORM_HAMMING ? "Hamming" : l.norm == cv::NORM_L2 ? "L2" : "another norm";
+  return cv::typeToString(l.type) + " x " + std::to_string(l.cols) + ", " + norm;
+}
 
 /// Putative correspondences: queryIdx indexes the first Features, trainIdx the second.
 using Matches = std::vector<cv::DMatch>;

@@ -74,4 +74,12 @@ inline void check_in_range(double value, double lo, double hi, const std::string
   return buf;
 }
 
+/// The shortest text that reads back as exactly `value` ("0.800000011920929" for 0.8f):
+/// for descriptions that are compared as text, such as a policy's `describe()`.
+[[nodiscard]] inline std::string exact_text(double value) {
+  char buf[40];
+  const auto r = std::to_chars(buf, buf + sizeof buf, value);
+  return std::string(buf, r.ptr);
+}
+
 }  // namespace vmap

@@ -2,6 +2,7 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/core/numeric.hpp>
 #include <vmap/features/detail/grey.hpp>
 
 #include <opencv2/features2d.hpp>
@@ -51,6 +52,16 @@ class AkazeDescriptor {
   }
 
   [[nodiscard]] const AkazeOptions& options() const noexcept { return options_; }
+
+  /// The name and every option (core/concepts.hpp, DescribesItself).
+  [[nodiscard]] std::string describe() const {
+    const AkazeOptions& o = options_;
+    return "AkazeDescriptor threshold=" + exact_text(o.threshold) + " octaves=" + std::to_string(o.octaves) +
+           " octave_layers=" + std::to_string(o.octave_layers);
+  }
+
+  /// Full M-LDB over 3 channels: 486 bits in 61 bytes, Hamming.
+  [[nodiscard]] static DescriptorLayout layout() noexcept { return {CV_8UC1, 61, cv::NORM_HAMMING}; }
 
  private:
   AkazeOptions options_;

@@ -2,6 +2,7 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/core/numeric.hpp>
 #include <vmap/features/budget.hpp>
 #include <vmap/features/detail/grey.hpp>
 
@@ -56,6 +57,17 @@ class OrbDescriptor {
   }
 
   [[nodiscard]] const OrbOptions& options() const noexcept { return options_; }
+
+  /// The name and every option (core/concepts.hpp, DescribesItself).
+  [[nodiscard]] std::string describe() const {
+    const OrbOptions& o = options_;
+    return "OrbDescriptor features=" + std::to_string(o.features) + " scale_factor=" + exact_text(o.scale_factor) +
+           " levels=" + std::to_string(o.levels) + " edge_threshold=" + std::to_string(o.edge_threshold) +
+           " fast_threshold=" + std::to_string(o.fast_threshold);
+  }
+
+  /// 256-bit binary descriptors: 32 bytes, Hamming.
+  [[nodiscard]] static DescriptorLayout layout() noexcept { return {CV_8UC1, 32, cv::NORM_HAMMING}; }
 
  private:
   OrbOptions options_;

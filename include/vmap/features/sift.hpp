@@ -2,6 +2,7 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/core/numeric.hpp>
 #include <vmap/features/budget.hpp>
 #include <vmap/features/detail/grey.hpp>
 
@@ -55,6 +56,17 @@ class SiftDescriptor {
   }
 
   [[nodiscard]] const SiftOptions& options() const noexcept { return options_; }
+
+  /// The name and every option (core/concepts.hpp, DescribesItself).
+  [[nodiscard]] std::string describe() const {
+    const SiftOptions& o = options_;
+    return "SiftDescriptor features=" + std::to_string(o.features) + " octave_layers=" +
+           std::to_string(o.octave_layers) + " contrast_threshold=" + exact_text(o.contrast_threshold) +
+           " edge_threshold=" + exact_text(o.edge_threshold) + " sigma=" + exact_text(o.sigma);
+  }
+
+  /// 128 floats, L2.
+  [[nodiscard]] static DescriptorLayout layout() noexcept { return {CV_32FC1, 128, cv::NORM_L2}; }
 
  private:
   SiftOptions options_;

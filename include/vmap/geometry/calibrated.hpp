@@ -101,6 +101,16 @@ class Calibrated {
   [[nodiscard]] const std::optional<Camera>& camera() const noexcept { return camera_; }
   [[nodiscard]] const E& estimator() const noexcept { return estimator_; }
 
+  /// The camera and the wrapped estimator's description (DescribesItself, when the
+  /// wrapped one describes itself); without a camera it is the wrapped estimator, and
+  /// describes itself as that.
+  [[nodiscard]] std::string describe() const
+    requires DescribesItself<E>
+  {
+    if (!camera_) return std::string(estimator_.describe());
+    return "Calibrated camera=(" + camera_->describe() + ") " + std::string(estimator_.describe());
+  }
+
  private:
   /// The F-matrix's final inliers by the Sampson distance in pixels of the real images
   /// (detail::sampson_in_image_pixels), against the wrapped estimator's pixel threshold:

@@ -12,6 +12,7 @@
 // io/calibration.hpp.
 
 #include <vmap/core/error.hpp>
+#include <vmap/core/numeric.hpp>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
@@ -144,6 +145,15 @@ struct Camera {
     detail::fail(source + ": the calibration is for " + std::to_string(image_size.width) + " x " +
                  std::to_string(image_size.height) + " images, the frames are " + std::to_string(frames.width) + " x " +
                  std::to_string(frames.height));
+  }
+
+  /// Every value, as text that reads back exactly ("pinhole fx=517.3 ... size=640x480"):
+  /// part of the description of an estimator that uses the camera (DescribesItself).
+  [[nodiscard]] std::string describe() const {
+    std::string out = std::string(lens == LensModel::pinhole ? "pinhole" : "fisheye") + " fx=" + exact_text(fx) +
+                      " fy=" + exact_text(fy) + " cx=" + exact_text(cx) + " cy=" + exact_text(cy) + " distortion=[";
+    for (std::size_t i = 0; i < distortion.size(); ++i) out += (i ? " " : "") + exact_text(distortion[i]);
+    return out + "] size=" + std::to_string(image_size.width) + "x" + std::to_string(image_size.height);
   }
 };
 

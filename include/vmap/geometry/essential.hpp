@@ -7,6 +7,7 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/core/numeric.hpp>
 #include <vmap/geometry/camera.hpp>
 #include <vmap/geometry/detail/robust.hpp>
 #include <vmap/geometry/fundamental.hpp>
@@ -124,6 +125,15 @@ class EssentialEstimator {
 
   [[nodiscard]] const Camera& camera() const noexcept { return camera_; }
   [[nodiscard]] const EssentialOptions& options() const noexcept { return options_; }
+
+  /// The camera and every option (core/concepts.hpp, DescribesItself).
+  [[nodiscard]] std::string describe() const {
+    const EssentialOptions& o = options_;
+    return "EssentialEstimator camera=(" + camera_.describe() + ") method=" + std::to_string(static_cast<int>(o.method)) +
+           " threshold_px=" + exact_text(o.threshold_px) + " confidence=" + exact_text(o.confidence) +
+           " max_iterations=" + std::to_string(o.max_iterations) + " min_inliers=" + std::to_string(o.min_inliers) +
+           " recover_pose=" + (o.recover_pose ? "1" : "0") + " seed=" + std::to_string(o.seed);
+  }
 
  private:
   /// Final inliers by the Sampson distance in pixels of the real images

@@ -2,6 +2,7 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/core/numeric.hpp>
 #include <vmap/geometry/detail/robust.hpp>
 
 #include <opencv2/calib3d.hpp>
@@ -43,6 +44,16 @@ struct FundamentalOptions {
 class FundamentalEstimator {
  public:
   static constexpr int minimal_matches = 8;
+
+  /// The name and every option (core/concepts.hpp, DescribesItself).
+  [[nodiscard]] std::string describe() const {
+    const FundamentalOptions& o = options_;
+    return "FundamentalEstimator method=" + std::to_string(static_cast<int>(o.method)) + " threshold_px=" +
+           exact_text(o.threshold_px) + " confidence=" + exact_text(o.confidence) + " max_iterations=" +
+           std::to_string(o.max_iterations) + " min_inliers=" + std::to_string(o.min_inliers) +
+           " check_degeneracy=" + (o.check_degeneracy ? "1" : "0") + " degeneracy_ratio=" +
+           exact_text(o.degeneracy_ratio) + " seed=" + std::to_string(o.seed);
+  }
 
   explicit FundamentalEstimator(const FundamentalOptions& options = {}) : options_(options) {
     detail::check_threshold_options(options_.threshold_px, options_.confidence, options_.max_iterations,

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <string>
 
 namespace vmap {
 
@@ -24,6 +25,8 @@ struct BasicInlierRatio {
   [[nodiscard]] double upper_bound(const Features& a, const Features& b, int raw_matches) const noexcept {
     return ratio(a, b, raw_matches);
   }
+  /// Its name (core/concepts.hpp, DescribesItself); it has no options.
+  [[nodiscard]] std::string describe() const { return Base == RatioBase::larger ? "InlierRatio" : "InlierRatioMin"; }
 
  private:
   static double ratio(const Features& a, const Features& b, int count) noexcept {

@@ -418,6 +418,10 @@ class XFeatDescriptor {
   }
 
   [[nodiscard]] const XFeatOptions& options() const noexcept { return options_; }
+
+  /// 64 floats of unit length, L2. Not described (DescribesItself): the model file is
+  /// not recorded.
+  [[nodiscard]] static DescriptorLayout layout() noexcept { return {CV_32FC1, 64, cv::NORM_L2}; }
   /// Whether the model runs only at its declared size or at any multiple of 32.
   [[nodiscard]] XFeatModelKind model_kind() const noexcept { return net_.kind(); }
   /// The size the model file declares ((0, 0) if symbolic).

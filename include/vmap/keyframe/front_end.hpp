@@ -194,6 +194,7 @@ class FeatureFrontEnd {
   [[nodiscard]] const Features& features_of(const Features& item) const noexcept { return item; }
 
   [[nodiscard]] D& descriptor() noexcept { return descriptor_; }
+  [[nodiscard]] const D& descriptor() const noexcept { return descriptor_; }
   [[nodiscard]] const M& matcher() const noexcept { return matcher_; }
   [[nodiscard]] const E& estimator() const noexcept { return estimator_; }
   [[nodiscard]] const S& similarity() const noexcept { return similarity_; }

@@ -2,6 +2,7 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/core/numeric.hpp>
 #include <vmap/matching/detail/hamming.hpp>
 #include <vmap/matching/hamming.hpp>
 
@@ -117,6 +118,13 @@ class BruteForceMatcher {
   [[nodiscard]] HammingLevel hamming_level() const noexcept { return level_; }
 
   [[nodiscard]] const BruteForceOptions& options() const noexcept { return options_; }
+
+  /// The name and the options that change the matches (core/concepts.hpp,
+  /// DescribesItself); the Hamming kernel level gives the same matches at every level.
+  [[nodiscard]] std::string describe() const {
+    return std::string("BruteForceMatcher mode=") + (options_.mode == MatchMode::mutual ? "mutual" : "ratio") +
+           " ratio=" + exact_text(options_.ratio);
+  }
 
  private:
   static float distance_at(const cv::Mat& dist, int row, int col) {

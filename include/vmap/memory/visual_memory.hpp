@@ -32,67 +32,11 @@
 // grows over a long run is better kept in a memory store (memory/store.hpp): an SQLite
 // file written key image by key image from the same records as the file's sections.
 //
-// Memory file format, version 3 (io/binary.hpp's encoding: little-endian fixed width,
-// f32/f64 as IEEE-754 bit patterns, str = u32 length + bytes). Version 2 is the same
-// without the last section (section count 10), version 1 also without "plcy", "labl" and
-// "gcsl" (section count 7); both still load (the loop decision's options at their
-// defaults, the inlier floor the file's min_loop_inliers; version 1: no labels, no GCS,
-// policies unchecked).
-//   header: u8[8] magic "VMAPMEMO", u32 version (3), u32 section count (11)
-//   sections, in this order, each { u8[4] tag, u64 length, u32 CRC-32 of the bytes, bytes }:
-//     "opts" options: f64 tau, u8 rule, u8 skip_by_upper_bound, u8 images, i32 jpeg quality,
-//            u64 vocabulary_after, i32 branching, i32 depth, i32 iterations,
-//            u64 max_descriptors, u64 seed, u8 scoring, u64 window (loops.window),
-//            u64 top k (loops.top_k), i32 min_loop_inliers (loops.decision.min_inliers),
-//            u64 localize_candidates, i32 the same min_inliers again (version 2's
-//            min_localize_inliers)
-//     "keys" u64 frames pushed, u32 key images m, m x { u64 frame index (increasing),
-//            f64 timestamp, str name, features (keyframe/map_io.hpp's layout), image, pose }
-//            image = u8 0 (none) | 1 (PNG) | 2 (JPEG), then i32 rows, i32 cols, i32 type,
-//            u32 length, the encoded bytes; pose = u8 0 (none) | 1 (SE(2): f64 x, y, theta)
-//            | 2 (SE(3): f64[12], the rows of [R | t])
-//     "link" u32 pairs (m - 1), each { u8 status, f64[9] F, i32 matches, i32 inliers, f64 S }
-//     "loop" u32 edges, each { u32 from, u32 to (< from), f64 BoW score, u8 status,
-//            f64[9] F (x_from^T F x_to = 0), i32 matches, i32 inliers, f64 S }
-//     "selc" the selector's I_{j-1}: u8 has; if 1: u64 index, f64 timestamp, str name,
-//            features, image, pose; then u8 has score; if 1: i32 raw matches, f64 bound,
-//            u8 verified run, u8 status, f64[9] F, i32 inliers, i32 matches, u8 degeneracy,
-//            i32 homography inliers, f64 S. Then u8 has last; if 1: u64 the index of the
-//            last pushed frame (where a resumed stream goes on).
-//     "voca" u8 has vocabulary; if 1: u64 length + the vocabulary file (place/vocabulary.hpp)
-//     "plcd" u64 length + the place database file (place/database.hpp), ids = key indices
-//            (exactly the key images already checked for loops, 0 .. n-1)
-//     "plcy" 4 x str: what is recorded of the descriptor, matcher, estimator and similarity
-//            (memory_policy_record: name and every option, e.g. "OrbDescriptor features=1000
-//            scale_factor=1.2000000476837158 levels=8 edge_threshold=31 fast_threshold=20";
-//            recorded: OrbDescriptor, AkazeDescriptor, SiftDescriptor, BruteForceMatcher,
-//            FundamentalEstimator, InlierRatio, InlierRatioMin; any other policy is ""
-//            (not recorded, not checked; e.g. network-backed descriptors, whose model
-//            file is not recorded either). load() compares them with the policies it is
-//            given and refuses a difference with an Error naming the policy and both.
-//     "labl" label options: f32 min_score (loops.labels), u64 sample M, f64 min_influence, f64
-//            max_influence, u8 loops.index (CandidateIndex), u64 loops.min_candidates, u32 n + n x i32
-//            the given order; u8 labelled; u8 has schema, if 1: u32 n + n x i32 the schema;
-//            u32 m, m x detections of key image k; detections of the selector's I_{j-1}
-//            (an empty list when "selc" holds none).
-//            detections = u32 count, count x { i32 label, f32 score, f32 x, y, w, h }.
-//            The tree is not stored: it is rebuilt exactly from the schema, the key images'
-//            detections and the database (the checked key images less the exclusion
-//            window, inserted in order as the run inserted them).
-//     "gcsl" u8 has GCS; if 1: BowHistogramOptions (i32 words, i32 iterations, u64
-//            max_descriptors, u64 seed, u8 norm), u64 length + the histogram's vocabulary
-//            (place/vocabulary.hpp), u64 length + the network (som/gcs.hpp's file, holding
-//            the GcsOptions), u32 n + n x { u32 key image, u64 the neuron it won }: the
-//            pose map is rebuilt exactly from these and the key images' poses (Algorithm 4).
-//     "dcsn" the loop decision: u64 temporal_consistency, u64 temporal_tolerance, f64
-//            min_bow_score, f64 left_ratio, f64 min_confidence, f64 chance_inlier_rate,
-//            f64 half_significance, i32 spread_grid, f64 full_spread, f64 ambiguity_ratio;
-//            the engine's state: u64 queries past the window, u64 of which left a place,
-//            u64 of which were no revisit, the temporal-consistency state (i32
-//            consecutive, u8 has last + u64 last, u64 island begin, u64 island end, u8
-//            accepted); u32 e + e x f64 each loop edge's confidence.
-// Each section is parsed by its own reader, so every error names its section; counts
-// are checked against the bytes that remain before anything is allocated.
+// The file format (version 3, and what versions 1 and 2 lack) is documented in
+// examples/memory.md, "The single-file format (.vmem)"; each section is parsed by its own
+// reader, so every error names its section, and counts are checked against the bytes
+// that remain before anything is allocated. Key images' descriptors are checked against
+// the layout of the descriptor given to load (core/concepts.hpp, StatesLayout).
 //
 // Bytes per key image (ORB 1000, 32-byte descriptors): 28 per keypoint + 32 per
 // descriptor, about 60 KB of features in the file and in memory (measured by
@@ -299,50 +243,16 @@ inline constexpr std::uint32_t memory_max_policy = 4096;
 /// Most detections one key image may have in a file (a detector gives a few hundred).
 inline constexpr std::uint32_t memory_max_detections = 1U << 16;
 
-// What the file records of a policy (section "plcy"): its name and every option, as
-// text so that a mismatch on load reads as it is. Policies not listed here are recorded
-// as "" (not recorded, not checked).
-inline std::string memory_number(double v) {
-  char buf[40];
-  const auto r = std::to_chars(buf, buf + sizeof buf, v);  // shortest text that reads back as v
-  return std::string(buf, r.ptr);
-}
+// What the file records of a policy (section "plcy"): its own description
+// (core/concepts.hpp, DescribesItself), so that a mismatch on load reads as it is; a
+// policy that does not describe itself is recorded as "" (not recorded, not checked).
 template <class P>
-std::string memory_policy_record(const P&) {
-  return {};
+std::string memory_policy_record(const P& policy) {
+  if constexpr (DescribesItself<P>)
+    return std::string(policy.describe());
+  else
+    return {};
 }
-inline std::string memory_policy_record(const OrbDescriptor& d) {
-  const OrbOptions& o = d.options();
-  return "OrbDescriptor features=" + std::to_string(o.features) + " scale_factor=" + memory_number(o.scale_factor) +
-         " levels=" + std::to_string(o.levels) + " edge_threshold=" + std::to_string(o.edge_threshold) +
-         " fast_threshold=" + std::to_string(o.fast_threshold);
-}
-inline std::string memory_policy_record(const AkazeDescriptor& d) {
-  const AkazeOptions& o = d.options();
-  return "AkazeDescriptor threshold=" + memory_number(o.threshold) + " octaves=" + std::to_string(o.octaves) +
-         " octave_layers=" + std::to_string(o.octave_layers);
-}
-inline std::string memory_policy_record(const SiftDescriptor& d) {
-  const SiftOptions& o = d.options();
-  return "SiftDescriptor features=" + std::to_string(o.features) + " octave_layers=" + std::to_string(o.octave_layers) +
-         " contrast_threshold=" + memory_number(o.contrast_threshold) + " edge_threshold=" +
-         memory_number(o.edge_threshold) + " sigma=" + memory_number(o.sigma);
-}
-inline std::string memory_policy_record(const BruteForceMatcher& m) {
-  const BruteForceOptions& o = m.options();
-  return std::string("BruteForceMatcher mode=") + (o.mode == MatchMode::mutual ? "mutual" : "ratio") +
-         " ratio=" + memory_number(o.ratio);
-}
-inline std::string memory_policy_record(const FundamentalEstimator& e) {
-  const FundamentalOptions& o = e.options();
-  return "FundamentalEstimator method=" + std::to_string(static_cast<int>(o.method)) + " threshold_px=" +
-         memory_number(o.threshold_px) + " confidence=" + memory_number(o.confidence) + " max_iterations=" +
-         std::to_string(o.max_iterations) + " min_inliers=" + std::to_string(o.min_inliers) +
-         " check_degeneracy=" + (o.check_degeneracy ? "1" : "0") + " degeneracy_ratio=" +
-         memory_number(o.degeneracy_ratio) + " seed=" + std::to_string(o.seed);
-}
-inline std::string memory_policy_record(const InlierRatio&) { return "InlierRatio"; }
-inline std::string memory_policy_record(const InlierRatioMin&) { return "InlierRatioMin"; }
 
 inline void memory_write_detections(BinaryWriter& w, const std::vector<Detection>& d) {
   if (d.size() > memory_max_detections)
@@ -758,10 +668,10 @@ class VisualMemory {
   /// The detections pushed with each key image's frame (empty without detections).
   [[nodiscard]] const std::vector<std::vector<Detection>>& key_detections() const noexcept { return key_detections_; }
   /// What the memory records of its policies (descriptor, matcher, estimator,
-  /// similarity): name and options, "" for a policy vmap does not know (file "plcy").
+  /// similarity): name and options, "" for a policy that does not describe itself (file "plcy").
   [[nodiscard]] const std::array<std::string, 4>& policy_records() const noexcept { return policies_; }
 
-  /// The memory file's bytes (format at the top of this header). `images` overrides
+  /// The memory file's bytes (format: examples/memory.md, "The single-file format"). `images` overrides
   /// MemoryOptions::images for this file (e.g. none for a small copy; png or jpeg store
   /// only the pixels the memory kept).
   [[nodiscard]] std::string serialize(std::optional<ImageStorage> images = {}) const {
@@ -816,6 +726,7 @@ class VisualMemory {
     if (m > state.map.frames) keys.corrupt(std::to_string(m) + " key images for " + std::to_string(state.map.frames) + " frames");
     for (std::uint32_t i = 0; i < m; ++i) {
       KeyImage k = read_key(keys, limits, total_pixels);
+      mem.check_layout(keys, k.features, [&] { return "key image " + std::to_string(i); });
       if (!state.map.keys.empty() && k.frame_index <= state.map.keys.back().frame_index)
         keys.corrupt("key image frame indices are not increasing");
       state.map.keys.push_back(std::move(k));
@@ -859,6 +770,7 @@ class VisualMemory {
       if (m == 0) sel.corrupt("a previous frame without a key image");
       PreparedFrame<Features> prev;
       KeyImage k = read_key(sel, limits, total_pixels);
+      mem.check_layout(sel, k.features, [] { return std::string("the previous frame"); });
       if (k.frame_index <= state.map.keys.back().frame_index) sel.corrupt("previous frame is not after the key image");
       prev.item = std::move(k.features);
       prev.index = k.frame_index;
@@ -1091,7 +1003,7 @@ class VisualMemory {
   // ---- file sections ------------------------------------------------------------
 
   /// The file of the current version from its 11 sections' bytes, in the order of the
-  /// format at the top of this header.
+  /// format (examples/memory.md, "The single-file format").
   static std::string file_bytes(const std::array<std::string, detail::memory_sections>& sections) {
     static constexpr const char tags[detail::memory_sections][5] = {"opts", "keys", "link", "loop", "selc", "voca",
                                                                     "plcd", "plcy", "labl", "gcsl", "dcsn"};
@@ -1193,6 +1105,21 @@ class VisualMemory {
     w.str(name, detail::map_max_string, "VisualMemory::save: a key image name");
     detail::write_features(w, f);
     detail::write_memory_image(w, image, storage, options_.jpeg_quality);
+  }
+
+  /// Features read from a file against the layout of the descriptor given to load
+  /// (core/concepts.hpp, StatesLayout), so that key images holding other descriptors (a
+  /// memory built with a descriptor that does not describe itself, or a crafted file)
+  /// are refused when the memory loads, not when they are first matched.
+  template <class What>
+  void check_layout(detail::BinaryReader& r, const Features& f, const What& what) const {
+    if constexpr (StatesLayout<D>) {
+      if (f.descriptors.empty()) return;
+      const DescriptorLayout want = selector_.front_end().descriptor().layout();
+      if (const DescriptorLayout got = layout_of(f); got != want)
+        r.corrupt(what() + " has descriptors of " + to_string(got) + ", the descriptor given to load makes " +
+                  to_string(want));
+    }
   }
 
   static KeyImage read_key(detail::BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels) {

@@ -1,11 +1,14 @@
 // VisualMemory with object detections (LFM-LCD's label tree, online schema), the GCS
-// localizer trained on the key images, the policies' options recorded in the file, and
-// format version 2 against version 1.
+// localizer trained on the key images, the policies recorded in the file by their own
+// describe(), key images checked against the descriptor's layout, and format version 2
+// against version 1.
 #include "support/errors.hpp"
 #include "support/memory_file.hpp"
 #include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
 
+#include <vmap/geometry/calibrated.hpp>
+#include <vmap/geometry/essential.hpp>
 #include <vmap/hooks/precomputed_detections.hpp>
 #include <vmap/lcd/evaluation.hpp>
 #include <vmap/lcd/influence.hpp>
@@ -15,6 +18,7 @@
 
 #include <opencv2/core.hpp>
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
@@ -309,6 +313,129 @@ TEST_CASE("memory files v2: policies' options are checked on load; version 1 fil
   CHECK(old.loops().size() == mem.loops().size());
   // Saved again, it is a version 3 file.
   CHECK(old.serialize()[8] == 3);
+}
+
+// A descriptor of a user's: A-KAZE's (or ORB's) features under a policy of its own, which
+// describes itself or not, and states its layout or not (core/concepts.hpp).
+template <class Inner, bool Describes, bool States>
+struct UserDescriptor {
+  Inner inner = Inner();
+  vmap::Features extract(const cv::Mat& image) { return inner.extract(image); }
+  std::string describe() const
+    requires Describes
+  {
+    return "UserDescriptor over " + inner.describe();
+  }
+  static vmap::DescriptorLayout layout() noexcept
+    requires States
+  {
+    return Inner::layout();
+  }
+};
+template <class D>
+using UserMemory = vmap::VisualMemory<D, vmap::BruteForceMatcher, vmap::FundamentalEstimator, vmap::InlierRatio>;
+
+static_assert(vmap::DescribesItself<vmap::OrbDescriptor> && vmap::StatesLayout<vmap::OrbDescriptor>);
+static_assert(vmap::DescribesItself<vmap::InlierRatioMin> && !vmap::StatesLayout<vmap::BruteForceMatcher>);
+static_assert(!vmap::DescribesItself<UserDescriptor<vmap::OrbDescriptor, false, true>>);
+static_assert(vmap::StatesLayout<UserDescriptor<vmap::OrbDescriptor, false, true>>);
+
+TEST_CASE("memory files: policies are recorded by their own describe(); key images are checked against the descriptor's layout") {
+  // vmap's policies describe themselves as the file has recorded them since version 2,
+  // so memories written before still load with them.
+  CHECK(vmap::OrbDescriptor{}.describe() ==
+        "OrbDescriptor features=1000 scale_factor=1.2000000476837158 levels=8 edge_threshold=31 fast_threshold=20");
+  CHECK(vmap::AkazeDescriptor{}.describe() == "AkazeDescriptor threshold=0.0010000000474974513 octaves=4 octave_layers=4");
+  CHECK(vmap::SiftDescriptor{}.describe() ==
+        "SiftDescriptor features=1000 octave_layers=3 contrast_threshold=0.04 edge_threshold=10 sigma=1.6");
+  CHECK(vmap::BruteForceMatcher{}.describe() == "BruteForceMatcher mode=mutual ratio=0.800000011920929");
+  CHECK(vmap::BruteForceMatcher({.mode = vmap::MatchMode::ratio, .ratio = 0.75f}).describe() ==
+        "BruteForceMatcher mode=ratio ratio=0.75");
+  CHECK(vmap::FundamentalEstimator{}.describe() ==
+        "FundamentalEstimator method=0 threshold_px=1 confidence=0.99 max_iterations=1000 min_inliers=8 "
+        "check_degeneracy=1 degeneracy_ratio=0.9 seed=0");
+  CHECK(vmap::InlierRatio{}.describe() == "InlierRatio");
+  CHECK(vmap::InlierRatioMin{}.describe() == "InlierRatioMin");
+  CHECK(vmap::AkazeDescriptor::layout() == vmap::DescriptorLayout{CV_8UC1, 61, cv::NORM_HAMMING});
+  CHECK(vmap::SiftDescriptor::layout() == vmap::DescriptorLayout{CV_32FC1, 128, cv::NORM_L2});
+  // An estimator with a camera describes the camera too; without one, Calibrated is the
+  // wrapped estimator and describes itself as that.
+  const vmap::Camera tum{.fx = 517.3, .fy = 516.5, .cx = 318.6, .cy = 255.3,
+                         .distortion = {0.2624, -0.9531, -0.0054, 0.0026, 1.1633}, .image_size = {640, 480}};
+  const std::string camera_text =
+      "pinhole fx=517.3 fy=516.5 cx=318.6 cy=255.3 distortion=[0.2624 -0.9531 -0.0054 0.0026 1.1633] size=640x480";
+  CHECK(tum.describe() == camera_text);
+  using CalibratedF = vmap::Calibrated<vmap::FundamentalEstimator>;
+  CHECK(CalibratedF(std::nullopt, vmap::FundamentalEstimator{}).describe() == vmap::FundamentalEstimator{}.describe());
+  CHECK(CalibratedF(tum, vmap::FundamentalEstimator{}).describe() ==
+        "Calibrated camera=(" + camera_text + ") " + vmap::FundamentalEstimator{}.describe());
+  CHECK(vmap::EssentialEstimator(tum).describe() ==
+        "EssentialEstimator camera=(" + camera_text +
+            ") method=0 threshold_px=1 confidence=0.999 max_iterations=1000 min_inliers=8 recover_pose=1 seed=0");
+
+  const auto& frames = sample_frames();
+  const vmap::MemoryOptions o = small_options();
+  const auto orb_memory = make_memory(o);
+  CHECK(orb_memory.policy_records() ==
+        std::array<std::string, 4>{vmap::OrbDescriptor{}.describe(), vmap::BruteForceMatcher{}.describe(),
+                                   memory_estimator().describe(), "InlierRatio"});
+
+  // A policy of the user's that describes itself is recorded and checked on load.
+  using Described = UserDescriptor<vmap::AkazeDescriptor, true, true>;
+  UserMemory<Described> described(Described{}, vmap::BruteForceMatcher{}, memory_estimator(), vmap::InlierRatio{}, o);
+  CHECK(described.policy_records()[0] == "UserDescriptor over " + vmap::AkazeDescriptor{}.describe());
+  for (std::size_t i = 0; i < 12; ++i) described.push(frames[i]);
+  const std::string akaze_file = described.serialize();
+  const std::string other = vmap::test::error_of([&] {
+    (void)UserMemory<Described>::deserialize(akaze_file, "m.vmem", Described{vmap::AkazeDescriptor({.octaves = 3})},
+                                             vmap::BruteForceMatcher{}, memory_estimator());
+  });
+  CHECK(other.find("section 'plcy'") != std::string::npos);
+  CHECK(other.find("octaves=3") != std::string::npos);
+
+  // A memory built with a calibrated camera records the camera: another camera is refused.
+  using CalibratedMemory = vmap::VisualMemory<vmap::OrbDescriptor, vmap::BruteForceMatcher, CalibratedF, vmap::InlierRatio>;
+  CalibratedMemory calibrated(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, CalibratedF(tum, memory_estimator()),
+                              vmap::InlierRatio{}, o);
+  for (std::size_t i = 0; i < 12; ++i) calibrated.push(frames[i]);
+  const std::string calibrated_file = calibrated.serialize();
+  CHECK(CalibratedMemory::deserialize(calibrated_file, "c.vmem", vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                                      CalibratedF(tum, memory_estimator()))
+            .key_images() == calibrated.key_images());
+  vmap::Camera other_camera = tum;
+  other_camera.fx = 500.0;
+  const std::string camera_error = vmap::test::error_of([&] {
+    (void)CalibratedMemory::deserialize(calibrated_file, "c.vmem", vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                                        CalibratedF(other_camera, memory_estimator()));
+  });
+  CHECK(camera_error.find("section 'plcy'") != std::string::npos);
+  CHECK(camera_error.find("the estimator given to load (Calibrated camera=(pinhole fx=500 ") != std::string::npos);
+
+  // A memory of A-KAZE key images under a policy that does not describe itself: nothing
+  // in "plcy" tells it from ORB. A descriptor that states its layout refuses the key
+  // images when the memory loads; one that does not is not checked.
+  using Unrecorded = UserDescriptor<vmap::AkazeDescriptor, false, false>;
+  UserMemory<Unrecorded> unrecorded(Unrecorded{}, vmap::BruteForceMatcher{}, memory_estimator(), vmap::InlierRatio{}, o);
+  for (std::size_t i = 0; i < 12; ++i) unrecorded.push(frames[i]);
+  REQUIRE(unrecorded.key_images() > 0);
+  CHECK(unrecorded.policy_records()[0].empty());
+  const std::string file = unrecorded.serialize();
+  const std::string layout = vmap::test::error_of([&] {
+    using OrbStated = UserDescriptor<vmap::OrbDescriptor, false, true>;
+    (void)UserMemory<OrbStated>::deserialize(file, "akaze.vmem", OrbStated{}, vmap::BruteForceMatcher{}, memory_estimator());
+  });
+  CHECK(layout.find("akaze.vmem") != std::string::npos);
+  CHECK(layout.find("section 'keys'") != std::string::npos);
+  CHECK(layout.find("key image 0 has descriptors of CV_8UC1 x 61, Hamming, the descriptor given to load makes "
+                    "CV_8UC1 x 32, Hamming") != std::string::npos);
+  using AkazeStated = UserDescriptor<vmap::AkazeDescriptor, false, true>;
+  const auto as_akaze =
+      UserMemory<AkazeStated>::deserialize(file, "akaze.vmem", AkazeStated{}, vmap::BruteForceMatcher{}, memory_estimator());
+  CHECK(as_akaze.key_images() == unrecorded.key_images());
+  using OrbUnstated = UserDescriptor<vmap::OrbDescriptor, false, false>;
+  const auto unchecked =
+      UserMemory<OrbUnstated>::deserialize(file, "akaze.vmem", OrbUnstated{}, vmap::BruteForceMatcher{}, memory_estimator());
+  CHECK(unchecked.key_images() == unrecorded.key_images());
 }
 
 TEST_CASE("memory files v2: truncated or flipped label, GCS and policy sections are Errors naming the section") {
