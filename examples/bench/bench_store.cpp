@@ -8,8 +8,14 @@
 //     every frame, until --keys key images: the mean sync time over the 100 key images
 //     up to 100, 1,000 and 10,000 (whichever the run reaches), the store's bytes per key
 //     image, then the time to open and load the store and to localize 20 frames in it.
+//     With --working-memory W (> 0) the memory holds the features of its W most recent
+//     key images only (VisualMemory::bound_features) and reads the others from the store
+//     when a candidate is verified: the run prints the resident memory at 1,000 and
+//     10,000 key images, the peak, and the reads and their time. Run it once with
+//     --working-memory 0 and once with W: each process has its own peak.
 //
-//   bench_store [--shared DIR] [--ratio-frames 400] [--repeats 3] [--keys 10000] [--scale-tau 0.95] [--dir /tmp/bench_store]
+//   bench_store [--shared DIR] [--ratio-frames 400] [--repeats 3] [--keys 10000] [--scale-tau 0.95]
+//               [--working-memory 0] [--dir /tmp/bench_store]
 #include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 
@@ -19,6 +25,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <optional>
 #include <string>
 #include <vector>
@@ -33,6 +40,15 @@ std::vector<vmap::Frame> read_all(const std::filesystem::path& input) {
   std::vector<vmap::Frame> out;
   while (auto f = src.next()) out.push_back(std::move(*f));
   return out;
+}
+
+/// A field of /proc/self/status in MiB (VmRSS: resident now, VmHWM: the peak).
+double status_mib(const std::string& field) {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind(field + ":", 0) == 0) return std::stod(line.substr(field.size() + 1)) / 1024.0;
+  return 0.0;
 }
 
 void remove_store(const std::filesystem::path& p) {
@@ -64,18 +80,21 @@ int main(int argc, char** argv) {
   std::size_t ratio_frames = 400, repeats = 3, keys = 10000;
   double scale_tau = 0.95;
   std::string dir = "/tmp/bench_store";
+  std::size_t working_memory = 0;
   app.add_option("--shared", shared, "The shared folder (data/tum_fr1_rpy)");
-  app.add_option("--ratio-frames", ratio_frames, "Frames of the ratio run");
+  app.add_option("--ratio-frames", ratio_frames, "Frames of the ratio run (0: skip it)");
   app.add_option("--repeats", repeats, "Runs of each configuration in the ratio run");
   app.add_option("--keys", keys, "Key images of the scale run");
   app.add_option("--scale-tau", scale_tau, "tau of the scale run");
   app.add_option("--dir", dir, "Folder for the stores");
+  app.add_option("--working-memory", working_memory,
+                 "Scale run: key images whose features stay in RAM (0: all; the others are read from the store)");
   CLI11_PARSE(app, argc, argv);
   std::filesystem::create_directories(dir);
 
   const auto frames = read_all(std::filesystem::path(shared) / "data/tum_fr1_rpy/rgb.txt");
   const std::filesystem::path ratio_store = std::filesystem::path(dir) / "ratio.vmdb";
-  {
+  if (ratio_frames > 0) {
     const std::vector<vmap::Frame> first(frames.begin(), frames.begin() + static_cast<std::ptrdiff_t>(std::min(ratio_frames, frames.size())));
     double ram = 1e300, synced = 1e300;
     for (std::size_t r = 0; r < repeats; ++r) {
@@ -93,7 +112,19 @@ int main(int argc, char** argv) {
   const std::filesystem::path scale_store = std::filesystem::path(dir) / "scale.vmdb";
   remove_store(scale_store);
   auto store = vmap::MemoryStore::create(scale_store);
+  std::size_t reads = 0;  // released key images' features read from the store
+  double read_ms = 0.0;
+  if (working_memory > 0)
+    mem.bound_features(working_memory, [&, source = store.features()](std::uint32_t k) {
+      const auto t = Clock::now();
+      vmap::Features f = source(k);
+      read_ms += ms_since(t);
+      ++reads;
+      return f;
+    });
   std::vector<double> sync_ms;  // per key image: the sync that wrote it
+  std::vector<std::pair<std::size_t, double>> rss;  // (key images, VmRSS MiB) at 1,000 and 10,000
+  const double rss_before = status_mib("VmRSS");     // the frames of tum_fr1_rpy, read once, are most of it
   std::size_t pushed = 0;
   double push_ms = 0.0;
   const auto t_run = Clock::now();
@@ -109,6 +140,8 @@ int main(int argc, char** argv) {
       store.sync(mem);
       const double s = ms_since(ts);
       if (step.new_key) sync_ms.push_back(s);
+      if (step.new_key && (mem.key_images() == 1000 || mem.key_images() == 10000))
+        rss.emplace_back(mem.key_images(), status_mib("VmRSS"));
       ++pushed;
       if (pushed % 1000 == 0)
         std::fprintf(stderr, "scale: %zu frames, %zu key images, %.0f s\n", pushed, mem.key_images(),
@@ -127,6 +160,13 @@ int main(int argc, char** argv) {
   }
   std::printf("  store: %.1f MB, %.1f KB per key image\n", static_cast<double>(bytes) / 1e6,
               static_cast<double>(bytes) / 1e3 / static_cast<double>(mem.key_images()));
+  std::printf("  working memory %s: resident %.1f MiB before the first frame;",
+              working_memory ? std::to_string(working_memory).c_str() : "unbounded", rss_before);
+  for (const auto& [k, mib] : rss) std::printf(" resident %.1f MiB at %zu key images;", mib, k);
+  std::printf(" peak %.1f MiB before loading\n", status_mib("VmHWM"));
+  if (working_memory > 0)
+    std::printf("  features read from the store: %zu (%.3f ms each, %.2f ms per pushed frame)\n", reads,
+                reads ? read_ms / static_cast<double>(reads) : 0.0, read_ms / static_cast<double>(pushed));
 
   const auto t_open = Clock::now();
   auto reader = vmap::MemoryStore::open(scale_store, vmap::sqlite::Access::read);

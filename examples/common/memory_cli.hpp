@@ -38,6 +38,11 @@ namespace vmap::examples {
 /// reader must use the writer's.
 using CliMemory = OrbVisualMemory;
 
+/// --working-memory's default: key images whose features a memory the command line
+/// writes keeps in RAM (examples/memory.md, "Bounded memory": reading a released key
+/// image's features from the store costs a fraction of its verification).
+inline constexpr std::size_t default_working_memory = 200;
+
 /// The file name used when --memory names a folder.
 inline constexpr const char* memory_file_name = "memory.vmdb";
 
@@ -299,12 +304,14 @@ class FramePoses {
 /// Pushes every frame of `src` into the writer's memory, with its pose when `poses` is
 /// given, and syncs the store after each frame that made a key image or a loop edge,
 /// every `save_every` pushed frames besides (0: no others) and after the last frame: a
-/// run killed half way resumes from the last sync. `on_frame(mem)` is called after each
-/// push.
+/// run killed half way resumes from the last sync. The memory holds the features of its
+/// `working_memory` most recent key images in RAM (0: all) and reads the others from the
+/// store. `on_frame(mem)` is called after each push.
 template <class OnFrame>
-StreamResult stream_into(MemoryWriter& w, FrameSource& src, std::size_t save_every,
+StreamResult stream_into(MemoryWriter& w, FrameSource& src, std::size_t save_every, std::size_t working_memory,
                          const std::optional<FramePoses>& poses, OnFrame&& on_frame) {
   using clock = std::chrono::steady_clock;
+  if (working_memory > 0) w.store.bound(w.memory, working_memory);
   StreamResult r;
   const auto sync = [&] {
     const auto t0 = clock::now();

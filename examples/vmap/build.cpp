@@ -46,6 +46,7 @@ struct BuildArgs {
   bool resume = false;
   bool force = false;  // --force: replace an existing memory
   std::size_t save_every = 0;
+  std::size_t working_memory = ex::default_working_memory;
   std::string images = "none";
   std::string vocabulary;
   std::string poses;  // --poses FILE: odometry kept with the memory's key images
@@ -331,7 +332,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   auto* mem = &writer->memory;
   ex::Progress progress("vmap build", expected_frames(src, so));
   MemoryRun run{file, args.resume, {}, 0, std::nullopt, 0, {}};
-  run.stream = ex::stream_into(*writer, src, args.save_every, poses, [&](const ex::CliMemory& m) {
+  run.stream = ex::stream_into(*writer, src, args.save_every, args.working_memory, poses, [&](const ex::CliMemory& m) {
     progress.update(src.delivered(), std::to_string(m.key_images()) + " key images");
   });
   progress.done(std::to_string(mem->key_images()) + " key images, " + std::to_string(src.skipped().size()) + " skipped");
@@ -351,8 +352,16 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   run.last_frame = mem->last_frame_index();
   run.bytes = fs::file_size(file);
   run.write_exports = [&](const fs::path& dir) { return ex::export_memory(*mem, dir, false); };
-  return report(args, app, mem->map(), mem->selector(), src, run.stream.pushed, run.stream.seconds, out_dir,
-                std::nullopt, run);
+  // map.vmap and the pictures need every key image's features: the released ones are
+  // read back from the memory.
+  std::optional<vmap::VisualMap> whole;
+  if (out_dir) {
+    whole.emplace(mem->map());
+    for (std::size_t k = 0; k < whole->keys.size(); ++k)
+      if (!mem->holds_features(k)) whole->keys[k].features = mem->key_features(static_cast<std::uint32_t>(k));
+  }
+  return report(args, app, whole ? *whole : mem->map(), mem->selector(), src, run.stream.pushed, run.stream.seconds,
+                out_dir, std::nullopt, run);
 }
 
 std::function<int()> setup(CLI::App& app) {
@@ -372,6 +381,10 @@ std::function<int()> setup(CLI::App& app) {
   app.add_flag("--force", args->force, "With --memory: replace an existing memory instead of refusing to");
   app.add_option("--save-every", args->save_every,
                  "With --memory: also write it every N frames (0: only at key images, loop edges and the end)")
+      ->check(ex::count_in(0, ex::max_frame_index));
+  app.add_option("--working-memory", args->working_memory,
+                 "With --memory: key images whose features stay in RAM; older ones are read from the memory when a "
+                 "loop candidate needs them (0: all)")
       ->check(ex::count_in(0, ex::max_frame_index));
   app.add_option("--images", args->images, "With --memory: key image pixels kept in it: none, png or jpeg")
       ->check(CLI::IsMember({"none", "png", "jpeg"}));
@@ -395,8 +408,8 @@ std::function<int()> setup(CLI::App& app) {
     ex::current_inputs() = {a.input};
     ex::check_range(a);
     if (!args->memory.empty()) return build_memory(*args, app);
-    for (const char* o : {"--resume", "--save-every", "--images", "--vocabulary", "--vocabulary-after",
-                          "--min-confidence", "--poses", "--gcs"})
+    for (const char* o : {"--resume", "--save-every", "--working-memory", "--images", "--vocabulary",
+                          "--vocabulary-after", "--min-confidence", "--poses", "--gcs"})
       if (app.get_option(o)->count() > 0) ex::usage_error(std::string(o) + " needs --memory DIR|FILE");
     const auto camera = ex::load_camera_option(a.camera);
     const bool pictures = !a.out.empty();

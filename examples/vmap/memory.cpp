@@ -38,6 +38,7 @@ struct MemoryArgs {
   std::optional<double> min_confidence;  // localize: the query's threshold; build: of loop edges
   std::string storage = "none";
   std::size_t start = 0, end = 0, stride = 1, save_every = 0;
+  std::size_t working_memory = ex::default_working_memory;
 };
 
 int build(const MemoryArgs& a, const CLI::App& app) {
@@ -67,7 +68,7 @@ int build(const MemoryArgs& a, const CLI::App& app) {
     writer->store.set_note("input", fingerprint);
   }
   ex::NewMemoryGuard guard(writer, !a.resume);
-  const auto r = ex::stream_into(*writer, src, a.save_every, std::nullopt, [](const ex::CliMemory&) {});
+  const auto r = ex::stream_into(*writer, src, a.save_every, a.working_memory, std::nullopt, [](const ex::CliMemory&) {});
   if (r.pushed == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
   guard.keep();
   writer->store.checkpoint();
@@ -178,6 +179,9 @@ std::function<int()> setup(CLI::App& app) {
               "Continue the memory in --memory after the last frame it saw (its options are kept; the same input and "
               "--stride, checked)");
   b->add_flag("--force", a->force, "Replace an existing memory instead of refusing to");
+  b->add_option("--working-memory", a->working_memory,
+                 "Key images whose features stay in RAM; older ones are read from the store when needed (0: all)")
+      ->check(ex::count_in(0, ex::max_frame_index));
   b->add_option("--save-every", a->save_every, "Also write the memory every N frames (0: only at key images, loop edges and the end)")
       ->check(ex::count_in(0, ex::max_frame_index));
   b->add_option("--threshold,--tau", a->tau, "Similarity threshold tau: a new key image when S < tau (eq. 6)")

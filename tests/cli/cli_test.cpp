@@ -28,6 +28,7 @@
 #include <initializer_list>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 namespace fs = std::filesystem;
@@ -392,6 +393,31 @@ TEST_CASE("cli: build --memory DIR/ writes DIR/memory.vmdb; --resume continues i
   const std::string before = slurp(file);
   usage_error({"build", sample, "--memory", file.string(), "--resume", "--end", "60"}, "already holds every frame");
   CHECK(slurp(file) == before);
+}
+
+TEST_CASE("cli: --working-memory 2 reads older key images from the memory and gives the same memory and map") {
+  const auto build = [](const std::string& name, const std::string& working) {
+    const fs::path file = work_dir() / name / "sample.vmdb";
+    const fs::path out = work_dir() / (name + "_out");
+    const Run r = run_vmap({"build", sample, "--memory", file.string(), "--vocabulary-after", "10", "--working-memory",
+                            working, "--out", out.string(), "--json"});
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+    const Run info = run_vmap({"memory", "info", file.string(), "--json"});
+    REQUIRE(info.code == 0);
+    return std::tuple{nlohmann::json::parse(r.out), nlohmann::json::parse(info.out), slurp(out / "map.vmap")};
+  };
+  const auto [bounded, bounded_info, bounded_map] = build("working_memory_2", "2");
+  const auto [whole, whole_info, whole_map] = build("working_memory_all", "0");
+  const auto& [one_file, one] = sample_memory();  // the default working memory
+  REQUIRE(whole["key_images"].get<std::size_t>() > 2);
+  CHECK(bounded["key_frames"] == whole["key_frames"]);
+  CHECK(bounded["key_frames"] == one["key_frames"]);
+  CHECK(bounded["memory"]["loops"] == whole["memory"]["loops"]);
+  CHECK(bounded_info == whole_info);
+  // map.vmap of --out holds every key image's features, also those read back.
+  CHECK(bounded_map == whole_map);
+  usage_error({"build", sample, "--working-memory", "2"}, "--working-memory needs --memory");
 }
 
 TEST_CASE("cli: build --memory errors: mixed options, --resume without a memory, a non-memory file") {

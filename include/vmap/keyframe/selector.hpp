@@ -241,6 +241,20 @@ class BasicKeyframeSelector {
   }
 
   [[nodiscard]] const VisualMap& map() const noexcept { return map_; }
+
+  /// Drops key image k's features from the map, keeping its norm and image size and
+  /// every other field: a visual memory that reads older key images' features from its
+  /// store bounds its RAM so. push() goes on unchanged: it matches new frames with its
+  /// own copy of the current key image's features, not the map's.
+  void release_key_features(std::size_t k) {
+    detail::check(k < map_.keys.size(), [&] {
+      return "KeyframeSelector::release_key_features: key image " + std::to_string(k) + " of " +
+             std::to_string(map_.keys.size());
+    });
+    Features& f = map_.keys[k].features;
+    f = Features{{}, cv::Mat(), f.norm, f.image_size};
+  }
+
   /// Moves the map out and starts a new sequence (options and policies are kept).
   [[nodiscard]] VisualMap take_map() {
     VisualMap out = std::move(map_);

@@ -51,6 +51,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -198,6 +200,54 @@ class MemoryStore {
     synced_ = true;
     vocabulary_written_ = has_vocabulary;
     gcs_written_ = memory.gcs_generation_;
+  }
+
+  /// sync(), then releases from RAM the features of the key images now stored that are
+  /// older than the memory's working memory (VisualMemory::bound_features; a no-op for a
+  /// memory without one).
+  template <Descriptor D, Matcher M, Estimator E, Similarity S>
+  void sync(VisualMemory<D, M, E, S>& memory) {
+    sync(std::as_const(memory));
+    memory.release_features(keys_);
+  }
+
+  /// Bounds `memory`'s RAM to the features of its `working_memory` most recent key
+  /// images, reading the others from this store (VisualMemory::bound_features), and
+  /// releases those already stored. The memory must be the one this store holds.
+  template <Descriptor D, Matcher M, Estimator E, Similarity S>
+  void bound(VisualMemory<D, M, E, S>& memory, std::size_t working_memory) const {
+    memory.bound_features(working_memory, features());
+    memory.release_features(keys_);
+  }
+
+  /// Reads a stored key image's features, through a read-only connection of its own (so
+  /// it stays valid when this object moves, and reads what was committed): the source of
+  /// VisualMemory::bound_features. A key image the store does not hold, or a damaged
+  /// record, is an Error naming the store.
+  [[nodiscard]] std::function<Features(std::uint32_t)> features() const {
+    struct Reader {
+      sqlite::Database db;
+      sqlite::Statement query;
+    };
+    auto db = sqlite::Database(path_, sqlite::Access::read, db_.what());
+    auto query = db.prepare("SELECT record FROM key_images WHERE id = ?", "read a key image's features");
+    auto reader = std::make_shared<Reader>(Reader{std::move(db), std::move(query)});
+    return [reader](std::uint32_t key) {
+      sqlite::Statement& q = reader->query;
+      q.bind(1, static_cast<std::int64_t>(key));
+      struct Reset {
+        sqlite::Statement& q;
+        ~Reset() { q.reset(); }
+      } reset{q};
+      if (!q.step()) reader->db.fail("holds no key image " + std::to_string(key));
+      // The record begins as the file's "keys" holds a key image: frame index, time,
+      // name, then the features.
+      detail::BinaryReader r(q.blob(0), reader->db.what() + " key image " + std::to_string(key));
+      (void)r.u64("frame index");
+      (void)r.f64("timestamp");
+      (void)r.str("name", detail::map_max_string);
+      return detail::read_features(r);
+    };
   }
 
   /// Records `value` under `name` in the notes table (its own transaction).

@@ -46,7 +46,9 @@
 // as PNG, +50 KB as JPEG quality 90). With labels: 24 B per detection of each key image
 // and one tree entry per key image; the GCS: its vocabulary and network (4 B per weight).
 // Nothing is kept for frames that are not key images except the one I_{j-1} of eq. 6
-// (its features, pose and detections).
+// (its features, pose and detections). With a working memory (bound_features, e.g. a
+// MemoryStore's) only the N most recent key images keep their features in RAM; the rest
+// is about 9.3 KiB per key image (bench_store at 10,000 key images, examples/memory.md).
 //
 // Threading: push() and localize() modify scratch state of the descriptor and must not
 // run concurrently on one object; const members only read. The memory is move-only (a
@@ -94,6 +96,7 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -530,7 +533,7 @@ class VisualMemory {
       out.reason = "the query image has no features";
       return out;
     }
-    const auto lookup = [&map](std::size_t k) -> const Features& { return map.keys[k].features; };
+    const auto lookup = [this](std::size_t k) -> const Features& { return feature_ref(k); };
     PlaceDecision d;
     if (engine_) {
       d = engine_->localize(q, options_.localize_candidates, lookup, std::nullopt, decision);
@@ -559,7 +562,7 @@ class VisualMemory {
         if (d.best && c.frame == *d.best) {
           l.fundamental = d.verification.model;
           l.matches = d.evidence.matches;
-          l.similarity = selector_.front_end().similarity()(q, map.keys[c.frame].features, d.verification);
+          l.similarity = selector_.front_end().similarity()(q, feature_ref(c.frame), d.verification);
         }
         links.emplace_back(c.stage == CandidateStage::chosen ? 2.0 : c.confidence, l);
       }
@@ -582,7 +585,7 @@ class VisualMemory {
     for (std::size_t k = 0; k < map.keys.size(); ++k)
       if (const auto* p = std::get_if<Pose2>(&poses_[k])) {
         keys.push_back(static_cast<std::uint32_t>(k));
-        features.push_back(map.keys[k].features);
+        features.push_back(key_features(static_cast<std::uint32_t>(k)));
         poses.push_back(*p);
       }
     detail::check(keys.size() >= 3, "VisualMemory::train_gcs: " + std::to_string(keys.size()) +
@@ -670,6 +673,57 @@ class VisualMemory {
   /// What the memory records of its policies (descriptor, matcher, estimator,
   /// similarity): name and options, "" for a policy that does not describe itself (file "plcy").
   [[nodiscard]] const std::array<std::string, 4>& policy_records() const noexcept { return policies_; }
+
+  // ---- working memory ---------------------------------------------------------------
+
+  /// Reads key image k's features where the memory no longer holds them in RAM (e.g.
+  /// MemoryStore::features(): the store the memory is synced into).
+  using KeyFeatureSource = std::function<Features(std::uint32_t key)>;
+
+  /// Bounds the features held in RAM to the `working_memory` (>= 1) most recent key
+  /// images: release_features() then drops older key images' features, which are read
+  /// through `source` when a loop or localization candidate is verified, for
+  /// train_gcs() and for save(). What ranking needs stays in RAM (each key image's bag of
+  /// words in the place database, its detections, pose and links), so the answers are
+  /// the same as with every key image's features held. map() shows released key images
+  /// without keypoints or descriptors. MemoryStore::sync releases them once stored.
+  void bound_features(std::size_t working_memory, KeyFeatureSource source) {
+    detail::check(working_memory >= 1, "VisualMemory::bound_features: the working memory must hold at least 1 key image");
+    detail::check(static_cast<bool>(source), "VisualMemory::bound_features: no source of released features");
+    working_memory_ = working_memory;
+    source_ = std::move(source);
+    read_.reset();
+  }
+
+  /// The bound set by bound_features (0: every key image's features are held).
+  [[nodiscard]] std::size_t working_memory() const noexcept { return working_memory_; }
+
+  /// Drops the features of the key images that are both among the first `stored` (those
+  /// the source can read) and older than the working memory; a no-op without
+  /// bound_features.
+  void release_features(std::size_t stored) {
+    if (working_memory_ == 0) return;
+    const std::size_t m = key_images();
+    const std::size_t until = std::min(stored, m > working_memory_ ? m - working_memory_ : 0);
+    for (; released_ < until; ++released_) selector_.release_key_features(released_);
+  }
+
+  /// Whether key image k's features are held in RAM.
+  [[nodiscard]] bool holds_features(std::size_t k) const noexcept { return k >= released_; }
+
+  /// Key image k's features: a copy of the held ones, or read through the source.
+  [[nodiscard]] Features key_features(std::uint32_t k) const {
+    const std::size_t m = key_images();
+    detail::check(k < m, [&] { return "VisualMemory::key_features: key " + std::to_string(k) + " of " + std::to_string(m); });
+    if (holds_features(k)) return selector_.map().keys[k].features;
+    Features f = source_(k);
+    const Features& kept = selector_.map().keys[k].features;  // released: its norm and image size remain
+    detail::check(f.norm == kept.norm && f.image_size == kept.image_size, [&] {
+      return "VisualMemory: the features read for key image " + std::to_string(k) +
+             " are not that key image's (another norm or image size)";
+    });
+    return f;
+  }
 
   /// The memory file's bytes (format: examples/memory.md, "The single-file format"). `images` overrides
   /// MemoryOptions::images for this file (e.g. none for a small copy; png or jpeg store
@@ -971,7 +1025,8 @@ class VisualMemory {
     if (vocabulary_->empty()) {
       if (keys.size() < options_.vocabulary_after) return;
       std::vector<cv::Mat> sets;
-      for (const auto& k : keys) sets.push_back(k.features.descriptors);
+      for (std::size_t k = 0; k < keys.size(); ++k)
+        sets.push_back(holds_features(k) ? keys[k].features.descriptors : key_features(static_cast<std::uint32_t>(k)).descriptors);
       std::size_t rows = 0;
       for (const auto& d : sets) rows += static_cast<std::size_t>(d.rows);
       // Too few descriptors to split into `branching` words (blank frames): try again
@@ -982,9 +1037,13 @@ class VisualMemory {
     if (!detecting()) return;
     if (!engine_) start_engine(PlaceDatabase<std::uint32_t>(vocabulary_->size(), options_.scoring));
     // The engine holds exactly the key images already checked, in order.
-    const auto lookup = [&keys](std::size_t k) -> const Features& { return keys[k].features; };
+    const auto lookup = [this](std::size_t k) -> const Features& { return feature_ref(k); };
     for (std::size_t k = engine_->frames(); k <= key; ++k) {
-      const PlaceDecision d = engine_->add(keys[k].features, label_vector(k), lookup);
+      // A query the working memory no longer holds (a catch-up after the label sample)
+      // is read once and kept here: the lookup's own copy is replaced at its next read.
+      std::optional<Features> read;
+      const Features& query = holds_features(k) ? keys[k].features : read.emplace(key_features(static_cast<std::uint32_t>(k)));
+      const PlaceDecision d = engine_->add(query, label_vector(k), lookup);
       if (!d.accepted()) continue;
       PlaceLink l;
       l.key = static_cast<std::uint32_t>(*d.best);
@@ -993,7 +1052,7 @@ class VisualMemory {
       l.fundamental = d.verification.model;
       l.matches = d.evidence.matches;
       l.inliers = d.evidence.inliers;
-      l.similarity = selector_.front_end().similarity()(keys[k].features, keys[*d.best].features, d.verification);
+      l.similarity = selector_.front_end().similarity()(query, feature_ref(*d.best), d.verification);
       l.confidence = d.confidence;
       loops_.push_back({static_cast<std::uint32_t>(k), l});
       found.push_back(loops_.back());
@@ -1135,7 +1194,10 @@ class VisualMemory {
   /// Key image i as "keys" holds it: the key image, then its pose.
   void write_key_record(detail::BinaryWriter& w, std::size_t i, ImageStorage storage) const {
     const KeyImage& k = selector_.map().keys[i];
-    write_key(w, k.frame_index, k.timestamp, k.name, k.features, k.image, storage);
+    if (holds_features(i))
+      write_key(w, k.frame_index, k.timestamp, k.name, k.features, k.image, storage);
+    else
+      write_key(w, k.frame_index, k.timestamp, k.name, key_features(static_cast<std::uint32_t>(i)), k.image, storage);
     detail::memory_write_pose(w, poses_[i]);
   }
 
@@ -1539,6 +1601,14 @@ class VisualMemory {
     std::vector<std::size_t> winners;  ///< the neuron each of them won (Algorithm 4)
   };
 
+  /// Key image k's features for a verification: held, or read into `read_`, so the
+  /// reference is valid until the next read of a released key image.
+  const Features& feature_ref(std::size_t k) {
+    if (holds_features(k)) return selector_.map().keys[k].features;
+    if (!read_ || read_->first != k) read_.emplace(k, key_features(static_cast<std::uint32_t>(k)));
+    return read_->second;
+  }
+
   MemoryOptions options_;
   std::array<std::string, 4> policies_;  ///< detail::memory_policy_record of each policy
   Selector selector_;
@@ -1554,6 +1624,10 @@ class VisualMemory {
   std::optional<LabelSchema> schema_;
   std::optional<GcsPart> gcs_;
   std::uint64_t gcs_generation_ = 0;  ///< counts train_gcs calls (a store rewrites the GCS when it changes)
+  std::size_t working_memory_ = 0;    ///< bound_features (0: unbounded)
+  KeyFeatureSource source_;           ///< where released features are read
+  std::size_t released_ = 0;          ///< key images 0 .. released_ - 1 hold no features in RAM
+  std::optional<std::pair<std::size_t, Features>> read_;  ///< the last released key image read (feature_ref)
 };
 
 // Named stacks: the paper's ORB 1000 + mutual NN + MAGSAC++ + eq. 5, and A-KAZE / SIFT.

@@ -13,6 +13,7 @@
 
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -149,6 +150,83 @@ TEST_CASE("store: stopped and reopened every few frames, the memory goes on exac
     CHECK(memory->serialize() == whole.serialize());
     CHECK(load(*store).serialize() == whole.serialize());
   }
+}
+
+TEST_CASE("store: a working memory of 3 key images answers as a memory that holds every key image's features") {
+  const auto o = options(vmap::ImageStorage::none);
+  // The first 50 frames are mapped; the last 10 are localized, then mapped on.
+  const std::vector<vmap::Frame> kept(frames().begin(), frames().begin() + 50);
+  const std::vector<vmap::Frame> later(frames().begin() + 50, frames().end());
+  auto whole = make(o);
+  for (const auto& f : kept) whole.push(f);
+  REQUIRE(whole.key_images() >= 10);
+
+  const fs::path file = fresh("working.vmdb");
+  std::optional<vmap::MemoryStore> store;
+  store.emplace(vmap::MemoryStore::create(file));
+  auto bounded = make(o);
+  store->bound(bounded, 3);
+  CHECK(bounded.working_memory() == 3);
+  std::size_t most_held = 0;
+  for (const auto& f : kept) {
+    bounded.push(f);
+    store->sync(bounded);
+    std::size_t now = 0;
+    for (std::size_t k = 0; k < bounded.key_images(); ++k) now += bounded.holds_features(k) ? 1 : 0;
+    most_held = std::max(most_held, now);
+  }
+  // The bound held after every sync; released key images keep no keypoints in RAM.
+  CHECK(most_held == 3);
+  const std::size_t m = bounded.key_images();
+  REQUIRE(m == whole.key_images());
+  for (std::size_t k = 0; k < m; ++k) {
+    CAPTURE(k);
+    CHECK(bounded.holds_features(k) == (k + 3 >= m));
+    CHECK(bounded.map().keys[k].features.keypoints.empty() == (k + 3 < m));
+    // Read back from the store, a key image's features are the ones it was made with.
+    const vmap::Features back = bounded.key_features(static_cast<std::uint32_t>(k));
+    const vmap::Features& original = whole.map().keys[k].features;
+    REQUIRE(back.size() == original.size());
+    CHECK(back.keypoints.front().pt == original.keypoints.front().pt);
+    CHECK(cv::norm(back.descriptors, original.descriptors, cv::NORM_HAMMING) == 0.0);
+  }
+  // The same loops (features read from the store for the candidates), the same file,
+  // the same localizations.
+  CHECK(bounded.serialize() == whole.serialize());
+  std::size_t answered = 0;
+  for (const auto& f : later) {
+    const auto a = bounded.localize(f.image);
+    const auto b = whole.localize(f.image);
+    CHECK(a.status == b.status);
+    CHECK(a.confidence == b.confidence);
+    REQUIRE(a.matches.size() == b.matches.size());
+    for (std::size_t i = 0; i < a.matches.size(); ++i) {
+      CHECK(a.matches[i].key == b.matches[i].key);
+      CHECK(a.matches[i].inliers == b.matches[i].inliers);
+      CHECK(a.matches[i].similarity == b.matches[i].similarity);
+    }
+    answered += a.ok() && !bounded.holds_features(a.best()->key) ? 1 : 0;
+  }
+  // Some answers are key images whose features were read from the store.
+  CHECK(answered > 0);
+  // Loaded again and bounded, it releases what is stored and goes on as the whole run.
+  store.reset();  // one writer at a time
+  vmap::MemoryStore again = vmap::MemoryStore::open(file);
+  auto resumed = load(again);
+  again.bound(resumed, 2);
+  CHECK(!resumed.holds_features(m - 3));
+  CHECK(resumed.holds_features(m - 2));
+  for (const auto& f : later) {
+    resumed.push(f);
+    again.sync(resumed);
+    whole.push(f);
+  }
+  CHECK(resumed.serialize() == whole.serialize());
+  CHECK(load(again).serialize() == whole.serialize());
+
+  CHECK_THROWS_AS(bounded.bound_features(0, again.features()), vmap::Error);
+  const auto source = again.features();
+  CHECK(error_of([&] { (void)source(100000); }).find("holds no key image 100000") != std::string::npos);
 }
 
 TEST_CASE("store: one writer at a time; readers load the last sync while the writer goes on") {
