@@ -51,7 +51,9 @@
 // is about 9.3 KiB per key image (bench_store at 10,000 key images, examples/memory.md).
 //
 // Threading: push() and localize() modify scratch state of the descriptor and must not
-// run concurrently on one object; const members only read. The memory is move-only (a
+// run concurrently on one object; const members only read, except that with a working
+// memory those that read released key images (key_features, serialize, save) go through
+// the one source, so they too run on one thread at a time. The memory is move-only (a
 // copy would share the descriptor's detector); separate objects (e.g. each thread
 // loading the same file) share nothing.
 
