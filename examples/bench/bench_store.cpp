@@ -11,8 +11,9 @@
 //     With --working-memory W (> 0) the memory holds the features of its W most recent
 //     key images only (VisualMemory::bound_features) and reads the others from the store
 //     when a candidate is verified: the run prints the resident memory at 1,000 and
-//     10,000 key images, the peak, and the reads and their time. Run it once with
-//     --working-memory 0 and once with W: each process has its own peak.
+//     10,000 key images, the peak, and the reads and their time, and loads the store
+//     bounded (MemoryStore::load_bounded). Run it once with --working-memory 0 and once
+//     with W: each process has its own peak.
 //
 //   bench_store [--shared DIR] [--ratio-frames 400] [--repeats 3] [--keys 10000] [--scale-tau 0.95]
 //               [--working-memory 0] [--dir /tmp/bench_store]
@@ -168,10 +169,14 @@ int main(int argc, char** argv) {
     std::printf("  features read from the store: %zu (%.3f ms each, %.2f ms per pushed frame)\n", reads,
                 reads ? read_ms / static_cast<double>(reads) : 0.0, read_ms / static_cast<double>(pushed));
 
+  const double rss_before_load = status_mib("VmRSS");
   const auto t_open = Clock::now();
   auto reader = vmap::MemoryStore::open(scale_store, vmap::sqlite::Access::read);
-  auto loaded = reader.load<vmap::OrbVisualMemory>();
+  auto loaded = working_memory > 0 ? reader.load_bounded<vmap::OrbVisualMemory>(working_memory)
+                                   : reader.load<vmap::OrbVisualMemory>();
   const double load_ms = ms_since(t_open);
+  std::printf("  load %s: resident %+.1f MiB after it, peak %.1f MiB\n",
+              working_memory > 0 ? "bounded" : "whole", status_mib("VmRSS") - rss_before_load, status_mib("VmHWM"));
   const bool same = loaded.key_images() == mem.key_images() && loaded.loops().size() == mem.loops().size();
   std::printf("  open + load: %.0f ms (%zu key images, %s)\n", load_ms, loaded.key_images(),
               same ? "equal key images and loop edges" : "DIFFERENT");

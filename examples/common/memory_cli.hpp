@@ -189,9 +189,10 @@ class NewMemoryGuard {
 
 /// The memory --resume continues: a missing file is a usage error that says how to start
 /// one; options that would change the memory's own (`options_kept`, given on the command
-/// line) conflict with --resume.
+/// line) conflict with --resume. With a `working_memory` (> 0) the memory is loaded
+/// holding only that many key images' features (MemoryStore::load_bounded).
 inline MemoryWriter memory_to_resume(const std::filesystem::path& file, const CLI::App& app,
-                                     const std::vector<std::string>& options_kept) {
+                                     const std::vector<std::string>& options_kept, std::size_t working_memory) {
   for (const auto& o : options_kept)
     if (app.get_option(o)->count() > 0)
       usage_error("--resume and " + o + " conflict (a resumed memory keeps the options it was started with)");
@@ -207,7 +208,7 @@ inline MemoryWriter memory_to_resume(const std::filesystem::path& file, const CL
   if (!store.synced())
     usage_error("--resume: the memory '" + file.string() + "' holds nothing yet (its first run stopped before its "
                 "first key image was written): start it again with --force");
-  auto memory = store.load<CliMemory>();
+  auto memory = working_memory > 0 ? store.load_bounded<CliMemory>(working_memory) : store.load<CliMemory>();
   return MemoryWriter{std::move(store), std::move(memory)};
 }
 

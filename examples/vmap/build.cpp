@@ -292,7 +292,8 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   if (args.resume)
     writer.emplace(
         ex::memory_to_resume(file, app,
-                             {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after", "--min-confidence"}));
+                             {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after", "--min-confidence"},
+                             args.working_memory));
   inputs.push_back(file);
   std::optional<ex::OutputFolder> out_dir;
   if (!a.out.empty()) {

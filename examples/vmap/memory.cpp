@@ -52,7 +52,8 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   ex::prepare_memory_output(file, "--memory", {a.input}, a.resume, a.force);
   std::optional<ex::CliMemory> fresh;
   if (a.resume) {
-    writer.emplace(ex::memory_to_resume(file, app, {"--threshold", "--images", "--vocabulary", "--min-confidence"}));
+    writer.emplace(ex::memory_to_resume(file, app, {"--threshold", "--images", "--vocabulary", "--min-confidence"},
+                                        a.working_memory));
     so = ex::resume_range(writer->memory, so, file.string());
   } else {
     ex::NewMemory n{.tau = a.tau, .images = a.storage, .vocabulary = a.vocabulary};

@@ -417,6 +417,20 @@ TEST_CASE("cli: --working-memory 2 reads older key images from the memory and gi
   CHECK(bounded_info == whole_info);
   // map.vmap of --out holds every key image's features, also those read back.
   CHECK(bounded_map == whole_map);
+  // Stopped after 30 frames and resumed holding 2 key images' features (the older ones
+  // loaded without them): the memory of the uninterrupted run.
+  const fs::path resumed = work_dir() / "working_memory_resumed" / "sample.vmdb";
+  const Run first = run_vmap({"build", sample, "--memory", resumed.string(), "--vocabulary-after", "10",
+                              "--working-memory", "2", "--end", "30"});
+  INFO(first.err);
+  REQUIRE(first.code == 0);
+  const Run second = run_vmap({"build", sample, "--memory", resumed.string(), "--resume", "--working-memory", "2", "--json"});
+  INFO(second.err);
+  REQUIRE(second.code == 0);
+  CHECK(nlohmann::json::parse(second.out)["key_frames"] == whole["key_frames"]);
+  const Run resumed_info = run_vmap({"memory", "info", resumed.string(), "--json"});
+  REQUIRE(resumed_info.code == 0);
+  CHECK(nlohmann::json::parse(resumed_info.out) == whole_info);
   usage_error({"build", sample, "--working-memory", "2"}, "--working-memory needs --memory");
 }
 

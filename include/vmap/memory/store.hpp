@@ -20,6 +20,12 @@
 // and parses them with the same checks as a .vmem file: a memory loaded from a store is
 // the memory that was synced, and pushing on continues exactly as the uninterrupted run.
 //
+// A working memory bounds the RAM of a long run: bound(memory, N) keeps the features of
+// the memory's N most recent key images in RAM, sync() releases the older ones once
+// stored, and the memory reads them back from the store when a candidate needs them
+// (VisualMemory::bound_features); load_bounded<Memory>(N) loads a memory so, reading the
+// older key images' records without their features.
+//
 // One writer at a time (open(..., write) of a memory another program writes is refused
 // with a message naming the file); any number of readers (open(..., read)) load the
 // last synced state while the writer goes on.
@@ -240,12 +246,8 @@ class MemoryStore {
         ~Reset() { q.reset(); }
       } reset{q};
       if (!q.step()) reader->db.fail("holds no key image " + std::to_string(key));
-      // The record begins as the file's "keys" holds a key image: frame index, time,
-      // name, then the features.
       detail::BinaryReader r(q.blob(0), reader->db.what() + " key image " + std::to_string(key));
-      (void)r.u64("frame index");
-      (void)r.f64("timestamp");
-      (void)r.str("name", detail::map_max_string);
+      skip_to_features(r);
       return detail::read_features(r);
     };
   }
@@ -278,6 +280,24 @@ class MemoryStore {
   /// images' pixels, as for VisualMemory::load.
   template <class Memory, class... Policies>
   [[nodiscard]] Memory load(Policies&&... policies) {
+    return load_holding<Memory>(0, std::forward<Policies>(policies)...);
+  }
+
+  /// load(), holding in RAM the features of the memory's `working_memory` (>= 1) most
+  /// recent key images only, also while it loads: the older key images' records are read
+  /// without their features, which the memory reads from this store when it needs them
+  /// (bound()). The memory is the one load() gives, bounded.
+  template <class Memory, class... Policies>
+  [[nodiscard]] Memory load_bounded(std::size_t working_memory, Policies&&... policies) {
+    detail::check(working_memory >= 1, "MemoryStore::load_bounded: the working memory must hold at least 1 key image");
+    return load_holding<Memory>(working_memory, std::forward<Policies>(policies)...);
+  }
+
+ private:
+  /// load() and load_bounded(): the rows joined into the memory file's sections; with a
+  /// working memory, the key images older than it are joined without their features.
+  template <class Memory, class... Policies>
+  [[nodiscard]] Memory load_holding(std::size_t working_memory, Policies&&... policies) {
     sqlite::Transaction snapshot(db_, "read the memory", sqlite::Transaction::Kind::read);
     std::array<std::string, detail::memory_sections> sections;
     sections[0] = meta("options");
@@ -285,11 +305,21 @@ class MemoryStore {
 
     std::string keys, detections, bows;
     std::size_t m = 0, checked = 0;
+    std::size_t released = 0;  // key images joined without their features
+    if (working_memory > 0) {
+      auto q = db_.prepare("SELECT count(*) FROM key_images", "count the key images");
+      if (!q.step()) db_.fail("count the key images: no row");
+      const auto stored = static_cast<std::size_t>(q.integer(0));
+      released = stored > working_memory ? stored - working_memory : 0;
+    }
     {
       auto q = db_.prepare("SELECT id, record, detections, bow FROM key_images ORDER BY id", "read the key images");
       while (q.step()) {
         expect_index(q.integer(0), m, "key image");
-        keys += q.blob(1);
+        if (m < released)
+          keys += without_features(q.blob(1), m);
+        else
+          keys += q.blob(1);
         detections += q.blob(2);
         if (!q.is_null(3)) {
           if (checked != m) db_.fail("is corrupt: key image " + std::to_string(m) + " has a bag of words, an earlier one none");
@@ -344,10 +374,14 @@ class MemoryStore {
     sections[9] = meta("gcs");
     sections[10] = meta("decision") + count32(e) + confidences;
     snapshot.commit();
-    return Memory::deserialize(Memory::file_bytes(sections), db_.what(), std::forward<Policies>(policies)...);
+    Memory memory = Memory::deserialize(Memory::file_bytes(sections), db_.what(), std::forward<Policies>(policies)...);
+    if (working_memory > 0) {
+      memory.bound_features(working_memory, features());
+      memory.released_ = released;
+    }
+    return memory;
   }
 
- private:
   MemoryStore(const std::filesystem::path& path, sqlite::Access access)
       : path_(path), db_(path, access, "memory '" + path.string() + "'") {}
 
@@ -433,6 +467,29 @@ class MemoryStore {
     if (got != static_cast<std::int64_t>(want))
       db_.fail("is corrupt: " + std::string(what) + " " + std::to_string(got) + " where " + std::to_string(want) +
                " was expected");
+  }
+
+  /// Reads past what a key image's record holds before its features: frame index, time
+  /// and name, as the file's "keys" section holds a key image.
+  static void skip_to_features(detail::BinaryReader& r) {
+    (void)r.u64("frame index");
+    (void)r.f64("timestamp");
+    (void)r.str("name", detail::map_max_string);
+  }
+
+  /// A key image's record with its features replaced by none of the same norm and image
+  /// size (the record's other fields as they are): what a bounded load keeps in RAM.
+  std::string without_features(std::string_view record, std::size_t key) const {
+    detail::BinaryReader r(record, db_.what() + " key image " + std::to_string(key));
+    skip_to_features(r);
+    const std::size_t head = r.offset();
+    const Features f = detail::read_features(r);
+    std::string out(record.substr(0, head));
+    detail::BinaryWriter w;
+    detail::write_features(w, Features{{}, cv::Mat(), f.norm, f.image_size});
+    out += w.data();
+    out += record.substr(r.offset());
+    return out;
   }
 
   static std::string count32(std::size_t n) {

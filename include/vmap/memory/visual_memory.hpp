@@ -48,7 +48,7 @@
 // Nothing is kept for frames that are not key images except the one I_{j-1} of eq. 6
 // (its features, pose and detections). With a working memory (bound_features, e.g. a
 // MemoryStore's) only the N most recent key images keep their features in RAM; the rest
-// is about 9.3 KiB per key image (bench_store at 10,000 key images, examples/memory.md).
+// is about 9.4 KiB per key image (bench_store at 10,000 key images, examples/memory.md).
 //
 // Threading: push() and localize() modify scratch state of the descriptor and must not
 // run concurrently on one object; const members only read, except that with a working

@@ -209,13 +209,19 @@ TEST_CASE("store: a working memory of 3 key images answers as a memory that hold
   }
   // Some answers are key images whose features were read from the store.
   CHECK(answered > 0);
-  // Loaded again and bounded, it releases what is stored and goes on as the whole run.
+  // Loaded again holding 2 key images' features (the others read without them), it is
+  // the same memory and goes on as the whole run.
   store.reset();  // one writer at a time
   vmap::MemoryStore again = vmap::MemoryStore::open(file);
-  auto resumed = load(again);
-  again.bound(resumed, 2);
+  auto resumed = again.load_bounded<vmap::OrbVisualMemory>(2, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                                                            memory_estimator(), vmap::InlierRatio{});
+  CHECK(resumed.working_memory() == 2);
   CHECK(!resumed.holds_features(m - 3));
+  CHECK(resumed.map().keys[m - 3].features.keypoints.empty());
   CHECK(resumed.holds_features(m - 2));
+  CHECK(resumed.map().keys[m - 2].features.size() == whole.map().keys[m - 2].features.size());
+  CHECK(resumed.serialize() == bounded.serialize());
+  CHECK_THROWS_AS((void)again.load_bounded<vmap::OrbVisualMemory>(0), vmap::Error);
   for (const auto& f : later) {
     resumed.push(f);
     again.sync(resumed);
