@@ -108,14 +108,18 @@ inline void check_memory_file(const std::filesystem::path& file) {
     vmap::detail::fail("'" + file.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file)");
 }
 
-inline CliMemory load_memory(const std::filesystem::path& file, const std::string& option) {
+/// `pixels`: decode the key images' pixels (false for the commands that never show them:
+/// info, export, loops, localize; the memory then cannot be written with pixels).
+inline CliMemory load_memory(const std::filesystem::path& file, const std::string& option, bool pixels = true) {
   check_input_file(file, option);
   check_memory_file(file);
+  MapLoadOptions limits;
+  limits.decode_images = pixels;
   if (memory_file_kind(file) == MemoryFileKind::store) {
     auto store = MemoryStore::open(file, sqlite::Access::read);
-    return store.load<CliMemory>();
+    return store.load<CliMemory>(OrbDescriptor{}, BruteForceMatcher{}, FundamentalEstimator{}, InlierRatio{}, limits);
   }
-  return CliMemory::load(file);
+  return CliMemory::load(file, OrbDescriptor{}, BruteForceMatcher{}, FundamentalEstimator{}, InlierRatio{}, limits);
 }
 
 /// A memory store a run writes into, and the memory it holds.
@@ -490,7 +494,7 @@ inline int localize_from_memory(const std::filesystem::path& file, const std::st
                                 const std::vector<std::string>& images, bool json,
                                 std::optional<double> min_confidence = std::nullopt) {
   current_inputs() = {file.string()};
-  CliMemory mem = load_memory(file, option);
+  CliMemory mem = load_memory(file, option, false);
   PlaceDecisionOptions decision = mem.options().loops.decision;
   if (min_confidence) decision.min_confidence = *min_confidence;
   const auto queries = localize_images(mem, images, decision);

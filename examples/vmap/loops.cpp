@@ -126,7 +126,7 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
   ex::current_inputs() = {file.string()};
   for (const auto& [path, option] : {std::pair{a.gt, "--gt"}, std::pair{a.gt_poses, "--gt-poses"}})
     if (!path.empty()) ex::check_input_file(path, option);
-  const auto mem = ex::load_memory(file, "--memory");
+  const auto mem = ex::load_memory(file, "--memory", false);
   const double min_confidence = mem.options().loops.decision.min_confidence;
   nlohmann::json loops = nlohmann::json::array();
   for (const auto& e : mem.loops()) loops.push_back(ex::loop_json(mem, e));

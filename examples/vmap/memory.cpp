@@ -96,7 +96,7 @@ int build(const MemoryArgs& a, const CLI::App& app) {
 int info(const MemoryArgs& a) {
   const auto file = ex::memory_file(a.memory);
   ex::current_inputs() = {file.string()};
-  const auto mem = ex::load_memory(file, "memory");
+  const auto mem = ex::load_memory(file, "memory", false);
   nlohmann::json keys = nlohmann::json::array(), loops = nlohmann::json::array();
   for (std::size_t k = 0; k < mem.key_images(); ++k)
     keys.push_back({{"key", k},
@@ -155,7 +155,7 @@ int export_files(const MemoryArgs& a) {
   const auto file = ex::memory_file(a.memory);
   ex::current_inputs() = {file.string()};
   ex::OutputFolder out(a.export_out, "--out", {file}, ex::export_file_names());
-  const auto mem = ex::load_memory(file, "memory");
+  const auto mem = ex::load_memory(file, "memory", false);
   const auto written = ex::export_memory(mem, out.path());
   out.commit();
   if (a.json) {

@@ -70,6 +70,10 @@ struct MapLoadOptions {
   std::uint64_t max_total_image_pixels = std::uint64_t{1} << 29;
   /// Size of the file (load_map only).
   std::uintmax_t max_file_bytes = default_max_file_bytes;
+  /// Visual memories: false leaves the key images' pixels undecoded (their recorded
+  /// sizes and encoded headers still checked), for a reader that never shows them; such
+  /// a memory refuses to be written with pixels, which it no longer has.
+  bool decode_images = true;
 };
 
 namespace detail {

@@ -136,8 +136,9 @@ class MemoryStore {
     if (!matched_ && keys_ > 0) check_same_memory(map);
     matched_ = true;
 
-    sqlite::Transaction t(db_, "write the memory");
     const ImageStorage storage = memory.options_.images;
+    memory.check_pixels_read(storage, "MemoryStore::sync");
+    sqlite::Transaction t(db_, "write the memory");
     for (std::size_t k = keys_; k < m; ++k) {
       const KeyImage& key = map.keys[k];
       detail::BinaryWriter record, detections;

@@ -327,7 +327,10 @@ inline void write_memory_image(BinaryWriter& w, const cv::Mat& image, ImageStora
   w.bytes(buf.data(), buf.size());
 }
 
-inline cv::Mat read_memory_image(BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels) {
+/// A key image's pixels (none, PNG or JPEG); with MapLoadOptions::decode_images false the
+/// encoded image is checked but not decoded, and `skipped` (when given) is set.
+inline cv::Mat read_memory_image(BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels,
+                                 bool* skipped = nullptr) {
   const std::uint8_t kind = r.u8("image kind");
   if (kind == 0) return {};
   if (kind > 2) r.corrupt("image kind " + std::to_string(kind) + " is not 0, 1 or 2");
@@ -343,6 +346,10 @@ inline cv::Mat read_memory_image(BinaryReader& r, const MapLoadOptions& limits, 
   const auto header = image_header_size(bytes);
   if (!header || header->width != cols || header->height != rows)
     r.corrupt("key image is not a " + std::string(kind == 1 ? "PNG" : "JPEG") + " of the recorded size");
+  if (!limits.decode_images) {
+    if (skipped) *skipped = true;
+    return {};
+  }
   const cv::Mat buf(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
   cv::Mat img;
   try {
@@ -732,6 +739,7 @@ class VisualMemory {
   /// only the pixels the memory kept).
   [[nodiscard]] std::string serialize(std::optional<ImageStorage> images = {}) const {
     const ImageStorage storage = images.value_or(options_.images);
+    check_pixels_read(storage, "VisualMemory::serialize");
     return file_bytes({options_bytes(storage), keys_bytes(storage), links_bytes(), loops_bytes(),
                        selector_bytes(storage), vocabulary_bytes(),
                        database_section(engine_ ? database().serialize()
@@ -781,7 +789,7 @@ class VisualMemory {
     keys.require_items(m, 50, "key image count");
     if (m > state.map.frames) keys.corrupt(std::to_string(m) + " key images for " + std::to_string(state.map.frames) + " frames");
     for (std::uint32_t i = 0; i < m; ++i) {
-      KeyImage k = read_key(keys, limits, total_pixels);
+      KeyImage k = read_key(keys, limits, total_pixels, &mem.pixels_unread_);
       mem.check_layout(keys, k.features, [&] { return "key image " + std::to_string(i); });
       if (!state.map.keys.empty() && k.frame_index <= state.map.keys.back().frame_index)
         keys.corrupt("key image frame indices are not increasing");
@@ -825,7 +833,7 @@ class VisualMemory {
     if (has_prev == 1) {
       if (m == 0) sel.corrupt("a previous frame without a key image");
       PreparedFrame<Features> prev;
-      KeyImage k = read_key(sel, limits, total_pixels);
+      KeyImage k = read_key(sel, limits, total_pixels, &mem.pixels_unread_);
       mem.check_layout(sel, k.features, [] { return std::string("the previous frame"); });
       if (k.frame_index <= state.map.keys.back().frame_index) sel.corrupt("previous frame is not after the key image");
       prev.item = std::move(k.features);
@@ -1183,13 +1191,14 @@ class VisualMemory {
     }
   }
 
-  static KeyImage read_key(detail::BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels) {
+  static KeyImage read_key(detail::BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels,
+                           bool* pixels_skipped) {
     KeyImage k;
     k.frame_index = static_cast<std::size_t>(r.u64("frame index"));
     k.timestamp = r.f64("timestamp");
     k.name = r.str("name", detail::map_max_string);
     k.features = detail::read_features(r);
-    k.image = detail::read_memory_image(r, limits, total_pixels);
+    k.image = detail::read_memory_image(r, limits, total_pixels, pixels_skipped);
     return k;
   }
 
@@ -1603,6 +1612,15 @@ class VisualMemory {
     std::vector<std::size_t> winners;  ///< the neuron each of them won (Algorithm 4)
   };
 
+  /// A memory loaded without decoding its pixels (MapLoadOptions::decode_images) cannot
+  /// write them: refused, so that no file loses the pixels it had.
+  void check_pixels_read(ImageStorage storage, const char* who) const {
+    if (pixels_unread_ && storage != ImageStorage::none)
+      detail::fail(std::string(who) + ": the memory was loaded without its key images' pixels "
+                   "(MapLoadOptions::decode_images = false) and cannot write them; write it with ImageStorage::none, "
+                   "or load it with its pixels");
+  }
+
   /// Key image k's features for a verification: held, or read into `read_`, so the
   /// reference is valid until the next read of a released key image.
   const Features& feature_ref(std::size_t k) {
@@ -1630,6 +1648,7 @@ class VisualMemory {
   KeyFeatureSource source_;           ///< where released features are read
   std::size_t released_ = 0;          ///< key images 0 .. released_ - 1 hold no features in RAM
   std::optional<std::pair<std::size_t, Features>> read_;  ///< the last released key image read (feature_ref)
+  bool pixels_unread_ = false;  ///< loaded with MapLoadOptions::decode_images false, and pixels were left undecoded
 };
 
 // Named stacks: the paper's ORB 1000 + mutual NN + MAGSAC++ + eq. 5, and A-KAZE / SIFT.

@@ -126,6 +126,42 @@ TEST_CASE("store: a memory's key images are loaded within a pixel budget") {
         }).find("the key images hold more than 614400 pixels together") != std::string::npos);
 }
 
+TEST_CASE("store: a memory loaded without decoding its pixels answers the same and refuses to write pixels") {
+  const fs::path file = fresh("undecoded.vmdb");
+  std::optional<vmap::MemoryStore> store;
+  store.emplace(vmap::MemoryStore::create(file));
+  auto memory = make(options(vmap::ImageStorage::png));
+  for (std::size_t i = 0; i < 50; ++i) memory.push(frames()[i]);
+  store->sync(memory);
+  store.reset();
+  store.emplace(vmap::MemoryStore::open(file));
+  vmap::MapLoadOptions undecoded;
+  undecoded.decode_images = false;
+  auto lean = store->load<vmap::OrbVisualMemory>(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
+                                                 vmap::InlierRatio{}, undecoded);
+  REQUIRE(lean.key_images() == memory.key_images());
+  for (std::size_t k = 0; k < lean.key_images(); ++k) {
+    CHECK(!memory.map().keys[k].image.empty());
+    CHECK(lean.map().keys[k].image.empty());
+  }
+  // Everything but the pixels is there: the same file without pixels, the same answers.
+  CHECK(lean.serialize(vmap::ImageStorage::none) == memory.serialize(vmap::ImageStorage::none));
+  for (std::size_t i = 50; i < 60; ++i) {
+    const auto a = lean.localize(frames()[i].image);
+    const auto b = memory.localize(frames()[i].image);
+    CHECK(a.status == b.status);
+    CHECK(a.confidence == b.confidence);
+  }
+  // It cannot write the pixels it did not read: refused, the store unchanged.
+  const std::string refused = error_of([&] { (void)lean.serialize(); });
+  CHECK(refused.find("VisualMemory::serialize: the memory was loaded without its key images' pixels") == 0);
+  const auto before = fs::file_size(file);
+  CHECK(error_of([&] { store->sync(lean); }).find("MemoryStore::sync: the memory was loaded without") == 0);
+  CHECK(fs::file_size(file) == before);
+  // Loaded with its pixels (lossless PNG here) it writes them again.
+  CHECK(load(*store).serialize() == memory.serialize());
+}
+
 TEST_CASE("store: stopped and reopened every few frames, the memory goes on exactly as an uninterrupted run") {
   const auto o = options(vmap::ImageStorage::png);
   auto whole = make(o);
