@@ -124,17 +124,12 @@ class MemoryStore {
   template <Descriptor D, Matcher M, Estimator E, Similarity S>
   void sync(const VisualMemory<D, M, E, S>& memory) {
     if (!insert_key_) db_.fail("is open read-only: open it with Access::write to sync a memory into it");
+    check_holds(memory);
     const VisualMap& map = memory.selector_.map();
     const std::size_t m = map.keys.size();
     const std::size_t e = memory.loops_.size();
     const auto* database = memory.engine_ ? &memory.engine_->ranker().database() : nullptr;
     const std::size_t checked = database ? database->size() : 0;
-    if (m < keys_ || e < loops_ || checked < bows_)
-      db_.fail("holds " + std::to_string(keys_) + " key images and " + std::to_string(loops_) +
-               " loop edges, the memory to sync " + std::to_string(m) + " and " + std::to_string(e) +
-               ": sync the memory loaded from this store, or a memory into a new store");
-    if (!matched_ && keys_ > 0) check_same_memory(map);
-    matched_ = true;
 
     const ImageStorage storage = memory.options_.images;
     memory.check_pixels_read(storage, "MemoryStore::sync");
@@ -220,9 +215,11 @@ class MemoryStore {
 
   /// Bounds `memory`'s RAM to the features of its `working_memory` most recent key
   /// images, reading the others from this store (VisualMemory::bound_features), and
-  /// releases those already stored. The memory must be the one this store holds.
+  /// releases those already stored. The memory must be the one this store holds (as for
+  /// sync: anything else is an Error naming the file, and nothing is released).
   template <Descriptor D, Matcher M, Estimator E, Similarity S>
-  void bound(VisualMemory<D, M, E, S>& memory, std::size_t working_memory) const {
+  void bound(VisualMemory<D, M, E, S>& memory, std::size_t working_memory) {
+    check_holds(memory);
     memory.bound_features(working_memory, features());
     memory.release_features(keys_);
   }
@@ -438,6 +435,23 @@ class MemoryStore {
     loops_ = count("SELECT count(*) FROM loops", "count the loop edges");
     bows_ = count("SELECT count(bow) FROM key_images", "count the bags of words");
     synced_ = count("SELECT count(*) FROM meta WHERE name = 'options'", "look for a sync") > 0;
+  }
+
+  /// `memory` is the one the store holds, grown (sync, bound): it has at least the stored
+  /// key images, loop edges and bags of words, and its last stored key image is the
+  /// stored one (checked once per store object).
+  template <Descriptor D, Matcher M, Estimator E, Similarity S>
+  void check_holds(const VisualMemory<D, M, E, S>& memory) {
+    const VisualMap& map = memory.selector_.map();
+    const std::size_t m = map.keys.size();
+    const std::size_t e = memory.loops_.size();
+    const std::size_t checked = memory.engine_ ? memory.engine_->ranker().database().size() : 0;
+    if (m < keys_ || e < loops_ || checked < bows_)
+      db_.fail("holds " + std::to_string(keys_) + " key images and " + std::to_string(loops_) +
+               " loop edges, the memory given " + std::to_string(m) + " and " + std::to_string(e) +
+               ": use the memory loaded from this store, or a memory with a new store");
+    if (!matched_ && keys_ > 0) check_same_memory(map);
+    matched_ = true;
   }
 
   /// The first sync into a store that holds key images: the memory must be the one it

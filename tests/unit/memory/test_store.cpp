@@ -258,6 +258,12 @@ TEST_CASE("store: a working memory of 3 key images answers as a memory that hold
   CHECK(resumed.map().keys[m - 2].features.size() == whole.map().keys[m - 2].features.size());
   CHECK(resumed.serialize() == bounded.serialize());
   CHECK_THROWS_AS((void)again.load_bounded<vmap::OrbVisualMemory>(0), vmap::Error);
+  // Bounding a memory this store does not hold is refused, nothing released.
+  auto stranger = make(o);
+  for (std::size_t i = 0; i < 5; ++i) stranger.push(kept[i]);
+  CHECK(error_of([&] { again.bound(stranger, 1); }).find("use the memory loaded from this store") != std::string::npos);
+  CHECK(stranger.working_memory() == 0);
+  CHECK(stranger.holds_features(0));
   for (const auto& f : later) {
     resumed.push(f);
     again.sync(resumed);
@@ -305,7 +311,7 @@ TEST_CASE("store: a memory is synced only into its own store") {
   for (std::size_t i = 0; i < 10; ++i) shorter.push(frames()[i]);
   {
     auto store = vmap::MemoryStore::open(file);
-    CHECK(error_of([&] { store.sync(shorter); }).find("sync the memory loaded from this store") != std::string::npos);
+    CHECK(error_of([&] { store.sync(shorter); }).find("use the memory loaded from this store") != std::string::npos);
   }
   // Another memory (a higher tau: more key images) whose key image of the store's last
   // index is another frame.
