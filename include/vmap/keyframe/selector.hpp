@@ -178,7 +178,7 @@ class BasicKeyframeSelector {
     FrameResult r;
     r.frame_index = frame.index;
     ++map_.frames;
-    if (!key_) {  // K_1 = I_1
+    if (!key_) {  // K_1 = I_1, and the first frame of a chain (start_chain)
       r.similarity = 1.0;
       r.key_taken = true;
       r.key_frame = frame.index;
@@ -254,6 +254,21 @@ class BasicKeyframeSelector {
     Features& f = map_.keys[k].features;
     f = Features{{}, cv::Mat(), f.norm, f.image_size};
   }
+
+  /// Ends the current chain of key images: the next frame becomes a key image as the
+  /// first frame does, not joined to the last key image by a verified link (pairs keeps
+  /// one entry per consecutive key images: that one is a link of no matches, status
+  /// too_few_matches, similarity 0). A visual memory starts a session, another run of
+  /// the robot, so. The map is kept; a no-op before the first frame.
+  void start_chain() {
+    key_.reset();
+    set_previous(std::nullopt);
+    prev_scored_ = false;
+    prev_degeneracy_pending_ = false;
+  }
+
+  /// Whether the next frame starts a chain (before the first frame, or after start_chain).
+  [[nodiscard]] bool chain_open() const noexcept { return !key_.has_value(); }
 
   /// Moves the map out and starts a new sequence (options and policies are kept).
   [[nodiscard]] VisualMap take_map() {
@@ -376,6 +391,8 @@ class BasicKeyframeSelector {
       }
       pair.similarity = link->similarity;
       map_.pairs.push_back(pair);
+    } else if (!map_.keys.empty()) {
+      map_.pairs.push_back(KeyPair{});  // a new chain (start_chain): no link to the last key image
     }
     map_.keys.push_back(std::move(k));
     if (key_) spare_name_ = std::move(key_->name);

@@ -248,10 +248,10 @@ class LoopEngine {
     const auto t0 = std::chrono::steady_clock::now();
     std::optional<typename Rank::Bow> bow;
     if (ranker_.ready()) bow = ranker_.describe(f);
+    const std::size_t older = candidates_below(q);
     // Frames that just left the window become tree candidates.
     if (uses_labels(options_.index))
-      while (tree_next_ + options_.window < q) tree_.insert(labels_[tree_next_], tree_next_), ++tree_next_;
-    const std::size_t older = q > options_.window ? q - options_.window : 0;  // candidates are < older
+      while (tree_next_ < older) tree_.insert(labels_[tree_next_], tree_next_), ++tree_next_;
 
     std::vector<std::pair<std::size_t, double>> to_verify;
     switch (options_.index) {
@@ -340,8 +340,10 @@ class LoopEngine {
   /// temporal-consistency state. The tree is rebuilt exactly: the frames the last query
   /// had inserted, in order.
   void restore(std::vector<LabelVector> labels, std::size_t past_window, std::size_t left_queries,
-               std::size_t not_revisit, const ConsistencyState<std::size_t>& consistency) {
+               std::size_t not_revisit, const ConsistencyState<std::size_t>& consistency,
+               std::size_t session_start = 0) {
     detail::check(frames_ == 0, "LoopEngine::restore: frames were added already");
+    detail::check(session_start <= labels.size(), "LoopEngine::restore: the session starts after the last frame");
     detail::check(not_revisit + left_queries <= past_window && past_window <= labels.size(),
                   "LoopEngine::restore: inconsistent stationarity counts");
     for (const LabelVector& v : labels)
@@ -353,9 +355,17 @@ class LoopEngine {
     left_queries_ = left_queries;
     not_revisit_ = not_revisit;
     set_consistency(consistency);
+    session_start_ = session_start;
     if (uses_labels(options_.index) && frames_ > 0)
-      while (tree_next_ + options_.window < frames_ - 1) tree_.insert(labels_[tree_next_], tree_next_), ++tree_next_;
+      while (tree_next_ < candidates_below(frames_ - 1)) tree_.insert(labels_[tree_next_], tree_next_), ++tree_next_;
   }
+
+  /// The next frame starts a session (another run of the robot, memory/visual_memory.hpp):
+  /// every frame before it is a candidate of the session's frames whatever the window,
+  /// and a revisit (the camera left them: it was another run). Idempotent.
+  void begin_session() { session_start_ = frames_; }
+  /// The first frame of the current session (0 for one session).
+  [[nodiscard]] std::size_t session_start() const noexcept { return session_start_; }
 
   /// A new decision (e.g. another confidence threshold) for the queries from now on.
   void set_decision(const PlaceDecisionOptions& decision) {
@@ -424,8 +434,16 @@ class LoopEngine {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }
 
-  /// The revisit rule for candidate j of query q (frames j+1 .. q-1 in the ranker).
+  /// Frames j < candidates_below(q) are candidates of query q: older than the window, or
+  /// of an earlier session.
+  [[nodiscard]] std::size_t candidates_below(std::size_t q) const noexcept {
+    return std::max(q > options_.window ? q - options_.window : 0, std::min(session_start_, q));
+  }
+
+  /// The revisit rule for candidate j of query q (frames j+1 .. q-1 in the ranker); a
+  /// frame of an earlier session was left by definition.
   bool left_place(std::size_t j, std::size_t q, double query_score) {
+    if (j < session_start_) return true;
     if (left_.size() < frames_) left_.resize(frames_);
     LeftCache& c = left_[j];
     if (c.until < j + 1) c.until = j + 1;
@@ -576,6 +594,7 @@ class LoopEngine {
   std::vector<LeftCache> left_;
   std::size_t frames_ = 0;
   std::size_t tree_next_ = 0;
+  std::size_t session_start_ = 0;  ///< first frame of the current session
   std::size_t verifications_ = 0;
   std::size_t past_window_ = 0;
   std::size_t not_revisit_ = 0;

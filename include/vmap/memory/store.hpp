@@ -30,7 +30,7 @@
 // with a message naming the file); any number of readers (open(..., read)) load the
 // last synced state while the writer goes on.
 //
-// Schema (version 1; PRAGMA application_id 0x564D4150 "VMAP", PRAGMA user_version 1),
+// Schema (version 2; PRAGMA application_id 0x564D4150 "VMAP", PRAGMA user_version 2),
 // documented for readers without vmap in examples/memory.md:
 //   meta(name TEXT PRIMARY KEY, value BLOB): "options", "policies", "labels",
 //        "previous_detections", "selector", "vocabulary", "database", "gcs", "decision"
@@ -45,7 +45,11 @@
 //   loops(id INTEGER PRIMARY KEY: the edge's index; from_key (newer), to_key (older),
 //        inliers, confidence; record BLOB as the file's "loop" holds one)
 //   notes(name TEXT PRIMARY KEY, value TEXT): what the program that writes the memory
-//        records about it (vmap's command line: the input it was built from)
+//        records about it (vmap's command line: the input each session was built from)
+//   sessions(id INTEGER PRIMARY KEY: the session's index, from 0; first_key, first_frame:
+//        its first key image and the frames pushed before it)
+// Version 1 had no sessions table (one session): a reader reads such a store as it is, a
+// writer adds the table when it opens one.
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/binary.hpp>
@@ -67,7 +71,7 @@
 namespace vmap {
 
 /// The store's schema version (PRAGMA user_version).
-inline constexpr std::int64_t memory_store_version = 1;
+inline constexpr std::int64_t memory_store_version = 2;
 /// PRAGMA application_id of a memory store: "VMAP".
 inline constexpr std::int64_t memory_store_application_id = 0x564D4150;
 
@@ -99,7 +103,7 @@ class MemoryStore {
       detail::fail("memory '" + path.string() + "' is empty: its creation was interrupted before the tables were "
                    "written (remove it, or create the memory again)");
     MemoryStore s(path, access);
-    s.check_schema();
+    s.check_schema(access);
     if (access == sqlite::Access::write) s.prepare();
     s.count_rows();
     return s;
@@ -175,6 +179,13 @@ class MemoryStore {
           .bind_blob(6, record.data());
       insert_loop_->run();
     }
+    const auto& sessions = memory.sessions_;
+    for (std::size_t i = sessions_; i < sessions.size(); ++i) {
+      insert_session_->bind(1, static_cast<std::int64_t>(i))
+          .bind(2, static_cast<std::int64_t>(sessions[i].first_key))
+          .bind(3, static_cast<std::int64_t>(sessions[i].first_frame));
+      insert_session_->run();
+    }
     // The small state, rewritten at every sync (a few hundred bytes, and I_{j-1}'s
     // features).
     put("options", memory.options_bytes(storage));
@@ -199,6 +210,7 @@ class MemoryStore {
     keys_ = m;
     loops_ = e;
     bows_ = checked;
+    sessions_ = sessions.size();
     synced_ = true;
     vocabulary_written_ = has_vocabulary;
     gcs_written_ = memory.gcs_generation_;
@@ -371,6 +383,25 @@ class MemoryStore {
     sections[8] = meta("labels") + count32(m) + detections + meta("previous_detections");
     sections[9] = meta("gcs");
     sections[10] = meta("decision") + count32(e) + confidences;
+    {
+      // "sess": the sessions after the first (a version-1 store holds one).
+      std::string rows;
+      std::size_t n = 0;
+      if (version_ >= 2) {
+        auto q = db_.prepare("SELECT id, first_key, first_frame FROM sessions ORDER BY id", "read the sessions");
+        while (q.step()) {
+          expect_index(q.integer(0), n, "session");
+          if (n > 0) {
+            detail::BinaryWriter w;
+            w.u64(static_cast<std::uint64_t>(q.integer(1)));
+            w.u64(static_cast<std::uint64_t>(q.integer(2)));
+            rows += w.data();
+          }
+          ++n;
+        }
+      }
+      sections[11] = count32(n > 0 ? n - 1 : 0) + rows;
+    }
     snapshot.commit();
     Memory memory = Memory::deserialize(Memory::file_bytes(sections), db_.what(), std::forward<Policies>(policies)...);
     if (working_memory > 0) {
@@ -394,8 +425,14 @@ class MemoryStore {
         " similarity REAL NOT NULL, record BLOB NOT NULL);"
         "CREATE TABLE loops(id INTEGER PRIMARY KEY, from_key INTEGER NOT NULL, to_key INTEGER NOT NULL,"
         " inliers INTEGER NOT NULL, confidence REAL NOT NULL, record BLOB NOT NULL);"
-        "CREATE TABLE notes(name TEXT PRIMARY KEY NOT NULL, value TEXT NOT NULL) WITHOUT ROWID;";
+        "CREATE TABLE notes(name TEXT PRIMARY KEY NOT NULL, value TEXT NOT NULL) WITHOUT ROWID;" +
+        sessions_sql();
     return sql;
+  }
+
+  /// The table version 2 added (a version-1 store holds one session).
+  static std::string sessions_sql() {
+    return "CREATE TABLE sessions(id INTEGER PRIMARY KEY, first_key INTEGER NOT NULL, first_frame INTEGER NOT NULL);";
   }
 
   [[nodiscard]] std::int64_t pragma(const char* name) {
@@ -404,13 +441,24 @@ class MemoryStore {
     return q.integer(0);
   }
 
-  void check_schema() {
+  /// Checks the application id and version; a writer brings a version-1 store (one
+  /// session, no sessions table) to version 2 in one transaction, a reader reads it as is.
+  void check_schema(sqlite::Access access) {
     if (pragma("application_id") != memory_store_application_id)
       db_.fail("is not a vmap memory store (an SQLite file without vmap's application id)");
     const std::int64_t version = pragma("user_version");
-    if (version != memory_store_version)
-      db_.fail("has store version " + std::to_string(version) + "; this build reads version " +
+    if (version < 1 || version > memory_store_version)
+      db_.fail("has store version " + std::to_string(version) + "; this build reads versions 1 to " +
                std::to_string(memory_store_version));
+    version_ = version;
+    if (version == 1 && access == sqlite::Access::write) {
+      sqlite::Transaction t(db_, "add the sessions table");
+      db_.exec(sessions_sql() + "INSERT INTO sessions SELECT 0, 0, 0 WHERE EXISTS(SELECT 1 FROM key_images);" +
+                   "PRAGMA user_version = " + std::to_string(memory_store_version) + ";",
+               "add the sessions table");
+      t.commit();
+      version_ = memory_store_version;
+    }
   }
 
   void prepare() {
@@ -423,6 +471,8 @@ class MemoryStore {
     insert_loop_.emplace(db_.prepare(
         "INSERT INTO loops(id, from_key, to_key, inliers, confidence, record) VALUES(?,?,?,?,?,?)", "insert a loop edge"));
     put_meta_.emplace(db_.prepare("INSERT OR REPLACE INTO meta(name, value) VALUES(?,?)", "write the state"));
+    insert_session_.emplace(
+        db_.prepare("INSERT INTO sessions(id, first_key, first_frame) VALUES(?,?,?)", "insert a session"));
   }
 
   void count_rows() {
@@ -435,6 +485,7 @@ class MemoryStore {
     loops_ = count("SELECT count(*) FROM loops", "count the loop edges");
     bows_ = count("SELECT count(bow) FROM key_images", "count the bags of words");
     synced_ = count("SELECT count(*) FROM meta WHERE name = 'options'", "look for a sync") > 0;
+    sessions_ = version_ >= 2 ? count("SELECT count(*) FROM sessions", "count the sessions") : (synced_ ? 1 : 0);
   }
 
   /// `memory` is the one the store holds, grown (sync, bound): it has at least the stored
@@ -446,7 +497,7 @@ class MemoryStore {
     const std::size_t m = map.keys.size();
     const std::size_t e = memory.loops_.size();
     const std::size_t checked = memory.engine_ ? memory.engine_->ranker().database().size() : 0;
-    if (m < keys_ || e < loops_ || checked < bows_)
+    if (m < keys_ || e < loops_ || checked < bows_ || memory.sessions_.size() < sessions_)
       db_.fail("holds " + std::to_string(keys_) + " key images and " + std::to_string(loops_) +
                " loop edges, the memory given " + std::to_string(m) + " and " + std::to_string(e) +
                ": use the memory loaded from this store, or a memory with a new store");
@@ -516,8 +567,9 @@ class MemoryStore {
   std::filesystem::path path_;
   sqlite::Database db_;
   // Prepared once for a writer (absent for a reader).
-  std::optional<sqlite::Statement> insert_key_, insert_link_, update_bow_, insert_loop_, put_meta_;
-  std::size_t keys_ = 0, loops_ = 0, bows_ = 0;  ///< rows in the store
+  std::optional<sqlite::Statement> insert_key_, insert_link_, update_bow_, insert_loop_, put_meta_, insert_session_;
+  std::size_t keys_ = 0, loops_ = 0, bows_ = 0, sessions_ = 0;  ///< rows in the store
+  std::int64_t version_ = memory_store_version;                 ///< the file's schema version
   bool matched_ = false;                         ///< the synced memory was checked against the stored one
   bool synced_ = false;                          ///< the store holds a memory (a sync happened)
   std::optional<bool> vocabulary_written_;       ///< whether the stored vocabulary is a learned one

@@ -27,12 +27,18 @@
 // images that have SE(2) poses, from their own features; localize() then also gives the
 // position estimate of Algorithm 5.
 //
+// Sessions: a memory holds several runs of the robot (start_session(); merge() appends
+// another memory's runs). Each is its own chain of key images; loops are searched across
+// every session (an earlier run's key images are candidates whatever the loop window, and
+// revisits by definition), so an accepted loop joins two runs, and localize() searches
+// them all.
+//
 // The whole state saves to one file and loads back; push() after load() continues
 // exactly as the uninterrupted run would (same key images, same loops). A memory that
 // grows over a long run is better kept in a memory store (memory/store.hpp): an SQLite
 // file written key image by key image from the same records as the file's sections.
 //
-// The file format (version 3, and what versions 1 and 2 lack) is documented in
+// The file format (version 4, and what versions 1 to 3 lack) is documented in
 // examples/memory.md, "The single-file format (.vmem)"; each section is parsed by its own
 // reader, so every error names its section, and counts are checked against the bytes
 // that remain before anything is allocated. Key images' descriptors are checked against
@@ -111,7 +117,7 @@
 namespace vmap {
 
 /// Written by this build; version 1 and 2 files still load.
-inline constexpr std::uint32_t memory_format_version = 3;
+inline constexpr std::uint32_t memory_format_version = 4;
 
 /// How key images' pixels are kept and saved.
 enum class ImageStorage : std::uint8_t {
@@ -228,6 +234,15 @@ struct MemoryLocalization {
   [[nodiscard]] const PlaceLink* best() const noexcept { return ok() && !matches.empty() ? &matches.front() : nullptr; }
 };
 
+/// A session: one run of the robot, its own chain of key images (consecutive key images
+/// of a session are linked; the first key image of a session is not linked to the last
+/// of the one before). Loops are searched across all sessions, and localization searches
+/// every session.
+struct MemorySession {
+  std::size_t first_key = 0;    ///< its first key image (== key_images() while it has none)
+  std::size_t first_frame = 0;  ///< frames pushed into the memory before it
+};
+
 /// A neighbour of a key image in the memory's graph.
 struct GraphNeighbour {
   enum class Kind : std::uint8_t { link, loop };
@@ -242,7 +257,8 @@ namespace detail {
 inline constexpr char memory_magic[8] = {'V', 'M', 'A', 'P', 'M', 'E', 'M', 'O'};
 inline constexpr std::uint32_t memory_sections_v1 = 7;
 inline constexpr std::uint32_t memory_sections_v2 = 10;
-inline constexpr std::uint32_t memory_sections = 11;
+inline constexpr std::uint32_t memory_sections_v3 = 11;
+inline constexpr std::uint32_t memory_sections = 12;
 /// Longest policy description a file may hold.
 inline constexpr std::uint32_t memory_max_policy = 4096;
 /// Most detections one key image may have in a file (a detector gives a few hundred).
@@ -633,13 +649,100 @@ class VisualMemory {
     detail::check(key < m,
                   [&] { return "VisualMemory::neighbours: key " + std::to_string(key) + " of " + std::to_string(m); });
     std::vector<GraphNeighbour> out;
-    if (key > 0) out.push_back({key - 1, GraphNeighbour::Kind::link});
-    if (key + 1 < m) out.push_back({key + 1, GraphNeighbour::Kind::link});
+    if (key > 0 && !starts_session(key)) out.push_back({key - 1, GraphNeighbour::Kind::link});
+    if (key + 1 < m && !starts_session(key + 1)) out.push_back({key + 1, GraphNeighbour::Kind::link});
     for (const auto& e : loops_) {
       if (e.from == key) out.push_back({e.link.key, GraphNeighbour::Kind::loop});
       if (e.link.key == key) out.push_back({e.from, GraphNeighbour::Kind::loop});
     }
     return out;
+  }
+
+  // ---- sessions -------------------------------------------------------------------
+
+  /// Starts a session (another run of the robot, e.g. tomorrow's): the next frame
+  /// pushed becomes a key image as the first frame of a memory does, not linked to the
+  /// last key image (map().pairs holds a link of no matches there). The loop engine
+  /// searches every earlier session's key images whatever its window, and takes them
+  /// as revisits (the camera left them: it was another run), so an accepted loop joins
+  /// the sessions. A no-op before the first frame and right after another start_session.
+  void start_session() {
+    if (frames() == 0 || sessions_.back().first_frame == frames()) return;
+    sessions_.push_back({key_images(), frames()});
+    selector_.start_chain();
+    previous_pose_ = OdometryPose{};
+    previous_detections_.clear();
+  }
+
+  /// The sessions, in order; the first starts at key image 0 and frame 0.
+  [[nodiscard]] const std::vector<MemorySession>& sessions() const noexcept { return sessions_; }
+
+  /// The session key image `key` belongs to (its index in sessions()).
+  [[nodiscard]] std::size_t session_of(std::size_t key) const {
+    detail::check(key < key_images(),
+                  [&] { return "VisualMemory::session_of: key " + std::to_string(key) + " of " + std::to_string(key_images()); });
+    return session_of_key(key);
+  }
+
+  /// Appends `other`'s sessions after this memory's, as if its runs had been pushed
+  /// here, each after start_session(): its key images, links, poses and detections as
+  /// they are, and loop detection of each of its key images against every key image
+  /// before it, this memory's included. The result equals the memory built with both
+  /// memories' runs (the key images of a session depend only on its frames), ranked
+  /// with this memory's vocabulary and label schema (learned as that build would learn
+  /// them); other's loop edges, bags of words and GCS are not used. Pushing then
+  /// continues other's last session. The two must have the same options and policies,
+  /// and other must hold its key images' features (not bounded): anything else is an
+  /// Error naming both (`name`, `other_name`), and this memory is left as it was.
+  void merge(VisualMemory&& other, const std::string& name = "the memory",
+             const std::string& other_name = "the other memory") {
+    const auto refuse = [&](const std::string& why) {
+      detail::fail("cannot merge " + other_name + " into " + name + ": " + why);
+    };
+    if (other.frames() == 0) return;
+    if (policies_ != other.policies_)
+      refuse("they were made with other policies (" + policies_[0] + " against " + other.policies_[0] + ", ...)");
+    if (options_bytes(options_.images) != other.options_bytes(other.options_.images) ||
+        decision_options_bytes() != other.decision_options_bytes())
+      refuse("they were made with other options (threshold, key images' storage, vocabulary, loop or decision options)");
+    if (frames() > 0 && labelled_ != other.labelled_)
+      refuse(std::string("the frames of ") + (labelled_ ? name : other_name) +
+             " came with detections, the other's without");
+    if (other.released_ > 0) refuse(other_name + " holds only its working memory's features in RAM (load it whole)");
+    if (pixels_unread_ || other.pixels_unread_) refuse("a memory was loaded without its key images' pixels");
+    // Checked: from here on nothing refuses.
+
+    const std::size_t m0 = key_images();
+    const std::size_t f0 = frames();
+    const std::size_t added = other.key_images();
+    const std::size_t other_frames = other.frames();
+    SelectorState<Features> state = other.selector_.pending_state();
+    state.map = selector_.take_map();
+    VisualMap theirs = other.selector_.take_map();
+    for (std::size_t i = 0; i < added; ++i) {
+      if (i > 0)
+        state.map.pairs.push_back(theirs.pairs[i - 1]);
+      else if (m0 > 0)
+        state.map.pairs.push_back(KeyPair{});  // other's first session starts a chain here
+      state.map.keys.push_back(std::move(theirs.keys[i]));
+    }
+    state.map.frames = f0 + other_frames;
+    selector_.restore(std::move(state));
+    if (m0 == 0) {
+      sessions_.clear();
+      labelled_ = other.labelled_;
+    }
+    for (const MemorySession& s : other.sessions_) sessions_.push_back({s.first_key + m0, s.first_frame + f0});
+    poses_.insert(poses_.end(), other.poses_.begin(), other.poses_.end());
+    key_detections_.insert(key_detections_.end(), other.key_detections_.begin(), other.key_detections_.end());
+    previous_pose_ = other.previous_pose_;
+    previous_detections_ = other.previous_detections_;
+    last_index_ = other.last_index_;
+    if (sessions_.back().first_key == key_images()) selector_.start_chain();
+    for (std::size_t k = m0; k < key_images(); ++k) {
+      std::vector<LoopEdge> found;
+      on_new_key(static_cast<std::uint32_t>(k), found);
+    }
   }
 
   [[nodiscard]] const VisualMap& map() const noexcept { return selector_.map(); }
@@ -745,7 +848,7 @@ class VisualMemory {
                        database_section(engine_ ? database().serialize()
                                                 : PlaceDatabase<std::uint32_t>(vocabulary_->size(), options_.scoring)
                                                       .serialize()),
-                       policies_bytes(), labels_bytes(), gcs_bytes(), decision_bytes()});
+                       policies_bytes(), labels_bytes(), gcs_bytes(), decision_bytes(), sessions_bytes()});
   }
 
   /// Writes the memory atomically (temporary file, fsync, rename, fsync of the folder):
@@ -772,6 +875,7 @@ class VisualMemory {
                    std::to_string(memory_format_version) + ")");
     const std::uint32_t sections = version == 1   ? detail::memory_sections_v1
                                    : version == 2 ? detail::memory_sections_v2
+                                   : version == 3 ? detail::memory_sections_v3
                                                   : detail::memory_sections;
     if (const std::uint32_t n = file.u32("section count"); n != sections)
       file.corrupt("header: " + std::to_string(n) + " sections, expected " + std::to_string(sections) +
@@ -791,8 +895,6 @@ class VisualMemory {
     for (std::uint32_t i = 0; i < m; ++i) {
       KeyImage k = read_key(keys, limits, total_pixels, &mem.pixels_unread_);
       mem.check_layout(keys, k.features, [&] { return "key image " + std::to_string(i); });
-      if (!state.map.keys.empty() && k.frame_index <= state.map.keys.back().frame_index)
-        keys.corrupt("key image frame indices are not increasing");
       state.map.keys.push_back(std::move(k));
       mem.poses_.push_back(detail::memory_read_pose(keys));
     }
@@ -898,20 +1000,33 @@ class VisualMemory {
       auto dcsn = detail::memory_open_section(file, "dcsn");
       engine_state = mem.read_decision(dcsn, database.size());
     }
+    if (version >= 4) {
+      auto sess = detail::memory_open_section(file, "sess");
+      mem.read_sessions(sess, m, state.map.frames);
+    }
     if (!file.at_end()) file.corrupt(std::to_string(file.remaining()) + " unexpected bytes after the last section");
+    // Frame indices increase within a session (each run numbers its own frames).
+    for (std::size_t i = 1; i < m; ++i)
+      if (!mem.starts_session(i) && state.map.keys[i].frame_index <= state.map.keys[i - 1].frame_index)
+        detail::fail(file.source() + " section 'keys': key image frame indices are not increasing within a session "
+                                     "(key image " + std::to_string(i) + ")");
     if (!database.empty()) {
       if (!mem.detecting()) detail::fail(db.source() + ": key images checked for loops without a label schema");
       mem.start_engine(std::move(database));
       std::vector<LabelVector> labels;
       for (std::size_t k = 0; k < mem.engine_->ranker().database().size(); ++k) labels.push_back(mem.label_vector(k));
       try {
+        // The session of the last key image checked: as the engine was when it checked it.
+        const std::size_t last_checked = mem.engine_->ranker().database().size() - 1;
+        const std::size_t session_start = mem.sessions_[mem.session_of_key(last_checked)].first_key;
         mem.engine_->restore(std::move(labels), engine_state.past_window, engine_state.left_queries,
-                             engine_state.not_revisit, engine_state.consistency);
+                             engine_state.not_revisit, engine_state.consistency, session_start);
       } catch (const Error& err) {
         detail::fail(file.source() + " section 'dcsn': " + err.what());
       }
     }
     mem.selector_.restore(std::move(state));
+    if (m > 0 && mem.sessions_.back().first_key == m) mem.selector_.start_chain();  // a session started, no frame yet
     return mem;
   }
 
@@ -976,8 +1091,8 @@ class VisualMemory {
   }
 
   /// Eq. 5 over the first `sample` key images' detections (label order by mean box area).
-  void sample_schema() {
-    if (!labelled_ || schema_ || key_detections_.size() < options_.labels.sample) return;
+  void sample_schema(std::size_t key_images) {
+    if (!labelled_ || schema_ || key_images < options_.labels.sample) return;
     LabelStatistics stats(options_.loops.labels);
     for (std::size_t k = 0; k < options_.labels.sample; ++k) stats.observe(key_detections_[k]);
     schema_ = make_label_schema(stats, options_.labels.influence);
@@ -1031,11 +1146,13 @@ class VisualMemory {
   /// schema after the sample), then catches up with the earlier ones in order.
   void on_new_key(std::uint32_t key, std::vector<LoopEdge>& found) {
     const auto& keys = selector_.map().keys;
-    sample_schema();
+    // Key images 0 .. key count (merge() appends later ones before it checks these).
+    const std::size_t known = std::size_t{key} + 1;
+    sample_schema(known);
     if (vocabulary_->empty()) {
-      if (keys.size() < options_.vocabulary_after) return;
+      if (known < options_.vocabulary_after) return;
       std::vector<cv::Mat> sets;
-      for (std::size_t k = 0; k < keys.size(); ++k)
+      for (std::size_t k = 0; k < known; ++k)
         sets.push_back(holds_features(k) ? keys[k].features.descriptors : key_features(static_cast<std::uint32_t>(k)).descriptors);
       std::size_t rows = 0;
       for (const auto& d : sets) rows += static_cast<std::size_t>(d.rows);
@@ -1051,6 +1168,7 @@ class VisualMemory {
     for (std::size_t k = engine_->frames(); k <= key; ++k) {
       // A query the working memory no longer holds (a catch-up after the label sample)
       // is read once and kept here: the lookup's own copy is replaced at its next read.
+      if (k > 0 && starts_session(k)) engine_->begin_session();
       std::optional<Features> read;
       const Features& query = holds_features(k) ? keys[k].features : read.emplace(key_features(static_cast<std::uint32_t>(k)));
       const PlaceDecision d = engine_->add(query, label_vector(k), lookup);
@@ -1069,13 +1187,25 @@ class VisualMemory {
     }
   }
 
+  /// The session of key image k (any k: no check against the key images).
+  [[nodiscard]] std::size_t session_of_key(std::size_t k) const noexcept {
+    const auto it = std::upper_bound(sessions_.begin(), sessions_.end(), k,
+                                     [](std::size_t key, const MemorySession& s) { return key < s.first_key; });
+    return static_cast<std::size_t>(it - sessions_.begin()) - 1;
+  }
+
+  /// Whether key image k is the first of a session other than the first.
+  [[nodiscard]] bool starts_session(std::size_t k) const {
+    return std::any_of(sessions_.begin() + 1, sessions_.end(), [k](const MemorySession& s) { return s.first_key == k; });
+  }
+
   // ---- file sections ------------------------------------------------------------
 
-  /// The file of the current version from its 11 sections' bytes, in the order of the
+  /// The file of the current version from its 12 sections' bytes, in the order of the
   /// format (examples/memory.md, "The single-file format").
   static std::string file_bytes(const std::array<std::string, detail::memory_sections>& sections) {
     static constexpr const char tags[detail::memory_sections][5] = {"opts", "keys", "link", "loop", "selc", "voca",
-                                                                    "plcd", "plcy", "labl", "gcsl", "dcsn"};
+                                                                    "plcd", "plcy", "labl", "gcsl", "dcsn", "sess"};
     detail::MemorySectionWriter s;
     for (std::size_t i = 0; i < sections.size(); ++i) s.add(tags[i], sections[i]);
     detail::BinaryWriter h;
@@ -1084,6 +1214,39 @@ class VisualMemory {
     h.u32(detail::memory_sections);
     h.bytes(s.out_.data());
     return std::move(h).take();
+  }
+
+  /// "sess": the sessions after the first (which starts at key image 0 and frame 0).
+  std::string sessions_bytes() const {
+    detail::BinaryWriter w;
+    w.u32(static_cast<std::uint32_t>(sessions_.size() - 1));
+    for (std::size_t i = 1; i < sessions_.size(); ++i) {
+      w.u64(sessions_[i].first_key);
+      w.u64(sessions_[i].first_frame);
+    }
+    return std::move(w).take();
+  }
+
+  /// Reads "sess" for a memory of `m` key images and `frames` frames: each session
+  /// starts after the one before, at or before the end.
+  void read_sessions(detail::BinaryReader& r, std::size_t m, std::size_t frames) {
+    const std::uint32_t n = r.u32("session count");
+    r.require_items(n, 16, "session count");
+    sessions_.assign(1, MemorySession{});
+    for (std::uint32_t i = 0; i < n; ++i) {
+      MemorySession s;
+      s.first_key = static_cast<std::size_t>(r.u64("session's first key image"));
+      s.first_frame = static_cast<std::size_t>(r.u64("session's first frame"));
+      const MemorySession& before = sessions_.back();
+      // The first frame of a session is a key image, so every session but the last
+      // holds one; the last holds none only while no frame was pushed into it.
+      if (s.first_key <= before.first_key || s.first_frame <= before.first_frame || s.first_key > m ||
+          s.first_frame > frames || (s.first_key == m) != (s.first_frame == frames))
+        r.corrupt("session " + std::to_string(i + 1) + " does not start after session " + std::to_string(i) +
+                  " (key image " + std::to_string(s.first_key) + ", frame " + std::to_string(s.first_frame) + ")");
+      sessions_.push_back(s);
+    }
+    r.expect_end("the sessions");
   }
 
   std::string vocabulary_bytes() const {
@@ -1418,7 +1581,8 @@ class VisualMemory {
 
   /// "dcsn" without the loop edges' confidences: the decision's options and the
   /// engine's state.
-  std::string decision_head_bytes() const {
+  /// The decision's options, as "dcsn" begins.
+  std::string decision_options_bytes() const {
     const LoopOptions& o = options_.loops;
     detail::BinaryWriter w;
     w.u64(o.temporal_consistency);
@@ -1431,6 +1595,12 @@ class VisualMemory {
     w.i32(o.decision.spread_grid);
     w.f64(o.decision.full_spread);
     w.f64(o.decision.ambiguity_ratio);
+    return std::move(w).take();
+  }
+
+  std::string decision_head_bytes() const {
+    detail::BinaryWriter w;
+    w.bytes(decision_options_bytes());
     w.u64(engine_ ? engine_->queries_past_window() : 0);
     w.u64(engine_ ? engine_->left_queries() : 0);
     w.u64(engine_ ? engine_->not_a_revisit_queries() : 0);
@@ -1649,6 +1819,7 @@ class VisualMemory {
   std::size_t released_ = 0;          ///< key images 0 .. released_ - 1 hold no features in RAM
   std::optional<std::pair<std::size_t, Features>> read_;  ///< the last released key image read (feature_ref)
   bool pixels_unread_ = false;  ///< loaded with MapLoadOptions::decode_images false, and pixels were left undecoded
+  std::vector<MemorySession> sessions_{MemorySession{}};  ///< never empty: the first starts at 0
 };
 
 // Named stacks: the paper's ORB 1000 + mutual NN + MAGSAC++ + eq. 5, and A-KAZE / SIFT.

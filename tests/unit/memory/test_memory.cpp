@@ -262,13 +262,13 @@ TEST_CASE("memory files: truncated at every section, flipped bytes, wrong versio
   REQUIRE(mem.key_images() >= 3);
   const std::string file = mem.serialize();
   const auto starts = section_starts(file);
-  REQUIRE(starts.size() == 11);
+  REQUIRE(starts.size() == 12);
   CHECK(section_starts(file).back() < file.size());
 
   auto message_of = [](const std::string& bytes) {
     return vmap::test::error_of([&] { (void)deserialize_memory(bytes, "fuzz.vmem"); });
   };
-  const char* tags[] = {"opts", "keys", "link", "loop", "selc", "voca", "plcd", "plcy", "labl", "gcsl", "dcsn"};
+  const char* tags[] = {"opts", "keys", "link", "loop", "selc", "voca", "plcd", "plcy", "labl", "gcsl", "dcsn", "sess"};
   for (std::size_t s = 0; s < starts.size(); ++s) {
     CAPTURE(tags[s]);
     // Cut inside the section's header, right after it, and in the middle of its bytes.
@@ -303,12 +303,12 @@ TEST_CASE("memory files: truncated at every section, flipped bytes, wrong versio
     CHECK(names_a_part(m));
   }
   // Wrong version, wrong magic, padding.
-  std::string v4 = file;
-  v4[8] = 4;
-  CHECK(message_of(v4).find("format version 4 is not supported") != std::string::npos);
-  std::string v1 = file;  // a version 1 header over the 11 sections of version 3
+  std::string v5 = file;
+  v5[8] = 5;
+  CHECK(message_of(v5).find("format version 5 is not supported") != std::string::npos);
+  std::string v1 = file;  // a version 1 header over the 12 sections of version 4
   v1[8] = 1;
-  CHECK(message_of(v1).find("11 sections, expected 7 in version 1") != std::string::npos);
+  CHECK(message_of(v1).find("12 sections, expected 7 in version 1") != std::string::npos);
   std::string magic = file;
   magic[0] = 'X';
   CHECK(message_of(magic).find("not a vmap memory") != std::string::npos);

@@ -294,7 +294,7 @@ TEST_CASE("memory files v2: policies' options are checked on load; version 1 fil
   // A version 1 file: the same first seven sections (their layout is unchanged), no
   // policies, labels or GCS. It loads (policies unchecked) and continues.
   const auto starts = section_starts(file);
-  REQUIRE(starts.size() == 11);
+  REQUIRE(starts.size() == 12);
   std::string v1 = file.substr(0, starts[7]);
   v1[8] = 1;
   v1[12] = 7;
@@ -311,8 +311,8 @@ TEST_CASE("memory files v2: policies' options are checked on load; version 1 fil
   }
   CHECK(old.map().key_indices() == mem.map().key_indices());
   CHECK(old.loops().size() == mem.loops().size());
-  // Saved again, it is a version 3 file.
-  CHECK(old.serialize()[8] == 3);
+  // Saved again, it is a file of the current version.
+  CHECK(old.serialize()[8] == static_cast<char>(vmap::memory_format_version));
 }
 
 // A descriptor of a user's: A-KAZE's (or ORB's) features under a policy of its own, which
@@ -449,7 +449,7 @@ TEST_CASE("memory files v2: truncated or flipped label, GCS and policy sections 
   REQUIRE(mem.label_schema().has_value());
   const std::string file = mem.serialize();
   const auto starts = section_starts(file);
-  REQUIRE(starts.size() == 11);
+  REQUIRE(starts.size() == 12);
   const auto message_of = [](const std::string& bytes) {
     return vmap::test::error_of([&] { (void)from_bytes(bytes, "bad.vmem"); });
   };
@@ -539,9 +539,27 @@ TEST_CASE("memory fuzz seeds: both load, fill every section and write back the s
   CHECK(none.serialize() == empty);
 }
 
+TEST_CASE("memory files v3: a version 3 file loads as one session and writes its 11 sections unchanged") {
+  const auto dir = vmap::test::source_dir() / "tests/fuzz/corpus/memory";
+  for (const char* name : {"labels_gcs_v3.vmem", "empty_v3.vmem"}) {
+    CAPTURE(name);
+    const std::string v3 = vmap::read_file(dir / name, 1 << 20, "seed");
+    REQUIRE(v3.size() > 16);
+    CHECK(v3[8] == 3);
+    const auto mem = vmap::OrbVisualMemory::deserialize(v3, name);
+    CHECK(mem.sessions().size() == 1);
+    const std::string v4 = mem.serialize();
+    const auto old_starts = section_starts(v3), new_starts = section_starts(v4);
+    REQUIRE(old_starts.size() == 11);
+    REQUIRE(new_starts.size() == 12);
+    CHECK(v4.substr(16, new_starts[11] - 16) == v3.substr(16));
+    CHECK(v4.substr(new_starts[11] + 16) == std::string(4, '\0'));  // no session after the first
+  }
+}
+
 TEST_CASE("memory files v2: a version 2 file loads and writes its sections unchanged, the options aside") {
-  // The version 2 seeds (written by main at 83a80c7); the version 3 seeds above were
-  // written from them by this code.
+  // The version 2 seeds (written by main at 83a80c7); the version 3 seeds were written
+  // from them by the version 3 code, the version 4 seeds above from those.
   const auto dir = vmap::test::source_dir() / "tests/fuzz/corpus/memory";
   for (const char* name : {"labels_gcs_v2.vmem", "empty_v2.vmem"}) {
     CAPTURE(name);
@@ -552,11 +570,11 @@ TEST_CASE("memory files v2: a version 2 file loads and writes its sections uncha
     const std::string v3 = mem.serialize();
     const auto old_starts = section_starts(v2), new_starts = section_starts(v3);
     REQUIRE(old_starts.size() == 10);
-    REQUIRE(new_starts.size() == 11);
+    REQUIRE(new_starts.size() == 12);
     // "opts" keeps its layout but holds one inlier floor twice (version 2 had two);
     // "voca" and "gcsl" hold vocabularies in their current file layout
     // (place/vocabulary.hpp); "keys" .. "selc" and "plcd" .. "labl" are the same bytes;
-    // "dcsn" is new.
+    // "dcsn" and "sess" are new.
     CHECK(v3.substr(new_starts[1], new_starts[5] - new_starts[1]) ==
           v2.substr(old_starts[1], old_starts[5] - old_starts[1]));
     CHECK(v3.substr(new_starts[6], new_starts[9] - new_starts[6]) ==
@@ -582,7 +600,7 @@ TEST_CASE("memory files v1: a file written by the version 1 code loads; its sect
   CHECK(std::get_if<vmap::Pose2>(&mem.poses()[4])->x() == 2.0);
   const std::string v3 = mem.serialize();
   const auto starts = section_starts(v3), old = section_starts(v1);
-  REQUIRE(starts.size() == 11);
+  REQUIRE(starts.size() == 12);
   REQUIRE(old.size() == 7);
   // Header (version and count aside) and the sections after "opts" (which holds one
   // inlier floor twice now) but "voca" (the vocabulary's current file layout): the same

@@ -1,0 +1,349 @@
+// Sessions: several runs in one memory, each its own chain of key images, loops searched
+// across them; a memory with sessions saves, loads, syncs into a store and resumes
+// exactly; merging two memories equals building both runs into one.
+#include "support/errors.hpp"
+#include "support/memory_file.hpp"
+#include "support/sample_memory.hpp"
+#include "support/shared_data.hpp"
+
+#include <vmap/memory/store.hpp>
+#include <vmap/memory/visual_memory.hpp>
+
+#include <doctest/doctest.h>
+
+#include <sqlite3.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace {
+
+namespace fs = std::filesystem;
+using vmap::test::error_of;
+using vmap::test::make_small_memory;
+using vmap::test::memory_estimator;
+using vmap::test::small_memory_options;
+
+const std::vector<vmap::Frame>& frames() { return vmap::test::sample_frames(); }
+
+/// The sample frames first .. last - 1 (their own indices, as a run of that part reads them).
+std::vector<vmap::Frame> part(std::size_t first, std::size_t last) {
+  return {frames().begin() + static_cast<std::ptrdiff_t>(first), frames().begin() + static_cast<std::ptrdiff_t>(last)};
+}
+
+/// Two runs over the sample frames: 0-39, then 20-59 (revisiting half of the first).
+const std::vector<vmap::Frame>& run1() {
+  static const auto f = part(0, 40);
+  return f;
+}
+const std::vector<vmap::Frame>& run2() {
+  static const auto f = part(20, 60);
+  return f;
+}
+
+vmap::OrbVisualMemory two_sessions(const vmap::MemoryOptions& o) {
+  auto mem = make_small_memory(o);
+  for (const auto& f : run1()) mem.push(f);
+  mem.start_session();
+  for (const auto& f : run2()) mem.push(f);
+  return mem;
+}
+
+vmap::OrbVisualMemory reload(const vmap::OrbVisualMemory& m) {
+  return vmap::OrbVisualMemory::deserialize(m.serialize(), "<memory>", vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                                            memory_estimator(), vmap::InlierRatio{});
+}
+
+fs::path fresh(const std::string& name) {
+  static const fs::path dir = vmap::test::scratch_dir("sessions");
+  const fs::path p = dir / name;
+  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(p.string() + suffix);
+  return p;
+}
+
+void raw_sql(const fs::path& p, const std::string& sql) {
+  sqlite3* db = nullptr;
+  REQUIRE(sqlite3_open(p.c_str(), &db) == SQLITE_OK);
+  char* message = nullptr;
+  const int rc = sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &message);
+  INFO((message ? message : ""));
+  sqlite3_free(message);
+  sqlite3_close(db);
+  REQUIRE(rc == SQLITE_OK);
+}
+
+std::int64_t sql_integer(const fs::path& p, const std::string& sql) {
+  sqlite3* db = nullptr;
+  REQUIRE(sqlite3_open(p.c_str(), &db) == SQLITE_OK);
+  sqlite3_stmt* q = nullptr;
+  REQUIRE(sqlite3_prepare_v2(db, sql.c_str(), -1, &q, nullptr) == SQLITE_OK);
+  REQUIRE(sqlite3_step(q) == SQLITE_ROW);
+  const std::int64_t v = sqlite3_column_int64(q, 0);
+  sqlite3_finalize(q);
+  sqlite3_close(db);
+  return v;
+}
+
+vmap::OrbVisualMemory load(vmap::MemoryStore& store) {
+  return store.load<vmap::OrbVisualMemory>(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
+                                           vmap::InlierRatio{});
+}
+
+}  // namespace
+
+TEST_CASE("sessions: each run is its own chain of key images; loops join them") {
+  const auto o = small_memory_options();
+  auto one = make_small_memory(o);
+  for (const auto& f : run1()) one.push(f);
+  auto alone = make_small_memory(o);
+  for (const auto& f : run2()) alone.push(f);
+
+  const auto mem = two_sessions(o);
+  const std::size_t m1 = one.key_images();
+  REQUIRE(mem.sessions().size() == 2);
+  CHECK(mem.sessions()[0].first_key == 0);
+  CHECK(mem.sessions()[0].first_frame == 0);
+  CHECK(mem.sessions()[1].first_key == m1);
+  CHECK(mem.sessions()[1].first_frame == run1().size());
+  CHECK(mem.frames() == run1().size() + run2().size());
+  CHECK(mem.key_images() == m1 + alone.key_images());
+  CHECK(mem.session_of(m1 - 1) == 0);
+  CHECK(mem.session_of(m1) == 1);
+  CHECK(mem.session_of(mem.key_images() - 1) == 1);
+
+  // The second session's key images and links are those of its run alone.
+  for (std::size_t k = 0; k < alone.key_images(); ++k) {
+    CHECK(mem.map().keys[m1 + k].frame_index == alone.map().keys[k].frame_index);
+    if (k > 0) {
+      CHECK(mem.map().pairs[m1 + k - 1].inliers == alone.map().pairs[k - 1].inliers);
+      CHECK(mem.map().pairs[m1 + k - 1].similarity == alone.map().pairs[k - 1].similarity);
+    }
+  }
+  // No link across the sessions: the pair there has no matches, and the graph no edge.
+  const vmap::KeyPair& gap = mem.map().pairs[m1 - 1];
+  CHECK(gap.matches == 0);
+  CHECK(gap.inliers == 0);
+  CHECK(gap.similarity == 0.0);
+  CHECK(gap.status == vmap::VerificationStatus::too_few_matches);
+  for (const auto& n : mem.neighbours(static_cast<std::uint32_t>(m1)))
+    CHECK((n.kind != vmap::GraphNeighbour::Kind::link || n.key == m1 + 1));
+  for (const auto& n : mem.neighbours(static_cast<std::uint32_t>(m1 - 1)))
+    CHECK((n.kind != vmap::GraphNeighbour::Kind::link || n.key == m1 - 2));
+
+  // The second run revisits frames 20-39: loops from the second session into the first.
+  std::size_t across = 0;
+  for (const auto& e : mem.loops()) {
+    CHECK(e.link.key < e.from);
+    if (e.from >= m1 && e.link.key < m1) {
+      ++across;
+      // A revisit of the same frames: the first session's key image lies within the
+      // frames both runs saw (20-39) or close to them.
+      CHECK(mem.map().keys[e.link.key].frame_index + 10 >= 20);
+    }
+  }
+  CHECK(across >= 3);
+  // Within its window of 2 key images the second session's first key images find the
+  // first session's last ones: a session start does not hide the run before it.
+  const auto first_across = std::find_if(mem.loops().begin(), mem.loops().end(),
+                                         [&](const vmap::LoopEdge& e) { return e.from >= m1 && e.link.key < m1; });
+  REQUIRE(first_across != mem.loops().end());
+  CHECK(first_across->from < m1 + 2 + 3);
+
+  // Localization searches both sessions: a frame of the second run finds a key image.
+  auto ask = reload(mem);
+  const auto answer = ask.localize(frames()[50].image);
+  CHECK(answer.ok());
+
+  // start_session is a no-op before the first frame and twice in a row.
+  auto empty = make_small_memory(o);
+  empty.start_session();
+  CHECK(empty.sessions().size() == 1);
+  auto twice = make_small_memory(o);
+  twice.push(frames()[0]);
+  twice.start_session();
+  twice.start_session();
+  CHECK(twice.sessions().size() == 2);
+  CHECK(vmap::test::error_of([&] { (void)twice.session_of(1); }).find("session_of: key 1 of 1") != std::string::npos);
+}
+
+TEST_CASE("sessions: saved, loaded and resumed at any frame, a memory goes on as the uninterrupted one") {
+  for (auto images : {vmap::ImageStorage::none, vmap::ImageStorage::png}) {
+    CAPTURE(static_cast<int>(images));
+    const auto o = small_memory_options(images);
+    const auto whole = two_sessions(o);
+    const std::string bytes = whole.serialize();
+    CHECK(reload(whole).serialize() == bytes);
+    // Stopped after every 9th frame of either run, and right after start_session.
+    for (std::size_t stop : {9U, 27U, 40U, 41U, 58U, 70U}) {
+      CAPTURE(stop);
+      auto mem = make_small_memory(o);
+      std::size_t pushed = 0;
+      std::optional<vmap::OrbVisualMemory> cur(std::move(mem));
+      const auto step = [&](const vmap::Frame& f) {
+        if (pushed == stop) cur.emplace(reload(*cur));
+        cur->push(f);
+        ++pushed;
+      };
+      for (const auto& f : run1()) step(f);
+      cur->start_session();
+      if (pushed == stop) {
+        cur.emplace(reload(*cur));
+        CHECK(cur->sessions().size() == 2);
+        CHECK(cur->selector().chain_open());
+      }
+      for (const auto& f : run2()) step(f);
+      CHECK(cur->serialize() == bytes);
+    }
+  }
+}
+
+TEST_CASE("sessions: a store synced at every frame holds the sessions; reopened mid-run it goes on exactly") {
+  const auto o = small_memory_options();
+  const auto whole = two_sessions(o);
+  const fs::path p = fresh("two.vmdb");
+  {
+    auto store = vmap::MemoryStore::create(p);
+    auto mem = make_small_memory(o);
+    for (const auto& f : run1()) {
+      mem.push(f);
+      store.sync(mem);
+    }
+    mem.start_session();
+    store.sync(mem);  // a session with no frame yet is stored too
+  }
+  {
+    auto store = vmap::MemoryStore::open(p);
+    auto mem = load(store);
+    REQUIRE(mem.sessions().size() == 2);
+    CHECK(mem.selector().chain_open());
+    for (std::size_t i = 0; i < 18; ++i) {
+      mem.push(run2()[i]);
+      store.sync(mem);
+    }
+  }
+  auto store = vmap::MemoryStore::open(p);
+  auto mem = load(store);
+  for (std::size_t i = 18; i < run2().size(); ++i) {
+    mem.push(run2()[i]);
+    store.sync(mem);
+  }
+  CHECK(mem.serialize() == whole.serialize());
+  CHECK(load(store).serialize() == whole.serialize());
+}
+
+TEST_CASE("sessions: the store's sessions table, read without vmap; a version-1 store is read as one session") {
+  const auto o = small_memory_options();
+  const auto whole = two_sessions(o);
+  const fs::path p = fresh("table.vmdb");
+  {
+    auto store = vmap::MemoryStore::create(p);
+    store.sync(whole);
+  }
+  CHECK(sql_integer(p, "SELECT count(*) FROM sessions") == 2);
+  CHECK(sql_integer(p, "SELECT first_key FROM sessions WHERE id = 1") ==
+        static_cast<std::int64_t>(whole.sessions()[1].first_key));
+  CHECK(sql_integer(p, "SELECT first_frame FROM sessions WHERE id = 1") == 40);
+  CHECK(sql_integer(p, "SELECT count(*) FROM key_images WHERE id >= (SELECT first_key FROM sessions WHERE id = 1)") ==
+        static_cast<std::int64_t>(whole.key_images() - whole.sessions()[1].first_key));
+  CHECK(sql_integer(p, "PRAGMA user_version") == 2);
+
+  // A store of the version 1 schema (one session, no sessions table).
+  auto one = make_small_memory(o);
+  for (const auto& f : run1()) one.push(f);
+  const fs::path v1 = fresh("v1.vmdb");
+  {
+    auto store = vmap::MemoryStore::create(v1);
+    store.sync(one);
+  }
+  raw_sql(v1, "DROP TABLE sessions; PRAGMA user_version = 1");
+  {
+    auto reader = vmap::MemoryStore::open(v1, vmap::sqlite::Access::read);
+    CHECK(load(reader).serialize() == one.serialize());
+    CHECK(sql_integer(v1, "PRAGMA user_version") == 1);  // a reader changes nothing
+  }
+  // A writer brings it to version 2 and continues it with a second session.
+  {
+    auto store = vmap::MemoryStore::open(v1);
+    CHECK(sql_integer(v1, "PRAGMA user_version") == 2);
+    auto mem = load(store);
+    CHECK(mem.serialize() == one.serialize());
+    mem.start_session();
+    for (const auto& f : run2()) {
+      mem.push(f);
+      store.sync(mem);
+    }
+  }
+  auto back = vmap::MemoryStore::open(v1, vmap::sqlite::Access::read);
+  CHECK(load(back).serialize() == whole.serialize());
+  CHECK(sql_integer(v1, "SELECT count(*) FROM sessions") == 2);
+}
+
+TEST_CASE("sessions: merging two memories equals building both runs into one; other policies are refused") {
+  const auto o = small_memory_options();
+  const auto whole = two_sessions(o);
+
+  auto a = make_small_memory(o);
+  for (const auto& f : run1()) a.push(f);
+  auto b = make_small_memory(o);
+  for (const auto& f : run2()) b.push(f);
+  a.merge(std::move(b), "A", "B");
+  CHECK(a.serialize() == whole.serialize());
+  // Pushing on continues the second run as the built memory would.
+  auto built = reload(whole);
+  for (std::size_t i = 0; i < 6; ++i) {
+    a.push(frames()[i]);
+    built.push(frames()[i]);
+  }
+  CHECK(a.serialize() == built.serialize());
+
+  // Into an empty memory: the other memory itself.
+  auto empty = make_small_memory(o);
+  auto c = make_small_memory(o);
+  for (const auto& f : run1()) c.push(f);
+  const std::string c_bytes = c.serialize();
+  empty.merge(std::move(c));
+  CHECK(empty.serialize() == c_bytes);
+
+  // Another threshold: refused with both names, the memory unchanged.
+  auto other_options = o;
+  other_options.selector.tau = 0.4;
+  auto d = make_small_memory(other_options);
+  for (const auto& f : part(0, 10)) d.push(f);
+  auto e = make_small_memory(o);
+  for (const auto& f : part(0, 10)) e.push(f);
+  const std::string e_bytes = e.serialize();
+  const std::string msg = error_of([&] { e.merge(std::move(d), "memory 'e'", "memory 'd'"); });
+  CHECK(msg.find("cannot merge memory 'd' into memory 'e'") != std::string::npos);
+  CHECK(msg.find("options") != std::string::npos);
+  CHECK(e.serialize() == e_bytes);
+}
+
+TEST_CASE("sessions: a damaged session table is an Error naming the section") {
+  const auto mem = two_sessions(small_memory_options());
+  const std::string bytes = mem.serialize();
+  // "sess" is the last section (tag, length, CRC, then its count and the second
+  // session's first key image and frame): a bad first key image, with a valid CRC.
+  const std::size_t start = vmap::test::section_starts(bytes).back();
+  REQUIRE(bytes.substr(start, 4) == "sess");
+  const std::size_t at = bytes.size() - 16;
+  for (const std::uint64_t bad_key : {std::uint64_t{0}, std::uint64_t{1000}}) {
+    std::string b = bytes;
+    for (int i = 0; i < 8; ++i) b[at + static_cast<std::size_t>(i)] = static_cast<char>((bad_key >> (8 * i)) & 0xFF);
+    vmap::detail::BinaryWriter crc;
+    crc.u32(vmap::detail::crc32(std::string_view(b).substr(start + 16)));
+    b.replace(start + 12, 4, crc.data());
+    const std::string msg = error_of([&] {
+      (void)vmap::OrbVisualMemory::deserialize(b, "m.vmem", vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                                               memory_estimator(), vmap::InlierRatio{});
+    });
+    INFO(msg);
+    CHECK(msg.find("m.vmem") != std::string::npos);
+    CHECK(msg.find("section 'sess'") != std::string::npos);
+    CHECK(msg.find("does not start after session 0") != std::string::npos);
+  }
+}
