@@ -95,8 +95,10 @@ inline void prepare_memory_output(const std::filesystem::path& file, const std::
   if (memory_file_kind(file) == MemoryFileKind::other)
     usage_error(option + ": '" + file.string() + "' exists and is not a vmap memory; refusing to replace it");
   if (!force)
-    usage_error(option + ": the memory '" + file.string() +
-                "' exists: give --resume to continue it, or --force to replace it");
+    usage_error(option + ": the memory '" + file.string() + "' exists: " +
+                (option == "--memory" ? "give --resume to continue it, --session new to add a run to it, or --force "
+                                        "to replace it"
+                                      : "give --force to replace it"));
 }
 
 /// Reads a memory file: a missing path, a folder or a device is a usage error naming
@@ -140,13 +142,19 @@ inline std::string input_fingerprint(const std::string& input, const FrameSource
       .dump();
 }
 
-/// --resume of a store built from another input (path, first frame or stride) is refused
-/// with both named; a store without the note (written by the library, or converted)
-/// takes this run's.
+/// The note that records session s's input ("input" for the first, "input 1", ...).
+inline std::string session_note(std::size_t session) {
+  return session == 0 ? std::string("input") : "input " + std::to_string(session);
+}
+
+/// --resume of a store whose last session was built from another input (path, first
+/// frame or stride) is refused with both named; a store without the note (written by the
+/// library, or converted) takes this run's.
 inline void check_same_input(MemoryWriter& w, const std::string& fingerprint) {
-  const auto recorded = w.store.note("input");
+  const std::string name = session_note(w.memory.sessions().size() - 1);
+  const auto recorded = w.store.note(name);
   if (!recorded) {
-    w.store.set_note("input", fingerprint);
+    w.store.set_note(name, fingerprint);
     return;
   }
   if (*recorded == fingerprint) return;
@@ -157,7 +165,9 @@ inline void check_same_input(MemoryWriter& w, const std::string& fingerprint) {
            "', stride " + std::to_string(j.value("stride", std::size_t{0})) + ")";
   };
   usage_error("--resume: the memory '" + w.store.path().string() + "' was built from " + describe(*recorded) +
-              "; this run reads " + describe(fingerprint) + ". Give the same input and --stride, or start another memory");
+              "; this run reads " + describe(fingerprint) +
+              ". Give the same input and --stride, --session new to add this run as a new session, or start another "
+              "memory");
 }
 
 /// A new memory store at `file` (an existing memory removed first when `force`; the
@@ -191,29 +201,46 @@ class NewMemoryGuard {
   bool armed_;
 };
 
-/// The memory --resume continues: a missing file is a usage error that says how to start
+/// How a run continues an existing memory: its last session after its last frame
+/// (--resume), or a new session from the input's first frame (--session new).
+enum class Continuation : std::uint8_t { resume, new_session };
+
+/// The memory a run continues: a missing file is a usage error that says how to start
 /// one; options that would change the memory's own (`options_kept`, given on the command
-/// line) conflict with --resume. With a `working_memory` (> 0) the memory is loaded
-/// holding only that many key images' features (MemoryStore::load_bounded).
-inline MemoryWriter memory_to_resume(const std::filesystem::path& file, const CLI::App& app,
-                                     const std::vector<std::string>& options_kept, std::size_t working_memory) {
+/// line) conflict. With a `working_memory` (> 0) the memory is loaded holding only that
+/// many key images' features (MemoryStore::load_bounded). A new session is started, and
+/// the input's `fingerprint` recorded as its input.
+inline MemoryWriter memory_to_continue(const std::filesystem::path& file, const CLI::App& app,
+                                       const std::vector<std::string>& options_kept, std::size_t working_memory,
+                                       Continuation how = Continuation::resume) {
+  const std::string flag = how == Continuation::resume ? "--resume" : "--session new";
   for (const auto& o : options_kept)
     if (app.get_option(o)->count() > 0)
-      usage_error("--resume and " + o + " conflict (a resumed memory keeps the options it was started with)");
+      usage_error(flag + " and " + o + " conflict (a continued memory keeps the options it was started with)");
   std::error_code ec;
   if (!std::filesystem::exists(file, ec))
-    usage_error("--resume: no memory file '" + file.string() + "' to continue (run without --resume to start one)");
+    usage_error(flag + ": no memory file '" + file.string() + "' to continue (run without " + flag + " to start one)");
   check_input_file(file, "--memory");
   check_memory_file(file);
   if (memory_file_kind(file) == MemoryFileKind::file)
-    usage_error("--resume: '" + file.string() + "' is a single-file memory (.vmem); convert it to a memory store "
+    usage_error(flag + ": '" + file.string() + "' is a single-file memory (.vmem); convert it to a memory store "
                 "first: vmap memory convert " + file.string() + " NEW.vmdb");
   auto store = MemoryStore::open(file, sqlite::Access::write);
   if (!store.synced())
-    usage_error("--resume: the memory '" + file.string() + "' holds nothing yet (its first run stopped before its "
+    usage_error(flag + ": the memory '" + file.string() + "' holds nothing yet (its first run stopped before its "
                 "first key image was written): start it again with --force");
   auto memory = working_memory > 0 ? store.load_bounded<CliMemory>(working_memory) : store.load<CliMemory>();
+  if (how == Continuation::new_session) memory.start_session();
   return MemoryWriter{std::move(store), std::move(memory)};
+}
+
+/// Records `fingerprint` as the input of the memory's last session: a new session's, or
+/// (checked) the resumed one's.
+inline void record_input(MemoryWriter& w, Continuation how, const std::string& fingerprint) {
+  if (how == Continuation::resume)
+    check_same_input(w, fingerprint);
+  else
+    w.store.set_note(session_note(w.memory.sessions().size() - 1), fingerprint);
 }
 
 /// What `vmap build --memory` and `vmap memory build` start a memory with.
@@ -394,6 +421,8 @@ inline nlohmann::json link_json(const CliMemory& mem, const PlaceLink& l) {
 inline nlohmann::json loop_json(const CliMemory& mem, const LoopEdge& e) {
   return {{"from", e.from},
           {"to", e.link.key},
+          {"from_session", mem.session_of(e.from)},
+          {"to_session", mem.session_of(e.link.key)},
           {"query", mem.map().keys[e.from].frame_index},
           {"match", mem.map().keys[e.link.key].frame_index},
           {"query_name", mem.map().keys[e.from].name},
@@ -519,12 +548,17 @@ inline int localize_from_memory(const std::filesystem::path& file, const std::st
 /// the five most confident edges, so a long memory does not flood the terminal.
 inline void print_loop_edges(const CliMemory& mem, bool all = false) {
   const auto& keys = mem.map().keys;
+  const bool sessions = mem.sessions().size() > 1;
+  const auto session = [&](std::uint32_t k) {
+    return sessions ? "session " + std::to_string(mem.session_of(k) + 1) + ", " : std::string();
+  };
   const auto line = [&](const LoopEdge& e) {
-    std::printf("  key %4u (frame %4zu, %s, %.6f s) -> key %4u (frame %4zu, %s, %.6f s)  confidence %.2f  inliers %4d  "
+    std::printf("  key %4u (%sframe %4zu, %s, %.6f s) -> key %4u (%sframe %4zu, %s, %.6f s)  confidence %.2f  inliers %4d  "
                 "bow score %.3f\n",
-                e.from, keys[e.from].frame_index, keys[e.from].name.c_str(), keys[e.from].timestamp, e.link.key,
-                keys[e.link.key].frame_index, keys[e.link.key].name.c_str(), keys[e.link.key].timestamp,
-                e.link.confidence, e.link.inliers, e.link.bow_score);
+                e.from, session(e.from).c_str(), keys[e.from].frame_index, keys[e.from].name.c_str(),
+                keys[e.from].timestamp, e.link.key, session(e.link.key).c_str(), keys[e.link.key].frame_index,
+                keys[e.link.key].name.c_str(), keys[e.link.key].timestamp, e.link.confidence, e.link.inliers,
+                e.link.bow_score);
   };
   std::vector<LoopEdge> edges = mem.loops();
   if (all || edges.size() <= 5) {

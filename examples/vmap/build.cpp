@@ -44,7 +44,8 @@ struct BuildArgs {
   bool single_thread = false;
   std::string memory;  // --memory DIR|FILE; empty: no memory
   bool resume = false;
-  bool force = false;  // --force: replace an existing memory
+  std::string session;  // --session new: add this run to --memory as a new session
+  bool force = false;   // --force: replace an existing memory
   std::size_t save_every = 0;
   std::size_t working_memory = ex::default_working_memory;
   std::string images = "none";
@@ -165,6 +166,7 @@ std::vector<std::string> write_outputs(const ex::OutputFolder& dir, const vmap::
 struct MemoryRun {
   std::filesystem::path file;
   bool resumed = false;
+  std::size_t session = 0;  ///< the session this run pushed into
   ex::StreamResult stream;
   std::size_t loops = 0;  ///< loop edges in the whole memory
   std::optional<std::size_t> last_frame;
@@ -202,6 +204,7 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
     for (const auto& e : memory->stream.loops) new_loops.push_back({{"from", e.from}, {"to", e.link.key}});
     memory_json = {{"file", ex::path_string(memory->file)},
                    {"resumed", memory->resumed},
+                   {"session", memory->session},
                    {"pushed", memory->stream.pushed},
                    {"saves", memory->stream.saves},
                    {"loops", memory->loops},
@@ -250,8 +253,8 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
     std::fprintf(out, "  quality (eq. 7)   not a finite number\n");
   std::fprintf(out, "  time              %.2f s (%.1f frames/s)\n", seconds, fps);
   if (memory)
-    std::fprintf(out, "  memory            %s: %s %zu frames, %zu loop edges (%zu new), last frame %zu, %ju bytes\n",
-                 memory->file.c_str(), memory->resumed ? "resumed with" : "pushed", memory->stream.pushed,
+    std::fprintf(out, "  memory            %s: session %zu %s %zu frames, %zu loop edges (%zu new), last frame %zu, %ju bytes\n",
+                 memory->file.c_str(), memory->session + 1, memory->resumed ? "resumed with" : "pushed", memory->stream.pushed,
                  memory->loops, memory->stream.loops.size(), memory->last_frame.value_or(0),
                  static_cast<std::uintmax_t>(memory->bytes));
   if (out_dir) {
@@ -282,18 +285,24 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
     ex::usage_error("--vocabulary and --vocabulary-after conflict (the second is for a vocabulary learned online)");
   const fs::path file = ex::memory_file(args.memory);
   if (args.resume && args.force) ex::usage_error("--resume and --force conflict (continue the memory, or replace it)");
+  const bool new_session = !args.session.empty();
+  if (new_session && args.resume)
+    ex::usage_error("--session new and --resume conflict (a new session reads its input from the start; --resume "
+                    "continues the last session)");
+  if (new_session && args.force) ex::usage_error("--session new and --force conflict (add a session, or replace the memory)");
+  const bool continued = args.resume || new_session;
+  const auto how = new_session ? ex::Continuation::new_session : ex::Continuation::resume;
   std::optional<ex::MemoryWriter> writer;
   std::vector<fs::path> inputs{a.input};
   if (!args.poses.empty()) {
     ex::check_input_file(args.poses, "--poses");
     inputs.emplace_back(args.poses);
   }
-  ex::prepare_memory_output(file, "--memory", inputs, args.resume, args.force);
-  if (args.resume)
-    writer.emplace(
-        ex::memory_to_resume(file, app,
-                             {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after", "--min-confidence"},
-                             args.working_memory));
+  ex::prepare_memory_output(file, "--memory", inputs, continued, args.force);
+  if (continued)
+    writer.emplace(ex::memory_to_continue(
+        file, app, {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after", "--min-confidence"},
+        args.working_memory, how));
   inputs.push_back(file);
   std::optional<ex::OutputFolder> out_dir;
   if (!a.out.empty()) {
@@ -309,7 +318,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   if (args.resume)
     so = ex::resume_range(writer->memory, so, file.string());
   auto src = vmap::FrameSource::open(a.input, so);
-  const bool no_pixels = args.resume ? writer->memory.options().images == vmap::ImageStorage::none : args.images == "none";
+  const bool no_pixels = continued ? writer->memory.options().images == vmap::ImageStorage::none : args.images == "none";
   if (out_dir && src.kind() == vmap::SourceKind::live && no_pixels)
     ex::usage_error("--out with --memory on a live source needs the memory's pixels (--images png or jpeg): a live "
                     "stream cannot be read again");
@@ -317,8 +326,8 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   if (args.gcs && args.poses.empty()) ex::usage_error("--gcs needs --poses FILE (the GCS learns a pose per neuron)");
   if (!args.poses.empty()) poses.emplace(args.poses, src, args.gcs);
   const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
-  if (args.resume) {
-    ex::check_same_input(*writer, fingerprint);
+  if (continued) {
+    ex::record_input(*writer, how, fingerprint);
   } else {
     writer.emplace(ex::create_memory(file, args.force,
                                      ex::new_memory({.tau = args.threshold,
@@ -329,10 +338,10 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
                                                      .min_confidence = args.min_confidence})));
     writer->store.set_note("input", fingerprint);
   }
-  ex::NewMemoryGuard guard(writer, !args.resume);
+  ex::NewMemoryGuard guard(writer, !continued);
   auto* mem = &writer->memory;
   ex::Progress progress("vmap build", expected_frames(src, so));
-  MemoryRun run{file, args.resume, {}, 0, std::nullopt, 0, {}};
+  MemoryRun run{file, args.resume, mem->sessions().size() - 1, {}, 0, std::nullopt, 0, {}};
   run.stream = ex::stream_into(*writer, src, args.save_every, args.working_memory, poses, [&](const ex::CliMemory& m) {
     progress.update(src.delivered(), std::to_string(m.key_images()) + " key images");
   });
@@ -379,6 +388,10 @@ std::function<int()> setup(CLI::App& app) {
                  "optional");
   app.add_flag("--resume", args->resume,
                "Continue the --memory file after its last frame (the same INPUT and --stride, checked)");
+  app.add_option("--session", args->session,
+                 "With --memory: 'new' adds this run to the existing memory as a new session (its own chain of key "
+                 "images; loops are searched across sessions)")
+      ->check(CLI::IsMember({"new"}));
   app.add_flag("--force", args->force, "With --memory: replace an existing memory instead of refusing to");
   app.add_option("--save-every", args->save_every,
                  "With --memory: also write it every N frames (0: only at key images, loop edges and the end)")
@@ -409,7 +422,7 @@ std::function<int()> setup(CLI::App& app) {
     ex::current_inputs() = {a.input};
     ex::check_range(a);
     if (!args->memory.empty()) return build_memory(*args, app);
-    for (const char* o : {"--resume", "--save-every", "--working-memory", "--images", "--vocabulary",
+    for (const char* o : {"--resume", "--session", "--save-every", "--working-memory", "--images", "--vocabulary",
                           "--vocabulary-after", "--min-confidence", "--poses", "--gcs"})
       if (app.get_option(o)->count() > 0) ex::usage_error(std::string(o) + " needs --memory DIR|FILE");
     const auto camera = ex::load_camera_option(a.camera);

@@ -31,7 +31,9 @@ struct MemoryArgs {
   std::string input, out, memory, vocabulary;
   std::vector<std::string> images;
   bool resume = false, force = false, json = false, edges = false;
+  std::string session;  // build: "new" adds the run as a new session
   std::string convert_in, convert_out;
+  std::string merge_a, merge_b;
   std::string export_out;
   double tau = 0.3;
   double time_offset = 0.0;  // build: added to the frame times the key images keep
@@ -46,15 +48,22 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   ex::current_inputs() = {a.input};
   const fs::path file = ex::memory_file(a.out);
   if (a.resume && a.force) ex::usage_error("--resume and --force conflict (continue the memory, or replace it)");
+  const bool new_session = !a.session.empty();
+  if (new_session && a.resume)
+    ex::usage_error("--session new and --resume conflict (a new session reads its input from the start; --resume "
+                    "continues the last session)");
+  if (new_session && a.force) ex::usage_error("--session new and --force conflict (add a session, or replace the memory)");
+  const bool continued = a.resume || new_session;
+  const auto how = new_session ? ex::Continuation::new_session : ex::Continuation::resume;
   std::optional<ex::MemoryWriter> writer;
   vmap::FrameSourceOptions so{.start = a.start, .stride = a.stride, .grey = true, .time_offset = a.time_offset};
   if (a.end > 0) so.end = a.end;
-  ex::prepare_memory_output(file, "--memory", {a.input}, a.resume, a.force);
+  ex::prepare_memory_output(file, "--memory", {a.input}, continued, a.force);
   std::optional<ex::CliMemory> fresh;
-  if (a.resume) {
-    writer.emplace(ex::memory_to_resume(file, app, {"--threshold", "--images", "--vocabulary", "--min-confidence"},
-                                        a.working_memory));
-    so = ex::resume_range(writer->memory, so, file.string());
+  if (continued) {
+    writer.emplace(ex::memory_to_continue(file, app, {"--threshold", "--images", "--vocabulary", "--min-confidence"},
+                                          a.working_memory, how));
+    if (a.resume) so = ex::resume_range(writer->memory, so, file.string());
   } else {
     ex::NewMemory n{.tau = a.tau, .images = a.storage, .vocabulary = a.vocabulary};
     if (a.min_confidence) n.min_confidence = *a.min_confidence;
@@ -62,13 +71,13 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   }
   auto src = vmap::FrameSource::open(a.input, so);
   const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
-  if (a.resume) {
-    ex::check_same_input(*writer, fingerprint);
+  if (continued) {
+    ex::record_input(*writer, how, fingerprint);
   } else {
     writer.emplace(ex::create_memory(file, a.force, std::move(*fresh)));
     writer->store.set_note("input", fingerprint);
   }
-  ex::NewMemoryGuard guard(writer, !a.resume);
+  ex::NewMemoryGuard guard(writer, !continued);
   const auto r = ex::stream_into(*writer, src, a.save_every, a.working_memory, std::nullopt, [](const ex::CliMemory&) {});
   if (r.pushed == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
   guard.keep();
@@ -78,13 +87,13 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   if (a.json) {
     nlohmann::json loops = nlohmann::json::array();
     for (const auto& e : r.loops) loops.push_back(ex::loop_json(*mem, e));
-    ex::print_json({{"memory", ex::path_string(file)}, {"pushed", r.pushed}, {"frames", mem->frames()},
+    ex::print_json({{"memory", ex::path_string(file)}, {"session", mem->sessions().size() - 1}, {"pushed", r.pushed}, {"frames", mem->frames()},
                     {"key_images", mem->key_images()}, {"loops", mem->loops().size()}, {"new_loops", loops},
                     {"last_frame_index", mem->last_frame_index().value_or(0)}, {"bytes", fs::file_size(file)},
                     {"seconds", r.seconds}});
   } else {
-    std::printf("%s %zu frames (%zu in all): %zu key images, %zu loop edges (%zu new), %.1f ms per frame\n",
-                a.resume ? "resumed with" : "pushed", r.pushed, mem->frames(), mem->key_images(), mem->loops().size(),
+    std::printf("session %zu: %s %zu frames (%zu in all): %zu key images, %zu loop edges (%zu new), %.1f ms per frame\n",
+                mem->sessions().size(), a.resume ? "resumed with" : "pushed", r.pushed, mem->frames(), mem->key_images(), mem->loops().size(),
                 r.loops.size(), ms);
     std::printf("wrote '%s' (%ju bytes, %zu syncs in %.2f s); last frame %zu\n", file.c_str(),
                 static_cast<std::uintmax_t>(fs::file_size(file)), r.saves, r.save_seconds,
@@ -93,20 +102,69 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   return 0;
 }
 
+/// One session of a memory as `memory info` shows it.
+struct SessionInfo {
+  std::size_t first_key = 0, key_images = 0, frames = 0;
+  std::size_t loops_within = 0, loops_across = 0;  ///< edges from its key images: into it, into an earlier session
+  std::optional<std::string> input;                ///< the input recorded by the command line (stores)
+  std::optional<std::uintmax_t> bytes;             ///< its key images' rows (stores)
+};
+
+std::vector<SessionInfo> session_infos(const ex::CliMemory& mem, const std::filesystem::path& file) {
+  const auto& sessions = mem.sessions();
+  std::vector<SessionInfo> out(sessions.size());
+  for (std::size_t s = 0; s < sessions.size(); ++s) {
+    const bool last = s + 1 == sessions.size();
+    out[s].first_key = sessions[s].first_key;
+    out[s].key_images = (last ? mem.key_images() : sessions[s + 1].first_key) - sessions[s].first_key;
+    out[s].frames = (last ? mem.frames() : sessions[s + 1].first_frame) - sessions[s].first_frame;
+  }
+  for (const auto& e : mem.loops()) {
+    const std::size_t from = mem.session_of(e.from);
+    ++(from == mem.session_of(e.link.key) ? out[from].loops_within : out[from].loops_across);
+  }
+  if (ex::memory_file_kind(file) != ex::MemoryFileKind::store) return out;
+  auto store = vmap::MemoryStore::open(file, vmap::sqlite::Access::read);
+  const auto bytes = store.key_image_bytes();
+  for (std::size_t s = 0; s < out.size(); ++s) {
+    if (auto note = store.note(ex::session_note(s))) {
+      const auto j = nlohmann::json::parse(*note, nullptr, false);
+      out[s].input = j.is_object() ? j.value("input", *note) : *note;
+    }
+    std::uintmax_t b = 0;
+    for (std::size_t k = out[s].first_key; k < out[s].first_key + out[s].key_images && k < bytes.size(); ++k) b += bytes[k];
+    out[s].bytes = b;
+  }
+  return out;
+}
+
 int info(const MemoryArgs& a) {
   const auto file = ex::memory_file(a.memory);
   ex::current_inputs() = {file.string()};
   const auto mem = ex::load_memory(file, "memory", false);
-  nlohmann::json keys = nlohmann::json::array(), loops = nlohmann::json::array();
+  const auto sessions = session_infos(mem, file);
+  nlohmann::json keys = nlohmann::json::array(), loops = nlohmann::json::array(), sess = nlohmann::json::array();
   for (std::size_t k = 0; k < mem.key_images(); ++k)
     keys.push_back({{"key", k},
+                    {"session", mem.session_of(k)},
                     {"frame_index", mem.map().keys[k].frame_index},
                     {"name", mem.map().keys[k].name},
                     {"pose", ex::pose_json(mem.poses()[k])}});
   for (const auto& e : mem.loops()) loops.push_back(ex::loop_json(mem, e));
+  for (const auto& s : sessions)
+    sess.push_back({{"first_key", s.first_key},
+                    {"key_images", s.key_images},
+                    {"frames", s.frames},
+                    {"loops_within", s.loops_within},
+                    {"loops_across", s.loops_across},
+                    {"input", s.input ? nlohmann::json(*s.input) : nlohmann::json(nullptr)},
+                    {"bytes", s.bytes ? nlohmann::json(*s.bytes) : nlohmann::json(nullptr)}});
+  const auto file_bytes = std::filesystem::file_size(file);
   if (a.json) {
     ex::print_json({{"frames", mem.frames()},
                     {"last_frame_index", mem.last_frame_index() ? nlohmann::json(*mem.last_frame_index()) : nlohmann::json(nullptr)},
+                    {"bytes", file_bytes},
+                    {"sessions", sess},
                     {"key_images", keys},
                     {"stationary", mem.stationary()},
                     {"loops", loops}});
@@ -114,6 +172,18 @@ int info(const MemoryArgs& a) {
   }
   std::printf("%zu frames, %zu key images, %zu loop edges, vocabulary of %zu words, last frame %zu\n", mem.frames(),
               mem.key_images(), mem.loops().size(), mem.vocabulary().size(), mem.last_frame_index().value_or(0));
+  if (sessions.size() > 1) {
+    std::printf("%zu sessions (%ju bytes in all):\n", sessions.size(), static_cast<std::uintmax_t>(file_bytes));
+    for (std::size_t s = 0; s < sessions.size(); ++s) {
+      const auto& i = sessions[s];
+      std::printf("  session %zu: %zu frames, %zu key images (from key %zu), %zu loop edges within, %zu to earlier "
+                  "sessions",
+                  s + 1, i.frames, i.key_images, i.first_key, i.loops_within, i.loops_across);
+      if (i.bytes) std::printf(", %ju bytes of key images", *i.bytes);
+      if (i.input) std::printf(", from %s", i.input->c_str());
+      std::printf("\n");
+    }
+  }
   if (mem.stationary()) std::printf("the camera never left its place: no key image is a revisit\n");
   ex::print_loop_edges(mem, a.edges);
   return 0;
@@ -150,6 +220,70 @@ int convert(const MemoryArgs& a) {
   return 0;
 }
 
+/// `memory merge A B --out C`: B's sessions appended to A's, loops searched from B's key
+/// images into every key image before them (VisualMemory::merge: C equals the memory
+/// built from A's runs and then B's as new sessions). C is written under a temporary
+/// name and renamed when complete, so an existing C (with --force) is never half replaced.
+int merge(const MemoryArgs& a) {
+  namespace fs = std::filesystem;
+  ex::current_inputs() = {a.merge_a, a.merge_b};
+  for (const auto& [in, option] : {std::pair{a.merge_a, "A"}, std::pair{a.merge_b, "B"}}) {
+    ex::check_input_file(in, option);
+    ex::check_memory_file(in);
+  }
+  const fs::path out = ex::memory_file(a.out);
+  ex::prepare_memory_output(out, "--out", {a.merge_a, a.merge_b}, false, a.force);
+  const auto t0 = std::chrono::steady_clock::now();
+  auto mem = ex::load_memory(a.merge_a, "A");
+  auto other = ex::load_memory(a.merge_b, "B");
+  const std::size_t sessions_a = mem.sessions().size(), sessions_b = other.sessions().size();
+  const std::size_t keys_a = mem.key_images(), loops_a = mem.loops().size();
+  mem.merge(std::move(other), "memory '" + a.merge_a + "'", "memory '" + a.merge_b + "'");
+  // The inputs each session was built from (a store's notes), renumbered.
+  std::vector<std::optional<std::string>> inputs;
+  for (const auto& [in, n] : {std::pair{a.merge_a, sessions_a}, std::pair{a.merge_b, sessions_b}}) {
+    std::optional<vmap::MemoryStore> store;
+    if (ex::memory_file_kind(in) == ex::MemoryFileKind::store) store.emplace(vmap::MemoryStore::open(in, vmap::sqlite::Access::read));
+    for (std::size_t s = 0; s < n; ++s) inputs.push_back(store ? store->note(ex::session_note(s)) : std::nullopt);
+  }
+  const fs::path tmp = out.string() + ".merging";
+  std::optional<ex::MemoryWriter> writer;
+  writer.emplace(ex::create_memory(tmp, true, std::move(mem)));
+  {
+    ex::NewMemoryGuard guard(writer, true);
+    writer->store.sync(writer->memory);
+    for (std::size_t s = 0; s < inputs.size(); ++s)
+      if (inputs[s]) writer->store.set_note(ex::session_note(s), *inputs[s]);
+    writer->store.checkpoint();
+    guard.keep();
+  }
+  const auto& m = writer->memory;
+  const std::size_t frames = m.frames(), key_images = m.key_images(), loops = m.loops().size(), sessions = m.sessions().size();
+  std::size_t across = 0;
+  for (const auto& e : m.loops()) across += m.session_of(e.from) != m.session_of(e.link.key) ? 1 : 0;
+  writer.reset();  // closes the store (its write-ahead log is empty after the checkpoint)
+  std::error_code ec;
+  for (const char* suffix : {"-wal", "-shm"}) {
+    fs::remove(tmp.string() + suffix, ec);
+    fs::remove(out.string() + suffix, ec);
+  }
+  fs::rename(tmp, out);
+  vmap::detail::sync_folder(vmap::detail::folder_of(out));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (a.json) {
+    ex::print_json({{"a", ex::path_string(a.merge_a)}, {"b", ex::path_string(a.merge_b)}, {"memory", ex::path_string(out)},
+                    {"sessions", sessions}, {"frames", frames}, {"key_images", key_images}, {"loops", loops},
+                    {"new_loops", loops - loops_a}, {"loops_across_sessions", across}, {"bytes", fs::file_size(out)},
+                    {"seconds", seconds}});
+    return 0;
+  }
+  std::printf("%s: %zu sessions, %zu frames, %zu key images (%zu from A), %zu loop edges (%zu found for B's key "
+              "images, %zu across sessions), %ju bytes, in %.2f s\n",
+              out.c_str(), sessions, frames, key_images, keys_a, loops, loops - loops_a, across,
+              static_cast<std::uintmax_t>(fs::file_size(out)), seconds);
+  return 0;
+}
+
 /// `memory export M --out DIR`: key images, trajectory and loop edges for other tools.
 int export_files(const MemoryArgs& a) {
   const auto file = ex::memory_file(a.memory);
@@ -179,6 +313,10 @@ std::function<int()> setup(CLI::App& app) {
   b->add_flag("--resume", a->resume,
               "Continue the memory in --memory after the last frame it saw (its options are kept; the same input and "
               "--stride, checked)");
+  b->add_option("--session", a->session,
+                "'new' adds this run to the existing memory as a new session (its own chain of key images; loops are "
+                "searched across sessions)")
+      ->check(CLI::IsMember({"new"}));
   b->add_flag("--force", a->force, "Replace an existing memory instead of refusing to");
   b->add_option("--working-memory", a->working_memory,
                  "Key images whose features stay in RAM; older ones are read from the store when needed (0: all)")
@@ -216,7 +354,15 @@ std::function<int()> setup(CLI::App& app) {
   c->add_option("OUTPUT", a->convert_out, "Memory store written (refused when it exists, unless --force)")->required();
   c->add_flag("--force", a->force, "Replace an existing memory OUTPUT");
   c->add_flag("--json", a->json, "Print the result as JSON");
-  return [a, b, l, x, c]() {
+  auto* g = app.add_subcommand("merge", "Join two memories made with the same options: B's sessions after A's, loops "
+                                        "searched from B's key images into A's");
+  g->add_option("A", a->merge_a, "Memory (store or .vmem) whose sessions come first")->required();
+  g->add_option("B", a->merge_b, "Memory whose sessions are appended")->required();
+  g->add_option("--out", a->out, "Memory store written (refused when it exists, unless --force)")->required();
+  g->add_flag("--force", a->force, "Replace an existing memory --out");
+  g->add_flag("--json", a->json, "Print the result as JSON");
+  return [a, b, l, x, c, g]() {
+    if (g->parsed()) return merge(*a);
     if (b->parsed()) return build(*a, *b);
     if (l->parsed())
       return ex::localize_from_memory(ex::memory_file(a->memory), "memory", a->images, a->json, a->min_confidence);
@@ -226,6 +372,7 @@ std::function<int()> setup(CLI::App& app) {
   };
 }
 
-const bool registered = vmap::cli::add_command({"memory", "A visual memory: build, resume, localize, info, export, convert", setup});
+const bool registered =
+    vmap::cli::add_command({"memory", "A visual memory: build, resume, localize, info, export, convert, merge", setup});
 
 }  // namespace

@@ -1180,13 +1180,22 @@ TEST_SUITE("data") {
   }
 }
 
+/// `memory info --json` without the sizes on disk (a store and a .vmem file, or two stores
+/// written in other orders, hold one memory in other bytes).
+nlohmann::json without_sizes(nlohmann::json j) {
+  j.erase("bytes");
+  for (auto& s : j["sessions"]) s.erase("bytes");
+  return j;
+}
+
 TEST_CASE("cli: a memory store is replaced only with --force, resumed only from its own input, written by one program") {
   const fs::path dir = fresh_dir("store_rules");
   const std::string mem = (dir / "m.vmdb").string();
   REQUIRE(run_vmap({"memory", "build", sample, "--memory", mem, "--end", "20"}).code == 0);
   const std::string before = slurp(mem);
-  usage_error({"memory", "build", sample, "--memory", mem}, "exists: give --resume to continue it, or --force to replace it");
-  usage_error({"build", sample, "--memory", mem, "--end", "10"}, "exists: give --resume to continue it, or --force");
+  usage_error({"memory", "build", sample, "--memory", mem},
+              "exists: give --resume to continue it, --session new to add a run to it, or --force to replace it");
+  usage_error({"build", sample, "--memory", mem, "--end", "10"}, "exists: give --resume to continue it, --session new");
   usage_error({"build", sample, "--memory", mem, "--resume", "--force"}, "--resume and --force conflict");
   CHECK(slurp(mem) == before);
   // Another input, or the same with another stride: refused, naming both.
@@ -1235,8 +1244,8 @@ TEST_CASE("cli: memory convert turns .vmem files of every version into stores th
     const Run b = run_vmap({"memory", "info", store, "--json"});
     REQUIRE(a.code == 0);
     REQUIRE(b.code == 0);
-    CHECK(nlohmann::json::parse(a.out) == nlohmann::json::parse(b.out));
-    usage_error({"memory", "convert", vmem, store}, "exists: give --resume to continue it, or --force");
+    CHECK(without_sizes(nlohmann::json::parse(a.out)) == without_sizes(nlohmann::json::parse(b.out)));
+    usage_error({"memory", "convert", vmem, store}, "exists: give --force to replace it");
     CHECK(run_vmap({"memory", "convert", vmem, store, "--force"}).code == 0);
   }
   // A .vmem is read as it is but not resumed: convert it first.
@@ -1244,6 +1253,69 @@ TEST_CASE("cli: memory convert turns .vmem files of every version into stores th
               "convert it to a memory store first");
   fails_with({"memory", "convert", sample, (dir / "x.vmdb").string()}, 1, "is not a vmap memory");
   CHECK(!fs::exists(dir / "x.vmdb"));
+}
+
+TEST_CASE("cli: --session new adds a run to a memory; memory merge of two memories equals it; info lists sessions") {
+  const fs::path dir = fresh_dir("sessions");
+  const std::string two = (dir / "two.vmdb").string();
+  REQUIRE(run_vmap({"memory", "build", sample, "--memory", two, "--end", "40"}).code == 0);
+  usage_error({"memory", "build", sample, "--memory", two, "--session", "new", "--resume"},
+              "--session new and --resume conflict");
+  usage_error({"build", sample, "--memory", two, "--session", "new", "--force"}, "--session new and --force conflict");
+  usage_error({"build", sample, "--memory", two, "--session", "again"}, "--session");
+  usage_error({"build", sample, "--session", "new"}, "--session needs --memory");
+  usage_error({"memory", "build", sample, "--memory", (dir / "none.vmdb").string(), "--session", "new"},
+              "--session new: no memory file");
+  usage_error({"memory", "build", sample, "--memory", two, "--session", "new", "--threshold", "0.5"},
+              "--session new and --threshold conflict");
+  const Run second = run_vmap({"build", sample, "--memory", two, "--session", "new", "--start", "20", "--json"});
+  INFO(second.err);
+  REQUIRE(second.code == 0);
+  const auto built = nlohmann::json::parse(second.out);
+  CHECK(built["memory"]["session"] == 1);
+  CHECK(built["memory"]["pushed"] == 40);
+
+  const Run info = run_vmap({"memory", "info", two, "--json"});
+  REQUIRE(info.code == 0);
+  auto j = nlohmann::json::parse(info.out);
+  REQUIRE(j["sessions"].size() == 2);
+  CHECK(j["frames"] == 80);
+  CHECK(j["sessions"][0]["frames"] == 40);
+  CHECK(j["sessions"][1]["frames"] == 40);
+  CHECK(j["sessions"][1]["first_key"] == j["sessions"][0]["key_images"]);
+  CHECK(j["sessions"][0]["input"].get<std::string>().find("rgb.txt") != std::string::npos);
+  CHECK(j["sessions"][1]["bytes"].get<std::size_t>() > 0);
+  // The second run revisits frames 20-39: loops from the second session into the first.
+  CHECK(j["sessions"][1]["loops_across"].get<std::size_t>() >= 3);
+  std::size_t across = 0;
+  for (const auto& e : j["loops"]) across += e["from_session"] != e["to_session"] ? 1 : 0;
+  CHECK(across == j["sessions"][1]["loops_across"]);
+  const Run text = run_vmap({"memory", "info", two});
+  CHECK(text.out.find("2 sessions") != std::string::npos);
+  CHECK(text.out.find("  session 2: 40 frames") != std::string::npos);
+  CHECK(text.out.find("(session 2, frame") != std::string::npos);
+
+  // --resume continues the last session, whose input is checked.
+  usage_error({"memory", "build", "examples/data/tum_fr1_rpy_60/rgb", "--memory", two, "--resume"}, "was built from '");
+
+  // Two memories built apart and merged: the same memory.
+  const std::string a = (dir / "a.vmdb").string(), b = (dir / "b.vmdb").string(), c = (dir / "c.vmdb").string();
+  REQUIRE(run_vmap({"memory", "build", sample, "--memory", a, "--end", "40"}).code == 0);
+  REQUIRE(run_vmap({"memory", "build", sample, "--memory", b, "--start", "20"}).code == 0);
+  const Run merged = run_vmap({"memory", "merge", a, b, "--out", c, "--json"});
+  INFO(merged.err);
+  REQUIRE(merged.code == 0);
+  CHECK(nlohmann::json::parse(merged.out)["sessions"] == 2);
+  const auto k = nlohmann::json::parse(run_vmap({"memory", "info", c, "--json"}).out);
+  CHECK(without_sizes(k) == without_sizes(j));
+  CHECK(!fs::exists(c + ".merging"));
+  usage_error({"memory", "merge", a, b, "--out", c}, "exists: give --force to replace it");
+  // Other options: refused, naming both, and nothing written.
+  const std::string d = (dir / "d.vmdb").string();
+  REQUIRE(run_vmap({"memory", "build", sample, "--memory", d, "--end", "10", "--threshold", "0.5"}).code == 0);
+  fails_with({"memory", "merge", a, d, "--out", (dir / "e.vmdb").string()}, 1,
+             "cannot merge memory '" + d + "' into memory '" + a + "'");
+  CHECK(!fs::exists(dir / "e.vmdb"));
 }
 
 TEST_CASE("cli: a memory store is read without vmap, by sqlite3 and by Python's sqlite3 module") {

@@ -67,6 +67,7 @@
 #include <string>
 #include <string_view>
 #include <utility>
+#include <vector>
 
 namespace vmap {
 
@@ -260,6 +261,16 @@ class MemoryStore {
       skip_to_features(r);
       return detail::read_features(r);
     };
+  }
+
+  /// The bytes of each key image's row (its record, detections and bag of words), in
+  /// order: what a key image costs on disk, without SQLite's page overhead.
+  [[nodiscard]] std::vector<std::uintmax_t> key_image_bytes() {
+    std::vector<std::uintmax_t> out;
+    auto q = db_.prepare("SELECT length(record) + length(detections) + ifnull(length(bow), 0) FROM key_images ORDER BY id",
+                         "measure the key images");
+    while (q.step()) out.push_back(static_cast<std::uintmax_t>(q.integer(0)));
+    return out;
   }
 
   /// Records `value` under `name` in the notes table (its own transaction).
