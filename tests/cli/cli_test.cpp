@@ -1298,6 +1298,25 @@ TEST_CASE("cli: --session new adds a run to a memory; memory merge of two memori
   // --resume continues the last session, whose input is checked.
   usage_error({"memory", "build", "examples/data/tum_fr1_rpy_60/rgb", "--memory", two, "--resume"}, "was built from '");
 
+  // The documented reader without vmap (examples/loops_between.py, Python's sqlite3):
+  // the same sessions, key images and loop edges (a ground truth of no loops here).
+  {
+    std::string row;
+    for (int i = 0; i < 60; ++i) row += i == 0 ? "0" : " 0";
+    std::string zeros;
+    for (int i = 0; i < 60; ++i) zeros += row + "\n";
+    write(dir / "none.txt", zeros);
+    const fs::path out = dir / "between.txt";
+    REQUIRE(std::system(("python3 examples/loops_between.py " + quote(two) + " " + quote((dir / "none.txt").string()) +
+                         " 40 > " + quote(out.string()))
+                            .c_str()) == 0);
+    const std::string line = slurp(out);
+    INFO(line);
+    CHECK(line.find("2 sessions, " + std::to_string(j["key_images"].size()) + " key images, " +
+                    std::to_string(j["loops"].size()) + " loop edges (" + std::to_string(across) + " across sessions)") !=
+          std::string::npos);
+  }
+
   // Two memories built apart and merged: the same memory.
   const std::string a = (dir / "a.vmdb").string(), b = (dir / "b.vmdb").string(), c = (dir / "c.vmdb").string();
   REQUIRE(run_vmap({"memory", "build", sample, "--memory", a, "--end", "40"}).code == 0);
