@@ -263,6 +263,9 @@ inline constexpr std::uint32_t memory_sections = 12;
 inline constexpr std::uint32_t memory_max_policy = 4096;
 /// Most detections one key image may have in a file (a detector gives a few hundred).
 inline constexpr std::uint32_t memory_max_detections = 1U << 16;
+/// The most frames a memory file may say were pushed: 2^40, 348 years at 100 frames a
+/// second. A larger count is a damaged or crafted file, not a robot's.
+inline constexpr std::uint64_t memory_max_frames = std::uint64_t{1} << 40;
 
 // What the file records of a policy (section "plcy"): its own description
 // (core/concepts.hpp, DescribesItself), so that a mismatch on load reads as it is; a
@@ -888,7 +891,10 @@ class VisualMemory {
     SelectorState<Features> state;
     std::uint64_t total_pixels = 0;
     auto keys = detail::memory_open_section(file, "keys");
-    state.map.frames = static_cast<std::size_t>(keys.u64("frame count"));
+    const std::uint64_t frames = keys.u64("frame count");
+    if (frames > detail::memory_max_frames)
+      keys.corrupt("frame count " + std::to_string(frames) + " is more than a memory can hold (2^40)");
+    state.map.frames = static_cast<std::size_t>(frames);
     const std::uint32_t m = keys.u32("key image count");
     keys.require_items(m, 50, "key image count");
     if (m > state.map.frames) keys.corrupt(std::to_string(m) + " key images for " + std::to_string(state.map.frames) + " frames");
@@ -952,7 +958,9 @@ class VisualMemory {
     const std::uint8_t has_last = sel.u8("last frame flag");
     if (has_last > 1 || (has_last == 0 && m > 0)) sel.corrupt("invalid last frame flag");
     if (has_last == 1) {
-      mem.last_index_ = static_cast<std::size_t>(sel.u64("last frame index"));
+      const std::uint64_t last = sel.u64("last frame index");
+      if (last > detail::memory_max_frames) sel.corrupt("last frame index " + std::to_string(last) + " is above 2^40");
+      mem.last_index_ = static_cast<std::size_t>(last);
       const std::size_t at_least = state.previous ? state.previous->index : (m > 0 ? state.map.keys.back().frame_index : 0);
       if (*mem.last_index_ < at_least) sel.corrupt("the last frame index is before the selector's frames");
     }

@@ -323,6 +323,29 @@ TEST_CASE("sessions: merging two memories equals building both runs into one; ot
   CHECK(e.serialize() == e_bytes);
 }
 
+TEST_CASE("memory files: a frame count above 2^40 is an Error naming the section, also with a valid CRC") {
+  const auto mem = two_sessions(small_memory_options());
+  const std::string bytes = mem.serialize();
+  const std::size_t keys = vmap::test::section_starts(bytes)[1];
+  REQUIRE(bytes.substr(keys, 4) == "keys");
+  for (const std::uint64_t count : {std::uint64_t{1} << 41, ~std::uint64_t{0}}) {
+    std::string b = bytes;
+    for (int i = 0; i < 8; ++i) b[keys + 16 + static_cast<std::size_t>(i)] = static_cast<char>((count >> (8 * i)) & 0xFF);
+    const std::size_t length = vmap::test::section_starts(b)[2] - keys - 16;
+    vmap::detail::BinaryWriter crc;
+    crc.u32(vmap::detail::crc32(std::string_view(b).substr(keys + 16, length)));
+    b.replace(keys + 12, 4, crc.data());
+    const std::string msg = error_of([&] {
+      (void)vmap::OrbVisualMemory::deserialize(b, "m.vmem", vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                                               memory_estimator(), vmap::InlierRatio{});
+    });
+    INFO(msg);
+    CHECK(msg.find("m.vmem") != std::string::npos);
+    CHECK(msg.find("section 'keys'") != std::string::npos);
+    CHECK(msg.find("is more than a memory can hold (2^40)") != std::string::npos);
+  }
+}
+
 TEST_CASE("sessions: a damaged session table is an Error naming the section") {
   const auto mem = two_sessions(small_memory_options());
   const std::string bytes = mem.serialize();
