@@ -18,10 +18,18 @@
 //      tum_fr1_rpy then rtabmap_loop: loop edges between the two.
 //   5. A camera that does not move: one real frame repeated with seeded sensor noise and
 //      sub-pixel jitter: loops, and whether the run is reported as stationary.
+//   6. Localization where ORB fails: a memory of tum_fr3_cabinet_kf (nearly textureless)
+//      with every 5th frame held out, built and queried with ORB 1000, SIFT and XFeat*
+//      (the dense grid, blocked mutual NN and XFeat's refinement before the F-matrix):
+//      held-out frames accepted and right by the poses (0.5 m, 30 degrees), and every
+//      10th frame of the other sequences (foreign places) accepted, with the time per query.
 //
-//   bench_places [--shared DIR] [--static-frames 120] [--seed 1]
+//   bench_places [--shared DIR] [--static-frames 120] [--seed 1] [--part all|localize]
 #include <vmap/features/orb.hpp>
+#include <vmap/features/sift.hpp>
 #include <vmap/geometry/fundamental.hpp>
+#include <vmap/hooks/xfeat_dense.hpp>
+#include <vmap/hooks/xfeat_fine.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
 #include <vmap/lcd/evaluation.hpp>
@@ -34,6 +42,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <map>
@@ -199,6 +208,97 @@ bool before_localized(const vmap::MemoryLocalization& a) {
   return std::any_of(a.matches.begin(), a.matches.end(), [](const vmap::PlaceLink& l) { return l.inliers >= 20; });
 }
 
+// ---- 6. localization with another verifier ------------------------------------------
+
+/// Section 6 for one feature stack: the memory of `home` without its held-out frames,
+/// then the held-out frames and the other sequences' every 10th frame localized in it.
+template <class Memory>
+void localization_row(const char* stack, Memory mem, const Sequence& home, const vmap::LoopGroundTruth& same,
+                      const std::vector<Sequence>& sequences) {
+  std::vector<const vmap::Frame*> held;
+  const auto t0 = std::chrono::steady_clock::now();
+  for (std::size_t i = 0; i < home.frames.size(); ++i) {
+    if (i % 5 == 2)
+      held.push_back(&home.frames[i]);
+    else
+      mem.push(home.frames[i]);
+  }
+  const double build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::size_t accepted = 0, right = 0, foreign = 0, foreign_accepted = 0;
+  double query_ms = 0.0;
+  std::size_t queries = 0;
+  const auto ask = [&](const vmap::Frame& f) {
+    const auto t = std::chrono::steady_clock::now();
+    auto a = mem.localize(f.image);
+    query_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
+    ++queries;
+    return a;
+  };
+  std::string wrong;  // the accepted answers the poses call another place
+  std::map<std::string, std::size_t> statuses;
+  std::vector<double> best_inliers, best_confidence;
+  for (const vmap::Frame* f : held) {
+    const auto a = ask(*f);
+    ++statuses[std::string(vmap::to_string(a.status))];
+    if (!a.matches.empty()) {
+      best_inliers.push_back(a.matches.front().inliers);
+      best_confidence.push_back(a.confidence);
+    }
+    if (!a.ok()) continue;
+    ++accepted;
+    const std::size_t k = mem.map().keys[a.best()->key].frame_index;
+    if (k < f->index ? same(f->index, k) : same(k, f->index)) {  // the matrix holds each pair once, newer first
+      ++right;
+    } else {
+      char b[128];
+      std::snprintf(b, sizeof b, " frame %zu -> key frame %zu (confidence %.2f, %d of %d inliers, spread %.2f);",
+                    f->index, k, a.confidence, a.best()->inliers, a.best()->matches, a.evidence.spread);
+      wrong += b;
+    }
+  }
+  for (const auto& t : sequences) {
+    if (same_place(home.name, t.name)) continue;
+    for (std::size_t i = 0; i < t.frames.size(); i += 10) {
+      ++foreign;
+      foreign_accepted += ask(t.frames[i]).ok() ? 1 : 0;
+    }
+  }
+  std::printf("| %s | %zu | %zu | %zu | %zu | %zu | %zu | %.1f | %.1f |\n", stack, mem.key_images(), held.size(), accepted,
+              right, foreign, foreign_accepted, queries ? query_ms / static_cast<double>(queries) : 0.0, build_s);
+  if (!wrong.empty()) std::fprintf(stderr, "%s, another place:%s\n", stack, wrong.c_str());
+  std::fprintf(stderr, "%s, held-out answers:", stack);
+  for (const auto& [k, v] : statuses) std::fprintf(stderr, " %s %zu,", k.c_str(), v);
+  std::fprintf(stderr, " best verified candidate: median %.0f inliers, median confidence %.2f\n", median(best_inliers),
+               median(best_confidence));
+  std::fflush(stdout);
+}
+
+void localization_section(const std::vector<Sequence>& sequences, const fs::path& shared) {
+  const Sequence& cabinet = sequences[1];
+  // The same place by the poses alone (no window: a held-out frame's neighbours count).
+  const vmap::LoopGroundTruth same = vmap::ground_truth_from_poses(
+      vmap::load_tum_poses(shared / "data/tum_fr3_cabinet_kf/truth_cam_poses.txt"),
+      {.max_distance = 0.5, .max_angle_deg = 30, .window = 0});
+  std::printf("\n## 6. Localization where ORB fails (tum_fr3_cabinet_kf, every 5th frame held out; every 10th frame of "
+              "the other sequences)\n\n");
+  std::printf("| verifier | key images | held out | accepted | right (0.5 m, 30 deg) | foreign queries | foreign "
+              "accepted | ms per query | s to build the memory |\n|---|---|---|---|---|---|---|---|---|\n");
+  std::fflush(stdout);
+  const vmap::FundamentalEstimator f{};
+  localization_row("ORB 1000", vmap::OrbVisualMemory(), cabinet, same, sequences);
+  localization_row("SIFT", vmap::SiftVisualMemory(), cabinet, same, sequences);
+  const fs::path models = shared / "models";
+  using XFeatStarMemory = vmap::VisualMemory<vmap::XFeatDenseDescriptor, vmap::DenseMutualMatcher,
+                                             vmap::XFeatRefined<vmap::FundamentalEstimator>, vmap::InlierRatio>;
+  localization_row(
+      "XFeat*",
+      XFeatStarMemory(vmap::XFeatDenseDescriptor({.model = models / "xfeat_anysize.onnx", .grid = vmap::XFeatGrid::refinable}),
+                      vmap::DenseMutualMatcher({.normalise = true}),
+                      vmap::XFeatRefined<vmap::FundamentalEstimator>(vmap::XFeatFineOptions{.model = models / "xfeat_fine.onnx"}, f),
+                      vmap::InlierRatio{}),
+      cabinet, same, sequences);
+}
+
 // ---- 5. a camera that does not move -------------------------------------------------
 
 std::vector<vmap::Frame> static_clip(const vmap::Frame& source, std::size_t n, std::uint64_t seed) {
@@ -231,9 +331,16 @@ int main(int argc, char** argv) {
   app.add_option("--shared", shared, "The shared folder (data/)");
   app.add_option("--static-frames", static_frames, "Frames of the static clip")->check(CLI::Range(11, 100000));
   app.add_option("--seed", seed, "Seed of the static clip's noise and jitter");
+  std::string part = "all";
+  app.add_option("--part", part, "all: sections 1-6; localize: section 6 only (minutes: XFeat* verifies on the CPU)")
+      ->check(CLI::IsMember({"all", "localize"}));
   CLI11_PARSE(app, argc, argv);
 
   const auto sequences = load_sequences(shared);
+  if (part == "localize") {
+    localization_section(sequences, shared);
+    return 0;
+  }
   vmap::OrbDescriptor orb;
 
   std::printf("## 1. Loops with the defaults (bow, top 2, window 10, vocabulary learned on the sequence)\n\n");
@@ -368,5 +475,6 @@ int main(int argc, char** argv) {
     const auto mem = build_memory(frames);
     std::printf("\n- memory: %zu key images, %zu loop edges\n", mem.key_images(), mem.loops().size());
   }
+  localization_section(sequences, shared);
   return 0;
 }

@@ -287,6 +287,17 @@ inline FrameSourceOptions resume_range(const CliMemory& mem, FrameSourceOptions 
   return so;
 }
 
+/// --resume of a memory that already holds the last frame of a folder or list (whose
+/// length is exact; a video's stated frame count is not trusted): a usage error that
+/// says so, as resume_range says it for --end, instead of a run that reads no frame.
+inline void check_frames_left(const CliMemory& mem, const FrameSource& src, const FrameSourceOptions& so,
+                              const std::string& file) {
+  const auto total = src.total();
+  if (src.kind() != SourceKind::video && total && so.start >= *total)
+    usage_error("--resume: the memory '" + file + "' already holds every frame of its input (its last frame is " +
+                std::to_string(mem.last_frame_index().value_or(0)) + ")");
+}
+
 /// What stream_into did.
 struct StreamResult {
   std::size_t pushed = 0;       ///< frames pushed in this run

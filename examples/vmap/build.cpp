@@ -328,6 +328,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
   if (continued) {
     ex::record_input(*writer, how, fingerprint);
+    if (args.resume) ex::check_frames_left(writer->memory, src, so, file.string());
   } else {
     writer.emplace(ex::create_memory(file, args.force,
                                      ex::new_memory({.tau = args.threshold,

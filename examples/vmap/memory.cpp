@@ -73,6 +73,7 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
   if (continued) {
     ex::record_input(*writer, how, fingerprint);
+    if (a.resume) ex::check_frames_left(writer->memory, src, so, file.string());
   } else {
     writer.emplace(ex::create_memory(file, a.force, std::move(*fresh)));
     writer->store.set_note("input", fingerprint);

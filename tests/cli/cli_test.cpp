@@ -1295,8 +1295,12 @@ TEST_CASE("cli: --session new adds a run to a memory; memory merge of two memori
   CHECK(text.out.find("  session 2: 40 frames") != std::string::npos);
   CHECK(text.out.find("(session 2, frame") != std::string::npos);
 
-  // --resume continues the last session, whose input is checked.
+  // --resume continues the last session, whose input is checked; with every frame of it
+  // already held, it says so.
   usage_error({"memory", "build", "examples/data/tum_fr1_rpy_60/rgb", "--memory", two, "--resume"}, "was built from '");
+  usage_error({"memory", "build", sample, "--memory", two, "--resume"},
+              "already holds every frame of its input (its last frame is 59)");
+  usage_error({"build", sample, "--memory", two, "--resume"}, "already holds every frame of its input");
 
   // The documented reader without vmap (examples/loops_between.py, Python's sqlite3):
   // the same sessions, key images and loop edges (a ground truth of no loops here).

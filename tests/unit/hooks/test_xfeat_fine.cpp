@@ -11,6 +11,7 @@
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
 #include <vmap/keyframe/selector.hpp>
+#include <vmap/memory/visual_memory.hpp>
 
 #include "support/errors.hpp"
 #include "support/shared_data.hpp"
@@ -404,5 +405,51 @@ TEST_SUITE("data") {
     orb_like.keypoints.resize(3);
     CHECK(error_of([&] { (void)refined.verify(orb_like, orb_like, {cv::DMatch(0, 0, 0.0f)}); }).find("refinable") !=
           std::string::npos);
+  }
+  TEST_CASE("XFeat*: a visual memory verifies with it, localizes a held-out frame, and loads back the same") {
+    using XFeatStarMemory = vmap::VisualMemory<vmap::XFeatDenseDescriptor, vmap::DenseMutualMatcher,
+                                               vmap::XFeatRefined<vmap::FundamentalEstimator>, vmap::InlierRatio>;
+    vmap::XFeatDenseOptions ro = dense_options();
+    ro.grid = vmap::XFeatGrid::refinable;
+    const auto make = [&](const vmap::MemoryOptions& o) {
+      return XFeatStarMemory(vmap::XFeatDenseDescriptor(ro), vmap::DenseMutualMatcher({.normalise = true}),
+                             vmap::XFeatRefined(refine_with(), estimator()), vmap::InlierRatio{}, o);
+    };
+    vmap::MemoryOptions o;
+    o.selector.tau = 0.3;
+    o.vocabulary_after = 3;
+    // Words rare enough to weigh: a dense grid covers every word of a small vocabulary in
+    // every image (an IDF of 0).
+    o.vocabulary = {.branching = 8, .depth = 3, .seed = 5};
+    o.loops.window = 2;
+    const std::vector<cv::Mat> frames = sample_frames(20);
+    auto mem = make(o);
+    for (std::size_t i = 0; i < frames.size(); ++i)
+      if (i != 12) mem.push(frames[i], static_cast<double>(i));
+    REQUIRE(mem.key_images() >= 3);
+    CHECK(!mem.vocabulary().empty());
+    const auto answer = mem.localize(frames[12]);
+    INFO(vmap::to_string(answer.status) << ": " << answer.reason << ", " << answer.verified_candidates << " verified");
+    REQUIRE(!answer.matches.empty());
+    // The best verified key image is one of the frames around the held-out one.
+    const std::size_t k = mem.map().keys[answer.matches.front().key].frame_index;
+    CHECK(k + 8 >= 12);
+    CHECK(k <= 12 + 8);
+    CHECK(answer.evidence.inliers > 12);
+    CHECK(answer.evidence.matches >= answer.evidence.inliers);
+    // Its evidence and decision are those of the loaded copy (the refinement included).
+    auto back = XFeatStarMemory::deserialize(mem.serialize(), "xfeat_star.vmem", vmap::XFeatDenseDescriptor(ro),
+                                             vmap::DenseMutualMatcher({.normalise = true}),
+                                             vmap::XFeatRefined(refine_with(), estimator()), vmap::InlierRatio{});
+    const auto again = back.localize(frames[12]);
+    CHECK(again.status == answer.status);
+    CHECK(again.confidence == answer.confidence);
+    REQUIRE(again.matches.size() == answer.matches.size());
+    CHECK(again.matches.front().key == answer.matches.front().key);
+    CHECK(again.matches.front().inliers == answer.matches.front().inliers);
+    MESSAGE("XFeat* memory of 19 sample frames: " << mem.key_images() << " key images; frame 12 -> the key image of pushed frame " << k
+                                                   << ", " << answer.evidence.inliers << " of " << answer.evidence.matches
+                                                   << " matches, confidence " << answer.confidence << ", "
+                                                   << vmap::to_string(answer.status));
   }
 }
