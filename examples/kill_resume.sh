@@ -28,7 +28,7 @@ equal=0 started_again=0 resumed=0 complete=0
 for trial in $(seq 1 "$trials"); do
   delay=$(python3 -c "print(round(0.02 + $RANDOM / 32767 * $duration, 3))")
   rm -f "$work/k.vmdb" "$work/k.vmdb-wal" "$work/k.vmdb-shm"
-  timeout -s KILL "$delay" "$vmap" memory build "$input" --memory "$work/k.vmdb" --images jpeg >/dev/null 2>&1 || true
+  (timeout -s KILL "$delay" "$vmap" memory build "$input" --memory "$work/k.vmdb" --images jpeg) >/dev/null 2>&1 || true
   if [ ! -e "$work/k.vmdb" ] || ! "$vmap" memory info "$work/k.vmdb" >/dev/null 2>&1; then
     # Killed before the first key image was written: nothing to resume.
     "$vmap" memory build "$input" --memory "$work/k.vmdb" --images jpeg --force >/dev/null
