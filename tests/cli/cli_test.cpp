@@ -1311,7 +1311,8 @@ TEST_CASE("cli: --session new adds a run to a memory; memory merge of two memori
     for (int i = 0; i < 60; ++i) zeros += row + "\n";
     write(dir / "none.txt", zeros);
     const fs::path out = dir / "between.txt";
-    REQUIRE(std::system(("python3 examples/loops_between.py " + quote(two) + " " + quote((dir / "none.txt").string()) +
+    const std::string script = std::string(VMAP_TEST_SOURCE_DIR) + "/examples/loops_between.py";
+    REQUIRE(std::system(("python3 " + quote(script) + " " + quote(two) + " " + quote((dir / "none.txt").string()) +
                          " 40 > " + quote(out.string()))
                             .c_str()) == 0);
     const std::string line = slurp(out);

@@ -734,6 +734,8 @@ class VisualMemory {
     if (m0 == 0) {
       sessions_.clear();
       labelled_ = other.labelled_;
+    } else if (sessions_.size() > 1 && sessions_.back().first_frame == f0) {
+      sessions_.pop_back();  // a session started here and never pushed into: other's first takes its place
     }
     for (const MemorySession& s : other.sessions_) sessions_.push_back({s.first_key + m0, s.first_frame + f0});
     poses_.insert(poses_.end(), other.poses_.begin(), other.poses_.end());

@@ -301,6 +301,16 @@ TEST_CASE("sessions: merging two memories equals building both runs into one; ot
   }
   CHECK(a.serialize() == built.serialize());
 
+  // A memory whose new session holds no frame yet: the other's first session takes its place.
+  auto open = make_small_memory(o);
+  for (const auto& f : run1()) open.push(f);
+  open.start_session();
+  auto b2 = make_small_memory(o);
+  for (const auto& f : run2()) b2.push(f);
+  open.merge(std::move(b2));
+  CHECK(open.sessions().size() == 2);
+  CHECK(open.serialize() == whole.serialize());
+
   // Into an empty memory: the other memory itself.
   auto empty = make_small_memory(o);
   auto c = make_small_memory(o);
