@@ -205,6 +205,20 @@ class NewMemoryGuard {
 /// (--resume), or a new session from the input's first frame (--session new).
 enum class Continuation : std::uint8_t { resume, new_session };
 
+/// How a run of `build --memory` / `memory build` treats its memory, from --resume,
+/// --session new and --force (conflicting pairs are usage errors): nullopt for a new
+/// memory (replacing an existing one with --force).
+inline std::optional<Continuation> continuation_of(bool resume, bool new_session, bool force) {
+  if (resume && force) usage_error("--resume and --force conflict (continue the memory, or replace it)");
+  if (new_session && resume)
+    usage_error("--session new and --resume conflict (a new session reads its input from the start; --resume "
+                "continues the last session)");
+  if (new_session && force) usage_error("--session new and --force conflict (add a session, or replace the memory)");
+  if (resume) return Continuation::resume;
+  if (new_session) return Continuation::new_session;
+  return std::nullopt;
+}
+
 /// The memory a run continues: a missing file is a usage error that says how to start
 /// one; options that would change the memory's own (`options_kept`, given on the command
 /// line) conflict. With a `working_memory` (> 0) the memory is loaded holding only that

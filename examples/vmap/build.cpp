@@ -284,14 +284,9 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   if (given("--vocabulary") && given("--vocabulary-after"))
     ex::usage_error("--vocabulary and --vocabulary-after conflict (the second is for a vocabulary learned online)");
   const fs::path file = ex::memory_file(args.memory);
-  if (args.resume && args.force) ex::usage_error("--resume and --force conflict (continue the memory, or replace it)");
-  const bool new_session = !args.session.empty();
-  if (new_session && args.resume)
-    ex::usage_error("--session new and --resume conflict (a new session reads its input from the start; --resume "
-                    "continues the last session)");
-  if (new_session && args.force) ex::usage_error("--session new and --force conflict (add a session, or replace the memory)");
-  const bool continued = args.resume || new_session;
-  const auto how = new_session ? ex::Continuation::new_session : ex::Continuation::resume;
+  const auto continuation = ex::continuation_of(args.resume, !args.session.empty(), args.force);
+  const bool continued = continuation.has_value();
+  const auto how = continuation.value_or(ex::Continuation::resume);
   std::optional<ex::MemoryWriter> writer;
   std::vector<fs::path> inputs{a.input};
   if (!args.poses.empty()) {

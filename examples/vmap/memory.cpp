@@ -47,14 +47,9 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   namespace fs = std::filesystem;
   ex::current_inputs() = {a.input};
   const fs::path file = ex::memory_file(a.out);
-  if (a.resume && a.force) ex::usage_error("--resume and --force conflict (continue the memory, or replace it)");
-  const bool new_session = !a.session.empty();
-  if (new_session && a.resume)
-    ex::usage_error("--session new and --resume conflict (a new session reads its input from the start; --resume "
-                    "continues the last session)");
-  if (new_session && a.force) ex::usage_error("--session new and --force conflict (add a session, or replace the memory)");
-  const bool continued = a.resume || new_session;
-  const auto how = new_session ? ex::Continuation::new_session : ex::Continuation::resume;
+  const auto continuation = ex::continuation_of(a.resume, !a.session.empty(), a.force);
+  const bool continued = continuation.has_value();
+  const auto how = continuation.value_or(ex::Continuation::resume);
   std::optional<ex::MemoryWriter> writer;
   vmap::FrameSourceOptions so{.start = a.start, .stride = a.stride, .grey = true, .time_offset = a.time_offset};
   if (a.end > 0) so.end = a.end;

@@ -337,8 +337,9 @@ class LoopEngine {
 
   /// The state a saved run ended with: the label vector of each frame indexed so far
   /// (the ranker already holds their bags of words), the stationarity counts and the
-  /// temporal-consistency state. The tree is rebuilt exactly: the frames the last query
-  /// had inserted, in order.
+  /// temporal-consistency state, and the first frame of the last frame's session
+  /// (begin_session). The tree is rebuilt exactly: the frames the last query had
+  /// inserted, in order.
   void restore(std::vector<LabelVector> labels, std::size_t past_window, std::size_t left_queries,
                std::size_t not_revisit, const ConsistencyState<std::size_t>& consistency,
                std::size_t session_start = 0) {

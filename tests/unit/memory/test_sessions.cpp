@@ -3,6 +3,7 @@
 // exactly; merging two memories equals building both runs into one.
 #include "support/errors.hpp"
 #include "support/memory_file.hpp"
+#include "support/raw_sql.hpp"
 #include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
 
@@ -10,8 +11,6 @@
 #include <vmap/memory/visual_memory.hpp>
 
 #include <doctest/doctest.h>
-
-#include <sqlite3.h>
 
 #include <algorithm>
 #include <cstdint>
@@ -25,6 +24,8 @@ namespace {
 
 namespace fs = std::filesystem;
 using vmap::test::error_of;
+using vmap::test::raw_sql;
+using vmap::test::sql_integer;
 using vmap::test::make_small_memory;
 using vmap::test::memory_estimator;
 using vmap::test::small_memory_options;
@@ -64,29 +65,6 @@ fs::path fresh(const std::string& name) {
   const fs::path p = dir / name;
   for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(p.string() + suffix);
   return p;
-}
-
-void raw_sql(const fs::path& p, const std::string& sql) {
-  sqlite3* db = nullptr;
-  REQUIRE(sqlite3_open(p.c_str(), &db) == SQLITE_OK);
-  char* message = nullptr;
-  const int rc = sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &message);
-  INFO((message ? message : ""));
-  sqlite3_free(message);
-  sqlite3_close(db);
-  REQUIRE(rc == SQLITE_OK);
-}
-
-std::int64_t sql_integer(const fs::path& p, const std::string& sql) {
-  sqlite3* db = nullptr;
-  REQUIRE(sqlite3_open(p.c_str(), &db) == SQLITE_OK);
-  sqlite3_stmt* q = nullptr;
-  REQUIRE(sqlite3_prepare_v2(db, sql.c_str(), -1, &q, nullptr) == SQLITE_OK);
-  REQUIRE(sqlite3_step(q) == SQLITE_ROW);
-  const std::int64_t v = sqlite3_column_int64(q, 0);
-  sqlite3_finalize(q);
-  sqlite3_close(db);
-  return v;
 }
 
 vmap::OrbVisualMemory load(vmap::MemoryStore& store) {

@@ -2,6 +2,7 @@
 // memory (the same file bytes), resumes exactly, refuses a second writer, serves readers
 // while it is written, and turns bad files into Errors naming the memory.
 #include "support/errors.hpp"
+#include "support/raw_sql.hpp"
 #include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
 
@@ -10,8 +11,6 @@
 #include <vmap/memory/visual_memory.hpp>
 
 #include <doctest/doctest.h>
-
-#include <sqlite3.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -23,6 +22,7 @@
 namespace {
 
 using vmap::test::error_of;
+using vmap::test::raw_sql;
 namespace fs = std::filesystem;
 
 using vmap::test::memory_estimator;
@@ -41,18 +41,6 @@ fs::path fresh(const std::string& name) {
   const fs::path p = dir / name;
   for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(p.string() + suffix);
   return p;
-}
-
-/// Runs raw SQL on a store file, as another program (sqlite3) would.
-void raw_sql(const fs::path& p, const std::string& sql) {
-  sqlite3* db = nullptr;
-  REQUIRE(sqlite3_open(p.c_str(), &db) == SQLITE_OK);
-  char* message = nullptr;
-  const int rc = sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &message);
-  INFO((message ? message : ""));
-  sqlite3_free(message);
-  sqlite3_close(db);
-  REQUIRE(rc == SQLITE_OK);
 }
 
 }  // namespace
