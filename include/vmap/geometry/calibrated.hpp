@@ -36,8 +36,12 @@ namespace vmap {
 ///   runs on the rest. The Verification's inlier_mask is aligned with the given
 ///   matches; `matches` counts all of them; the model (F or H) is the model of the ideal
 ///   pinhole image, x_ideal = K * normalised ray.
-/// - Without a camera (std::nullopt) or with an ideal one: the wrapped estimator,
-///   unchanged, so a command line can choose at run time with one type.
+/// - With an ideal camera (no distortion): the wrapped estimator on the given keypoints.
+/// - With a camera of either kind, a verified F-matrix (FundamentalEstimator) also gives
+///   the relative pose (Verification::relative_pose: R and the unit t from camera a to
+///   camera b), so the F-matrix decides as without a camera and the pose comes with it.
+/// - Without a camera (std::nullopt): the wrapped estimator, unchanged, so a command
+///   line can choose at run time with one type.
 ///
 /// The wrapped estimator sees keypoints only (positions, with the other KeyPoint fields
 /// kept) and no descriptors. Const and thread-safe when the wrapped estimator is.
@@ -55,7 +59,22 @@ class Calibrated {
       camera_->check_frame_size(a.image_size, source_);
       camera_->check_frame_size(b.image_size, source_);
     }
-    if (!camera_ || camera_->ideal()) return estimator_.verify(a, b, matches);
+    if (!camera_) return estimator_.verify(a, b, matches);
+    if (camera_->ideal()) {
+      Verification v = estimator_.verify(a, b, matches);
+      if constexpr (std::same_as<E, FundamentalEstimator>) {
+        if (v.ok()) {
+          std::vector<cv::Point2f> ia, ib;
+          for (std::size_t k = 0; k < matches.size(); ++k)
+            if (v.inlier_mask[k]) {
+              ia.push_back(a.keypoints[static_cast<std::size_t>(matches[k].queryIdx)].pt);
+              ib.push_back(b.keypoints[static_cast<std::size_t>(matches[k].trainIdx)].pt);
+            }
+          recover_pose(ia, ib, v);
+        }
+      }
+      return v;
+    }
     std::vector<cv::Point2f> pa, pb;
     std::vector<int> order;
     detail::gather_points(a, b, matches, 0, pa, pb, order);  // checks the indices; seed 0: given order
@@ -88,6 +107,15 @@ class Calibrated {
     if constexpr (std::same_as<E, FundamentalEstimator>) {
       if (v.status == VerificationStatus::verified || v.status == VerificationStatus::too_few_inliers)
         rescore_in_image_pixels(pa, pb, fa, fb, original, v);
+      if (v.ok()) {
+        std::vector<cv::Point2f> ia, ib;
+        for (std::size_t k = 0; k < kept.size(); ++k)
+          if (v.inlier_mask[k]) {
+            ia.push_back(fa.keypoints[k].pt);
+            ib.push_back(fb.keypoints[k].pt);
+          }
+        recover_pose(ia, ib, v);
+      }
     }
     v.matches = static_cast<int>(matches.size());
     if (!v.inlier_mask.empty()) {
@@ -199,6 +227,29 @@ class Calibrated {
       if (std::sqrt(r.dot(r)) <= 2.0 * o.threshold_px) ++v.homography_inliers;
     }
     if (v.homography_inliers >= o.degeneracy_ratio * v.inliers) v.degeneracy = Degeneracy::homography;
+  }
+
+  /// The motion from camera a to camera b behind a verified F of the ideal image: E =
+  /// K^T F K (Hartley and Zisserman, eq. 9.12), decomposed by cv::recoverPose on the ideal
+  /// pixels of the inliers (the cheirality test picks one of the four solutions). No pose
+  /// is an expected outcome (no inlier in front of both cameras).
+  void recover_pose(const std::vector<cv::Point2f>& ia, const std::vector<cv::Point2f>& ib, Verification& v) const
+    requires std::same_as<E, FundamentalEstimator>
+  {
+    const cv::Matx33d K = camera_->K();
+    cv::Mat R, t;
+    try {
+      const int front = cv::recoverPose(cv::Mat(K.t() * v.model * K), ia, ib, cv::Mat(K), R, t);
+      RelativePose p;
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) p.rotation(r, c) = R.at<double>(r, c);
+        p.translation[r] = t.at<double>(r, 0);
+      }
+      p.points_in_front = front;
+      v.relative_pose = p;
+    } catch (const cv::Exception&) {
+      v.relative_pose.reset();
+    }
   }
 
   static bool finite(const cv::Point2f& p) noexcept { return std::isfinite(p.x) && std::isfinite(p.y); }

@@ -58,7 +58,16 @@ Run run_f(const LensScene& s, const vmap::Camera& cam, bool with_camera, bool id
   REQUIRE(v.ok());
   r.inliers = v.inliers;
   r.t = tally(s, v);
-  if (with_camera || ideal_points) {
+  if (with_camera) {
+    // The pose Calibrated recovers from its F (E = K^T F K) ...
+    REQUIRE(v.relative_pose.has_value());
+    CHECK(cv::norm(v.relative_pose->translation) == doctest::Approx(1.0).epsilon(1e-9));
+    CHECK(v.relative_pose->points_in_front >= v.inliers - 5);
+    r.rot = vmap::test::rotation_error_deg(v.relative_pose->rotation, s.R);
+    r.dir = vmap::test::direction_error_deg(v.relative_pose->translation, s.t);
+  } else if (ideal_points) {
+    // ... and the one a test recovers from a plain F on ideal pixels.
+    CHECK_FALSE(v.relative_pose.has_value());
     const auto p = vmap::test::pose_from_f(s, cam, v, ideal_points);
     r.rot = vmap::test::rotation_error_deg(p.rotation, s.R);
     r.dir = vmap::test::direction_error_deg(p.translation, s.t);
@@ -85,6 +94,14 @@ TEST_CASE("with the camera, F and E on strong lenses keep the ideal pinhole's in
       const Run pin = run_f(ideal, cam, false, true);
       const Run cal = run_f(real, cam, true, false);
       const Run raw = run_f(real, cam, false, false);
+      // An ideal camera (no distortion) takes the plain F's path and recovers the pose too.
+      vmap::Camera undistorted = cam;
+      undistorted.lens = vmap::LensModel::pinhole;
+      undistorted.distortion.clear();
+      const Run pin_cal = run_f(ideal, undistorted, true, false);
+      CHECK(pin_cal.inliers == pin.inliers);
+      CHECK(pin_cal.rot < 0.2);
+      CHECK(pin_cal.dir < 2.5);
       CHECK(pin.inliers >= real.true_inliers - 3);
       // Calibrated F: the pinhole count within 2 %, nearly all of them true inliers.
       CHECK(std::abs(cal.inliers - pin.inliers) <= 0.02 * pin.inliers);
