@@ -1,14 +1,17 @@
 #pragma once
 
 // What the subcommands that read or write a visual memory file share (`vmap build
-// --memory`, `vmap localize --memory`, `vmap loops --memory`, `vmap memory ...`): the one
-// policy stack they all use, the --memory path rule, loading with errors that name the
-// option, streaming frames into a memory store (memory/store.hpp) synced at every key
-// image, and the JSON / text of key images, localization answers and loop edges.
+// --memory`, `vmap localize --memory`, `vmap loops --memory`, `vmap memory ...`): the
+// policy stack a memory records and every reader instantiates again, the --memory path
+// rule, loading with errors that name the option, streaming frames into a memory store
+// (memory/store.hpp) synced at every key image, and the JSON / text of key images,
+// localization answers and loop edges.
 
 #include "common/cli_support.hpp"
+#include "common/policies.hpp"
 
 #include <vmap/core/error.hpp>
+#include <vmap/geometry/calibrated.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
 #include <vmap/memory/store.hpp>
@@ -21,6 +24,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -33,10 +37,126 @@
 
 namespace vmap::examples {
 
-/// Every memory file the command line writes or reads uses this stack (ORB 1000 + mutual
-/// NN + MAGSAC++ + eq. 5): the file holds the memory's options, not its policies', so a
-/// reader must use the writer's.
-using CliMemory = OrbVisualMemory;
+/// What a memory the command line writes is built with: the descriptor (--features,
+/// --nfeatures, --model, --refine-model), the F-matrix method (--estimator) and the
+/// camera (--camera). A memory holds its options but not its policies, so the store
+/// records this (the note `stack_note`) and every command that reads the memory
+/// instantiates the same stack from it. A memory without the note (a .vmem file, a store
+/// written by the library or by an earlier vmap) is ORB 1000 + MAGSAC++ on raw pixels,
+/// the stack the command line used before it had a choice.
+struct MemoryStack {
+  DescriptorChoice descriptor;
+  std::string estimator = "magsac";
+  std::optional<CameraOption> camera;  ///< the calibration, kept in the note, not read again
+};
+
+/// The store's note that records a MemoryStack (JSON, examples/memory.md).
+inline constexpr const char* stack_note = "stack";
+
+inline nlohmann::json stack_json(const MemoryStack& s) {
+  nlohmann::json j{{"features", s.descriptor.name},
+                   {"nfeatures", s.descriptor.features},
+                   {"model", s.descriptor.model},
+                   {"refine_model", s.descriptor.refine_model},
+                   {"estimator", s.estimator},
+                   {"camera", nullptr}};
+  if (s.camera) {
+    const Camera& c = s.camera->camera;
+    j["camera"] = {{"file", path_string(s.camera->file)},
+                   {"lens", c.lens == LensModel::pinhole ? "pinhole" : "fisheye"},
+                   {"fx", c.fx},
+                   {"fy", c.fy},
+                   {"cx", c.cx},
+                   {"cy", c.cy},
+                   {"distortion", c.distortion},
+                   {"width", c.image_size.width},
+                   {"height", c.image_size.height}};
+  }
+  return j;
+}
+
+/// A MemoryStack from the command line: model paths made absolute, so that a reader in
+/// another folder finds them.
+inline MemoryStack stack_of_args(DescriptorChoice d, std::string estimator, const std::string& camera_file) {
+  std::error_code ec;
+  for (std::string* path : {&d.model, &d.refine_model})
+    if (!path->empty()) {
+      const auto abs = std::filesystem::weakly_canonical(*path, ec);
+      if (!ec) *path = abs.string();
+    }
+  (void)parse_method(estimator);  // an unknown method is refused before the memory is made
+  return {std::move(d), std::move(estimator), load_camera_option(camera_file)};
+}
+
+/// The stack a memory store records; the default stack when it records none. A note
+/// that is not a stack is a vmap::Error naming the memory.
+inline MemoryStack recorded_stack(MemoryStore& store) {
+  const auto note = store.note(stack_note);
+  if (!note) return {};
+  const std::string who = "memory '" + store.path().string() + "': its recorded stack";
+  try {
+    const auto j = nlohmann::json::parse(*note);
+    MemoryStack s;
+    s.descriptor.name = j.at("features").get<std::string>();
+    s.descriptor.features = j.at("nfeatures").get<int>();
+    s.descriptor.model = j.at("model").get<std::string>();
+    s.descriptor.refine_model = j.at("refine_model").get<std::string>();
+    s.estimator = j.at("estimator").get<std::string>();
+    if (const auto& c = j.at("camera"); !c.is_null()) {
+      Camera cam;
+      const auto lens = c.at("lens").get<std::string>();
+      if (lens != "pinhole" && lens != "fisheye") vmap::detail::fail(who + ": unknown lens '" + lens + "'");
+      cam.lens = lens == "pinhole" ? LensModel::pinhole : LensModel::fisheye;
+      cam.fx = c.at("fx").get<double>();
+      cam.fy = c.at("fy").get<double>();
+      cam.cx = c.at("cx").get<double>();
+      cam.cy = c.at("cy").get<double>();
+      cam.distortion = c.at("distortion").get<std::vector<double>>();
+      cam.image_size = {c.at("width").get<int>(), c.at("height").get<int>()};
+      cam.validate(who + "'s camera");
+      s.camera = CameraOption{c.at("file").get<std::string>(), cam};
+    }
+    return s;
+  } catch (const nlohmann::json::exception& e) {
+    vmap::detail::fail(who + " is not valid: " + e.what());
+  }
+}
+
+/// The stack's F-matrix verification: MAGSAC++ (or --estimator's method) at 1 px, on the
+/// camera's undistorted keypoints when the stack has one (Calibrated, which then also
+/// gives the relative pose of a localized query).
+inline Calibrated<FundamentalEstimator> memory_estimator(const MemoryStack& s) {
+  return {s.camera ? std::optional<Camera>(s.camera->camera) : std::nullopt,
+          FundamentalEstimator({.method = parse_method(s.estimator)}),
+          s.camera ? "the memory's camera (from " + s.camera->file.string() + ")" : std::string("camera")};
+}
+
+/// Calls f(descriptor, matcher, estimator) with the stack's policies (one instantiation
+/// of f per descriptor type, as with_descriptor); f builds or loads a memory of
+/// MemoryOf<decltype(descriptor), ...>.
+template <class F>
+int with_stack(const MemoryStack& s, F&& f) {
+  const auto estimator = memory_estimator(s);
+  return with_descriptor(s.descriptor, [&](auto descriptor) -> int {
+    auto matcher = matcher_for(descriptor);
+    auto verifier = estimator_for(descriptor, s.descriptor, estimator);
+    return f(std::move(descriptor), std::move(matcher), std::move(verifier));
+  });
+}
+
+/// The memory type of a policy stack (eq. 5's inlier ratio as the similarity).
+template <class D, class M, class E>
+using MemoryOf = VisualMemory<D, M, E, InlierRatio>;
+
+/// "ORB 1000, MAGSAC++" / "XFeat* (model ...), camera tum.yaml": for summaries.
+inline std::string stack_text(const MemoryStack& s) {
+  std::string out = s.descriptor.name;
+  if (s.descriptor.name == "orb" || s.descriptor.name == "sift" || s.descriptor.name == "xfeat")
+    out += " " + std::to_string(s.descriptor.features);
+  out += ", " + s.estimator;
+  out += s.camera ? ", camera " + s.camera->file.string() : ", raw pixels";
+  return out;
+}
 
 /// --working-memory's default: key images whose features a memory the command line
 /// writes keeps in RAM (examples/memory.md, "Bounded memory": reading a released key
@@ -110,24 +230,49 @@ inline void check_memory_file(const std::filesystem::path& file) {
     vmap::detail::fail("'" + file.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file)");
 }
 
+/// The stack a memory file records (the default stack for a .vmem file, which has no
+/// notes).
+inline MemoryStack memory_stack(const std::filesystem::path& file, const std::string& option) {
+  check_input_file(file, option);
+  check_memory_file(file);
+  if (memory_file_kind(file) != MemoryFileKind::store) return {};
+  auto store = MemoryStore::open(file, sqlite::Access::read);
+  return recorded_stack(store);
+}
+
+/// Reads a memory file with the given policies (its recorded stack's, from with_stack).
 /// `pixels`: decode the key images' pixels (false for the commands that never show them:
 /// info, export, loops, localize; the memory then cannot be written with pixels).
-inline CliMemory load_memory(const std::filesystem::path& file, const std::string& option, bool pixels = true) {
+template <class D, class M, class E>
+MemoryOf<D, M, E> load_memory_with(const std::filesystem::path& file, const std::string& option, bool pixels,
+                                   D descriptor, M matcher, E estimator) {
   check_input_file(file, option);
   check_memory_file(file);
   MapLoadOptions limits;
   limits.decode_images = pixels;
   if (memory_file_kind(file) == MemoryFileKind::store) {
     auto store = MemoryStore::open(file, sqlite::Access::read);
-    return store.load<CliMemory>(OrbDescriptor{}, BruteForceMatcher{}, FundamentalEstimator{}, InlierRatio{}, limits);
+    return store.load<MemoryOf<D, M, E>>(std::move(descriptor), std::move(matcher), std::move(estimator), InlierRatio{},
+                                         limits);
   }
-  return CliMemory::load(file, OrbDescriptor{}, BruteForceMatcher{}, FundamentalEstimator{}, InlierRatio{}, limits);
+  return MemoryOf<D, M, E>::load(file, std::move(descriptor), std::move(matcher), std::move(estimator), InlierRatio{}, limits);
+}
+
+/// Loads the memory file with its recorded stack and calls f(memory, stack).
+template <class F>
+int with_memory(const std::filesystem::path& file, const std::string& option, bool pixels, F&& f) {
+  const MemoryStack stack = memory_stack(file, option);
+  return with_stack(stack, [&](auto descriptor, auto matcher, auto estimator) -> int {
+      auto mem = load_memory_with(file, option, pixels, std::move(descriptor), std::move(matcher), std::move(estimator));
+      return f(mem, stack);
+  });
 }
 
 /// A memory store a run writes into, and the memory it holds.
+template <class Memory>
 struct MemoryWriter {
   MemoryStore store;
-  CliMemory memory;
+  Memory memory;
 };
 
 /// What a memory records of its input (the "input" note): the input's path, its first
@@ -150,7 +295,8 @@ inline std::string session_note(std::size_t session) {
 /// --resume of a store whose last session was built from another input (path, first
 /// frame or stride) is refused with both named; a store without the note (written by the
 /// library, or converted) takes this run's.
-inline void check_same_input(MemoryWriter& w, const std::string& fingerprint) {
+template <class Memory>
+void check_same_input(MemoryWriter<Memory>& w, const std::string& fingerprint) {
   const std::string name = session_note(w.memory.sessions().size() - 1);
   const auto recorded = w.store.note(name);
   if (!recorded) {
@@ -171,20 +317,25 @@ inline void check_same_input(MemoryWriter& w, const std::string& fingerprint) {
 }
 
 /// A new memory store at `file` (an existing memory removed first when `force`; the
-/// caller checked it with prepare_memory_output).
-inline MemoryWriter create_memory(const std::filesystem::path& file, bool force, CliMemory memory) {
+/// caller checked it with prepare_memory_output), recording the memory's `stack`.
+template <class Memory>
+MemoryWriter<Memory> create_memory(const std::filesystem::path& file, bool force, Memory memory,
+                                   const MemoryStack& stack) {
   if (force) {
     std::error_code ec;
     for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(file.string() + suffix, ec);
   }
-  return MemoryWriter{MemoryStore::create(file), std::move(memory)};
+  MemoryWriter<Memory> w{MemoryStore::create(file), std::move(memory)};
+  w.store.set_note(stack_note, stack_json(stack).dump());
+  return w;
 }
 
 /// Removes the store a run created when the run ends (an error, no frame) before
 /// keep(): no empty memory is left behind. A resumed memory is never removed.
+template <class Memory>
 class NewMemoryGuard {
  public:
-  NewMemoryGuard(std::optional<MemoryWriter>& w, bool created) : w_(&w), armed_(created) {}
+  NewMemoryGuard(std::optional<MemoryWriter<Memory>>& w, bool created) : w_(&w), armed_(created) {}
   NewMemoryGuard(const NewMemoryGuard&) = delete;
   NewMemoryGuard& operator=(const NewMemoryGuard&) = delete;
   void keep() noexcept { armed_ = false; }
@@ -197,7 +348,7 @@ class NewMemoryGuard {
   }
 
  private:
-  std::optional<MemoryWriter>* w_;
+  std::optional<MemoryWriter<Memory>>* w_;
   bool armed_;
 };
 
@@ -219,18 +370,23 @@ inline std::optional<Continuation> continuation_of(bool resume, bool new_session
   return std::nullopt;
 }
 
-/// The memory a run continues: a missing file is a usage error that says how to start
-/// one; options that would change the memory's own (`options_kept`, given on the command
-/// line) conflict. With a `working_memory` (> 0) the memory is loaded holding only that
-/// many key images' features (MemoryStore::load_bounded). A new session is started, and
-/// the input's `fingerprint` recorded as its input.
-inline MemoryWriter memory_to_continue(const std::filesystem::path& file, const CLI::App& app,
-                                       const std::vector<std::string>& options_kept, std::size_t working_memory,
-                                       Continuation how = Continuation::resume) {
+/// The options that make a memory's policy stack: a continued memory keeps its own.
+inline const std::vector<std::string>& stack_options() {
+  static const std::vector<std::string> names{"--features", "--model", "--refine-model", "--nfeatures",
+                                              "--estimator", "--camera"};
+  return names;
+}
+
+/// The store of the memory a run continues: a missing file is a usage error that says
+/// how to start one; options that would change the memory's own (`options_kept` and
+/// stack_options(), given on the command line) conflict.
+inline MemoryStore store_to_continue(const std::filesystem::path& file, const CLI::App& app,
+                                     const std::vector<std::string>& options_kept, Continuation how) {
   const std::string flag = how == Continuation::resume ? "--resume" : "--session new";
-  for (const auto& o : options_kept)
-    if (app.get_option(o)->count() > 0)
-      usage_error(flag + " and " + o + " conflict (a continued memory keeps the options it was started with)");
+  for (const auto& list : {options_kept, stack_options()})
+    for (const auto& o : list)
+      if (app.get_option(o)->count() > 0)
+        usage_error(flag + " and " + o + " conflict (a continued memory keeps the options it was started with)");
   std::error_code ec;
   if (!std::filesystem::exists(file, ec))
     usage_error(flag + ": no memory file '" + file.string() + "' to continue (run without " + flag + " to start one)");
@@ -243,14 +399,29 @@ inline MemoryWriter memory_to_continue(const std::filesystem::path& file, const 
   if (!store.synced())
     usage_error(flag + ": the memory '" + file.string() + "' holds nothing yet (its first run stopped before its "
                 "first key image was written): start it again with --force");
-  auto memory = working_memory > 0 ? store.load_bounded<CliMemory>(working_memory) : store.load<CliMemory>();
+  return store;
+}
+
+/// The memory a run continues, from its store (store_to_continue) with its recorded
+/// policies. With a `working_memory` (> 0) the memory is loaded holding only that many
+/// key images' features (MemoryStore::load_bounded). With Continuation::new_session a new
+/// session is started.
+template <class D, class M, class E>
+MemoryWriter<MemoryOf<D, M, E>> memory_to_continue(MemoryStore store, std::size_t working_memory, Continuation how,
+                                                   D descriptor, M matcher, E estimator) {
+  using Memory = MemoryOf<D, M, E>;
+  auto memory = working_memory > 0
+                    ? store.load_bounded<Memory>(working_memory, std::move(descriptor), std::move(matcher),
+                                                 std::move(estimator), InlierRatio{})
+                    : store.load<Memory>(std::move(descriptor), std::move(matcher), std::move(estimator), InlierRatio{});
   if (how == Continuation::new_session) memory.start_session();
-  return MemoryWriter{std::move(store), std::move(memory)};
+  return MemoryWriter<Memory>{std::move(store), std::move(memory)};
 }
 
 /// Records `fingerprint` as the input of the memory's last session: a new session's, or
 /// (checked) the resumed one's.
-inline void record_input(MemoryWriter& w, Continuation how, const std::string& fingerprint) {
+template <class Memory>
+void record_input(MemoryWriter<Memory>& w, Continuation how, const std::string& fingerprint) {
   if (how == Continuation::resume)
     check_same_input(w, fingerprint);
   else
@@ -268,7 +439,8 @@ struct NewMemory {
   double min_confidence = PlaceDecisionOptions{}.min_confidence;
 };
 
-inline CliMemory new_memory(const NewMemory& n) {
+template <class D, class M, class E>
+MemoryOf<D, M, E> new_memory(const NewMemory& n, D descriptor, M matcher, E estimator) {
   MemoryOptions o;
   o.selector.tau = n.tau;
   o.selector.rule = n.rule;
@@ -287,13 +459,14 @@ inline CliMemory new_memory(const NewMemory& n) {
     check_input_file(n.vocabulary, "--vocabulary");
     voc = AnyVocabulary::load(n.vocabulary);
   }
-  return CliMemory(o, std::move(voc));
+  return MemoryOf<D, M, E>(std::move(descriptor), std::move(matcher), std::move(estimator), InlierRatio{}, o, std::move(voc));
 }
 
 /// The frame range a resumed memory reads: the frames after the last one it holds, in
 /// the sequence's index space (the same --stride as the first run gives the same frames
 /// an uninterrupted run would have read). Nothing left to read is a usage error.
-inline FrameSourceOptions resume_range(const CliMemory& mem, FrameSourceOptions so, const std::string& file) {
+template <class Memory>
+FrameSourceOptions resume_range(const Memory& mem, FrameSourceOptions so, const std::string& file) {
   if (const auto last = mem.last_frame_index()) so.start = std::max(so.start, *last + so.stride);
   if (so.start >= so.end)
     usage_error("--resume: the memory '" + file + "' already holds every frame up to --end (its last frame is " +
@@ -304,7 +477,8 @@ inline FrameSourceOptions resume_range(const CliMemory& mem, FrameSourceOptions 
 /// --resume of a memory that already holds the last frame of a folder or list (whose
 /// length is exact; a video's stated frame count is not trusted): a usage error that
 /// says so, as resume_range says it for --end, instead of a run that reads no frame.
-inline void check_frames_left(const CliMemory& mem, const FrameSource& src, const FrameSourceOptions& so,
+template <class Memory>
+void check_frames_left(const Memory& mem, const FrameSource& src, const FrameSourceOptions& so,
                               const std::string& file) {
   const auto total = src.total();
   if (src.kind() != SourceKind::video && total && so.start >= *total)
@@ -364,8 +538,8 @@ class FramePoses {
 /// run killed half way resumes from the last sync. The memory holds the features of its
 /// `working_memory` most recent key images in RAM (0: all) and reads the others from the
 /// store. `on_frame(mem)` is called after each push.
-template <class OnFrame>
-StreamResult stream_into(MemoryWriter& w, FrameSource& src, std::size_t save_every, std::size_t working_memory,
+template <class Memory, class OnFrame>
+StreamResult stream_into(MemoryWriter<Memory>& w, FrameSource& src, std::size_t save_every, std::size_t working_memory,
                          const std::optional<FramePoses>& poses, OnFrame&& on_frame) {
   using clock = std::chrono::steady_clock;
   if (working_memory > 0) w.store.bound(w.memory, working_memory);
@@ -425,7 +599,8 @@ inline std::string pose_text(const OdometryPose& p) {
 }
 
 /// A verified key image of a localization answer.
-inline nlohmann::json link_json(const CliMemory& mem, const PlaceLink& l) {
+template <class Memory>
+nlohmann::json link_json(const Memory& mem, const PlaceLink& l) {
   const auto& k = mem.map().keys[l.key];
   nlohmann::json f = nlohmann::json::array();
   for (double e : l.fundamental.val) f.push_back(e);
@@ -443,7 +618,8 @@ inline nlohmann::json link_json(const CliMemory& mem, const PlaceLink& l) {
 
 /// A loop edge: key images (from, to) and their frames (query, match), as `vmap loops`
 /// names the frames of a loop.
-inline nlohmann::json loop_json(const CliMemory& mem, const LoopEdge& e) {
+template <class Memory>
+nlohmann::json loop_json(const Memory& mem, const LoopEdge& e) {
   return {{"from", e.from},
           {"to", e.link.key},
           {"from_session", mem.session_of(e.from)},
@@ -470,8 +646,9 @@ struct MemoryQuery {
 
 /// Localizes each image (read in grey, as the memory's frames were); an unreadable image
 /// is a vmap::Error naming it.
-inline std::vector<MemoryQuery> localize_images(CliMemory& mem, const std::vector<std::string>& images,
-                                                const PlaceDecisionOptions& decision) {
+template <class Memory>
+std::vector<MemoryQuery> localize_images(Memory& mem, const std::vector<std::string>& images,
+                                         const PlaceDecisionOptions& decision) {
   std::vector<MemoryQuery> out;
   for (const auto& path : images) {
     current_inputs() = {path};
@@ -497,9 +674,28 @@ inline nlohmann::json evidence_json(const PlaceEvidence& e) {
           {"model", std::string(to_string(e.model))}};
 }
 
+/// The rotation angle of R in degrees (from its trace).
+inline double rotation_degrees(const cv::Matx33d& R) {
+  const double c = std::clamp((cv::trace(R) - 1.0) / 2.0, -1.0, 1.0);
+  return std::acos(c) * 180.0 / CV_PI;
+}
+
+/// A relative pose (core/verification.hpp): R by rows, the unit t, the inliers in front
+/// of both cameras; null when the memory has no camera or the decomposition failed.
+inline nlohmann::json relative_pose_json(const std::optional<RelativePose>& p) {
+  if (!p) return nullptr;
+  nlohmann::json r = nlohmann::json::array();
+  for (int i = 0; i < 9; ++i) r.push_back(p->rotation.val[i]);
+  return {{"rotation", r},
+          {"rotation_degrees", rotation_degrees(p->rotation)},
+          {"translation", {p->translation[0], p->translation[1], p->translation[2]}},
+          {"points_in_front", p->points_in_front}};
+}
+
 /// Every answer: per query its decision (status, reason, confidence, evidence), time and
 /// every verified key image (most confident first).
-inline nlohmann::json localizations_json(const CliMemory& mem, const std::vector<MemoryQuery>& queries) {
+template <class Memory>
+nlohmann::json localizations_json(const Memory& mem, const std::vector<MemoryQuery>& queries) {
   nlohmann::json out = nlohmann::json::array();
   for (const auto& q : queries) {
     nlohmann::json j{{"image", path_string(q.image)},
@@ -515,6 +711,9 @@ inline nlohmann::json localizations_json(const CliMemory& mem, const std::vector
     // The GCS position (Algorithm 5), present when the memory holds a trained GCS
     // (VisualMemory::train_gcs); null otherwise.
     j["position"] = q.answer.position ? pose_json(q.answer.position->pose) : nlohmann::json(nullptr);
+    // The query's camera relative to the best key image's (X_key = R X_query + t, |t| = 1),
+    // present when the memory has a camera (--camera) and the F-matrix was verified.
+    j["relative_pose"] = relative_pose_json(q.answer.relative_pose);
     for (const auto& l : q.answer.matches) j["matches"].push_back(link_json(mem, l));
     out.push_back(std::move(j));
   }
@@ -524,7 +723,8 @@ inline nlohmann::json localizations_json(const CliMemory& mem, const std::vector
 /// One line per query: the accepted key image (index, frame, name), confidence, inliers,
 /// BoW score, pose; or the decision and its reason ("unknown place (confidence 0.12 <
 /// 0.50)").
-inline void print_localizations(const CliMemory& mem, const std::vector<MemoryQuery>& queries) {
+template <class Memory>
+void print_localizations(const Memory& mem, const std::vector<MemoryQuery>& queries) {
   for (const auto& q : queries) {
     if (const auto* b = q.answer.best()) {
       const auto& k = mem.map().keys[b->key];
@@ -534,6 +734,11 @@ inline void print_localizations(const CliMemory& mem, const std::vector<MemoryQu
     } else {
       std::printf("%s: %s (%s), %.1f ms\n", q.image.c_str(), std::string(to_string(q.answer.status)).c_str(),
                   q.answer.reason.c_str(), q.ms);
+    }
+    if (q.answer.best() && q.answer.relative_pose) {
+      const RelativePose& p = *q.answer.relative_pose;
+      std::printf("  relative to the key image: rotation %.2f deg, translation direction (%.3f, %.3f, %.3f)\n",
+                  rotation_degrees(p.rotation), p.translation[0], p.translation[1], p.translation[2]);
     }
     if (q.answer.position) {
       const Pose2& p = q.answer.position->pose;
@@ -548,30 +753,33 @@ inline int localize_from_memory(const std::filesystem::path& file, const std::st
                                 const std::vector<std::string>& images, bool json,
                                 std::optional<double> min_confidence = std::nullopt) {
   current_inputs() = {file.string()};
-  CliMemory mem = load_memory(file, option, false);
-  PlaceDecisionOptions decision = mem.options().loops.decision;
-  if (min_confidence) decision.min_confidence = *min_confidence;
-  const auto queries = localize_images(mem, images, decision);
-  if (!json) {
-    print_localizations(mem, queries);
+  return with_memory(file, option, false, [&](auto& mem, const MemoryStack& stack) -> int {
+    PlaceDecisionOptions decision = mem.options().loops.decision;
+    if (min_confidence) decision.min_confidence = *min_confidence;
+    const auto queries = localize_images(mem, images, decision);
+    if (!json) {
+      print_localizations(mem, queries);
+      return 0;
+    }
+    std::size_t localized = 0;
+    for (const auto& q : queries) localized += q.answer.ok() ? 1 : 0;
+    print_json({{"command", "localize"},
+                {"memory", path_string(file)},
+                {"stack", stack_json(stack)},
+                {"frames", mem.frames()},
+                {"key_images", mem.key_images()},
+                {"min_confidence", decision.min_confidence},
+                {"queries", localizations_json(mem, queries)},
+                {"localized", localized}});
     return 0;
-  }
-  std::size_t localized = 0;
-  for (const auto& q : queries) localized += q.answer.ok() ? 1 : 0;
-  print_json({{"command", "localize"},
-              {"memory", path_string(file)},
-              {"frames", mem.frames()},
-              {"key_images", mem.key_images()},
-              {"min_confidence", decision.min_confidence},
-              {"queries", localizations_json(mem, queries)},
-              {"localized", localized}});
-  return 0;
+  });
 }
 
 /// The loop edges: with `all`, one line per edge in the style of `vmap loops` (frame
 /// names and times); otherwise a summary (how many, key images involved, confidence) and
 /// the five most confident edges, so a long memory does not flood the terminal.
-inline void print_loop_edges(const CliMemory& mem, bool all = false) {
+template <class Memory>
+void print_loop_edges(const Memory& mem, bool all = false) {
   const auto& keys = mem.map().keys;
   const bool sessions = mem.sessions().size() > 1;
   const auto session = [&](std::uint32_t k) {

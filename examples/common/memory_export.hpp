@@ -50,7 +50,8 @@ inline const std::vector<std::string>& export_file_names() {
 
 /// Writes the files of the top of this file into `dir` (each atomically), key_images.txt
 /// only when `key_list` (vmap build writes its own); returns their names.
-inline std::vector<std::string> export_memory(const CliMemory& mem, const std::filesystem::path& dir, bool key_list = true) {
+template <class Memory>
+std::vector<std::string> export_memory(const Memory& mem, const std::filesystem::path& dir, bool key_list = true) {
   const auto& keys = mem.map().keys;
   std::vector<CameraPose> trajectory;
   std::vector<std::optional<CameraPose>> posed(keys.size());

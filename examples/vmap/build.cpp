@@ -173,6 +173,7 @@ struct MemoryRun {
   std::uintmax_t bytes = 0;
   /// Writes the memory's exports (common/memory_export.hpp) into a folder.
   std::function<std::vector<std::string>(const std::filesystem::path&)> write_exports;
+  ex::MemoryStack stack;  ///< the memory's policies (a resumed memory's own)
 };
 
 /// The key images' outputs (--out), the JSON or the table, for a plain or a memory run.
@@ -210,7 +211,8 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
                    {"loops", memory->loops},
                    {"new_loops", new_loops},
                    {"last_frame_index", memory->last_frame ? nlohmann::json(*memory->last_frame) : nlohmann::json(nullptr)},
-                   {"bytes", memory->bytes}};
+                   {"bytes", memory->bytes},
+                   {"stack", ex::stack_json(memory->stack)}};
   }
   if (a.json) {
     nlohmann::json j{{"command", "build"},
@@ -236,7 +238,8 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
   std::FILE* out = stdout;
   const bool previous_rule = memory ? sel.options().rule == vmap::KeyRule::previous_frame : a.rule == "previous";
   std::fprintf(out, "vmap build: %s (%s + mutual NN + %s, threshold %.2f, %s rule)%s\n\n", a.input.c_str(),
-               a.features.c_str(), a.estimator.c_str(), memory ? sel.options().tau : args.threshold,
+               (memory ? memory->stack.descriptor.name : a.features).c_str(),
+               (memory ? memory->stack.estimator : a.estimator).c_str(), memory ? sel.options().tau : args.threshold,
                previous_rule ? "eq. 6 previous-frame" : "Algorithm 1 current-frame",
                camera ? (", camera " + camera->file.string()).c_str() : "");
   print_table(out, map);
@@ -275,71 +278,79 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   namespace fs = std::filesystem;
   const auto& a = args.common;
   auto given = [&](const char* name) { return app.get_option(name)->count() > 0; };
-  // The file holds the memory's options, not its policies': every reader uses
-  // ex::CliMemory's stack, so the writer must too.
-  for (const char* o : {"--features", "--model", "--nfeatures", "--estimator", "--camera"})
-    if (given(o))
-      ex::usage_error(std::string("--memory and ") + o +
-                      " conflict (a memory file is built and read with ORB 1000 + mutual NN + MAGSAC++)");
   if (given("--vocabulary") && given("--vocabulary-after"))
     ex::usage_error("--vocabulary and --vocabulary-after conflict (the second is for a vocabulary learned online)");
   const fs::path file = ex::memory_file(args.memory);
   const auto continuation = ex::continuation_of(args.resume, !args.session.empty(), args.force);
   const bool continued = continuation.has_value();
   const auto how = continuation.value_or(ex::Continuation::resume);
-  std::optional<ex::MemoryWriter> writer;
   std::vector<fs::path> inputs{a.input};
   if (!args.poses.empty()) {
     ex::check_input_file(args.poses, "--poses");
     inputs.emplace_back(args.poses);
   }
+  // The policy stack: a new memory's from the command line (its camera read before any
+  // folder is made), a continued one's as it recorded it (the stack's options then
+  // conflict, store_to_continue).
+  ex::MemoryStack stack;
+  if (!continued) stack = ex::stack_of_args(a.descriptor(), a.estimator, a.camera);
   ex::prepare_memory_output(file, "--memory", inputs, continued, args.force);
-  if (continued)
-    writer.emplace(ex::memory_to_continue(
-        file, app, {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after", "--min-confidence"},
-        args.working_memory, how));
-  inputs.push_back(file);
-  std::optional<ex::OutputFolder> out_dir;
-  if (!a.out.empty()) {
-    // The --out folder is replaced as a whole when the run ends: a memory inside it would go.
-    if (ex::cli_detail::inside(ex::cli_detail::resolved(file), ex::cli_detail::resolved(a.out)))
-      ex::usage_error("--memory: '" + file.string() + "' is inside the --out folder '" + a.out +
-                      "', which is replaced as a whole (keep the memory elsewhere)");
-    std::vector<std::string> files{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"};
-    files.insert(files.end(), ex::export_file_names().begin(), ex::export_file_names().end());
-    out_dir.emplace(a.out, "--out", inputs, files);
-  }
-  auto so = ex::source_options(a, true);
-  if (args.resume)
-    so = ex::resume_range(writer->memory, so, file.string());
-  auto src = vmap::FrameSource::open(a.input, so);
-  const bool no_pixels = continued ? writer->memory.options().images == vmap::ImageStorage::none : args.images == "none";
-  if (out_dir && src.kind() == vmap::SourceKind::live && no_pixels)
-    ex::usage_error("--out with --memory on a live source needs the memory's pixels (--images png or jpeg): a live "
-                    "stream cannot be read again");
-  std::optional<ex::FramePoses> poses;
-  if (args.gcs && args.poses.empty()) ex::usage_error("--gcs needs --poses FILE (the GCS learns a pose per neuron)");
-  if (!args.poses.empty()) poses.emplace(args.poses, src, args.gcs);
-  const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
+  std::optional<vmap::MemoryStore> kept;
   if (continued) {
-    ex::record_input(*writer, how, fingerprint);
-    if (args.resume) ex::check_frames_left(writer->memory, src, so, file.string());
-  } else {
-    writer.emplace(ex::create_memory(file, args.force,
-                                     ex::new_memory({.tau = args.threshold,
-                                                     .rule = ex::parse_rule(a.rule),
-                                                     .images = args.images,
-                                                     .vocabulary = args.vocabulary,
-                                                     .vocabulary_after = args.vocabulary_after,
-                                                     .min_confidence = args.min_confidence})));
-    writer->store.set_note("input", fingerprint);
+    kept.emplace(ex::store_to_continue(
+        file, app, {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after", "--min-confidence"}, how));
+    stack = ex::recorded_stack(*kept);
   }
-  ex::NewMemoryGuard guard(writer, !continued);
-  auto* mem = &writer->memory;
-  ex::Progress progress("vmap build", expected_frames(src, so));
-  MemoryRun run{file, args.resume, mem->sessions().size() - 1, {}, 0, std::nullopt, 0, {}};
-  run.stream = ex::stream_into(*writer, src, args.save_every, args.working_memory, poses, [&](const ex::CliMemory& m) {
-    progress.update(src.delivered(), std::to_string(m.key_images()) + " key images");
+  return ex::with_stack(stack, [&](auto descriptor, auto matcher, auto estimator) -> int {
+    using Memory = ex::MemoryOf<decltype(descriptor), decltype(matcher), decltype(estimator)>;
+    std::optional<ex::MemoryWriter<Memory>> writer;
+    if (continued)
+      writer.emplace(ex::memory_to_continue(std::move(*kept), args.working_memory, how, std::move(descriptor), std::move(matcher),
+                                            std::move(estimator)));
+    inputs.push_back(file);
+    std::optional<ex::OutputFolder> out_dir;
+    if (!a.out.empty()) {
+      // The --out folder is replaced as a whole when the run ends: a memory inside it would go.
+      if (ex::cli_detail::inside(ex::cli_detail::resolved(file), ex::cli_detail::resolved(a.out)))
+        ex::usage_error("--memory: '" + file.string() + "' is inside the --out folder '" + a.out +
+                        "', which is replaced as a whole (keep the memory elsewhere)");
+      std::vector<std::string> files{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"};
+      files.insert(files.end(), ex::export_file_names().begin(), ex::export_file_names().end());
+      out_dir.emplace(a.out, "--out", inputs, files);
+    }
+    auto so = ex::source_options(a, true);
+    if (args.resume)
+      so = ex::resume_range(writer->memory, so, file.string());
+    auto src = vmap::FrameSource::open(a.input, so);
+    const bool no_pixels = continued ? writer->memory.options().images == vmap::ImageStorage::none : args.images == "none";
+    if (out_dir && src.kind() == vmap::SourceKind::live && no_pixels)
+      ex::usage_error("--out with --memory on a live source needs the memory's pixels (--images png or jpeg): a live "
+                      "stream cannot be read again");
+    std::optional<ex::FramePoses> poses;
+    if (args.gcs && args.poses.empty()) ex::usage_error("--gcs needs --poses FILE (the GCS learns a pose per neuron)");
+    if (!args.poses.empty()) poses.emplace(args.poses, src, args.gcs);
+    const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
+    if (continued) {
+      ex::record_input(*writer, how, fingerprint);
+      if (args.resume) ex::check_frames_left(writer->memory, src, so, file.string());
+    } else {
+      writer.emplace(ex::create_memory(file, args.force,
+                                       ex::new_memory({.tau = args.threshold,
+                                                       .rule = ex::parse_rule(a.rule),
+                                                       .images = args.images,
+                                                       .vocabulary = args.vocabulary,
+                                                       .vocabulary_after = args.vocabulary_after,
+                                                       .min_confidence = args.min_confidence},
+                                                      std::move(descriptor), std::move(matcher), std::move(estimator)),
+                                       stack));
+      writer->store.set_note("input", fingerprint);
+    }
+    ex::NewMemoryGuard guard(writer, !continued);
+    auto* mem = &writer->memory;
+    ex::Progress progress("vmap build", expected_frames(src, so));
+    MemoryRun run{file, args.resume, mem->sessions().size() - 1, {}, 0, std::nullopt, 0, {}, stack};
+    run.stream = ex::stream_into(*writer, src, args.save_every, args.working_memory, poses, [&](const Memory& m) {
+      progress.update(src.delivered(), std::to_string(m.key_images()) + " key images");
   });
   progress.done(std::to_string(mem->key_images()) + " key images, " + std::to_string(src.skipped().size()) + " skipped");
   if (run.stream.pushed == 0)
@@ -367,7 +378,8 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
       if (!mem->holds_features(k)) whole->keys[k].features = mem->key_features(static_cast<std::uint32_t>(k));
   }
   return report(args, app, whole ? *whole : mem->map(), mem->selector(), src, run.stream.pushed, run.stream.seconds,
-                out_dir, std::nullopt, run);
+                out_dir, stack.camera, run);
+  });
 }
 
 std::function<int()> setup(CLI::App& app) {

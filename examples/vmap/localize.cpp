@@ -406,7 +406,7 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--out", s->out, "Folder for map.png, a picture of the map and the estimates (created if missing)");
   app.add_flag("--json", s->json, "Print a JSON summary on stdout instead of the table (with --memory: every answer)");
   app.add_option("--memory", s->memory,
-                 "Answer from a saved visual memory (vmap build --memory; a folder means DIR/memory.vmem): the key "
+                 "Answer from a saved visual memory (vmap build --memory; a folder means DIR/memory.vmdb): the key "
                  "image each IMAGE matches, instead of training a GCS map");
   app.add_option("image", s->images, "With --memory: the query images");
   app.add_option("--min-confidence", s->min_confidence,

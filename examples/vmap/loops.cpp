@@ -97,7 +97,8 @@ vmap::CandidateIndex parse_rank(const std::string& rank) {
 /// The ground truth over a memory's key images: (i, j) when the frames' ground truth
 /// marks (f_i, f_j) and j + window < i (the pairs the memory could find, as
 /// ground_truth_from_poses' window leaves out the near ones).
-vmap::LoopGroundTruth key_ground_truth(const LoopsArgs& a, const ex::CliMemory& mem) {
+template <class Memory>
+vmap::LoopGroundTruth key_ground_truth(const LoopsArgs& a, const Memory& mem) {
   const auto& keys = mem.map().keys;
   const std::size_t window = mem.options().loops.window;
   if (!a.gt_poses.empty()) {
@@ -126,64 +127,65 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
   ex::current_inputs() = {file.string()};
   for (const auto& [path, option] : {std::pair{a.gt, "--gt"}, std::pair{a.gt_poses, "--gt-poses"}})
     if (!path.empty()) ex::check_input_file(path, option);
-  const auto mem = ex::load_memory(file, "--memory", false);
-  const double min_confidence = mem.options().loops.decision.min_confidence;
-  nlohmann::json loops = nlohmann::json::array();
-  for (const auto& e : mem.loops()) loops.push_back(ex::loop_json(mem, e));
-  nlohmann::json j{{"command", "loops"},
-                   {"memory", ex::path_string(file)},
-                   {"frames", mem.frames()},
-                   {"key_images", mem.key_images()},
-                   {"min_confidence", min_confidence},
-                   {"stationary", mem.stationary()},
-                   {"loops", loops}};
-  if (a.gt.empty() && a.gt_poses.empty()) {
+  return ex::with_memory(file, "--memory", false, [&](const auto& mem, const ex::MemoryStack&) -> int {
+    const double min_confidence = mem.options().loops.decision.min_confidence;
+    nlohmann::json loops = nlohmann::json::array();
+    for (const auto& e : mem.loops()) loops.push_back(ex::loop_json(mem, e));
+    nlohmann::json j{{"command", "loops"},
+                     {"memory", ex::path_string(file)},
+                     {"frames", mem.frames()},
+                     {"key_images", mem.key_images()},
+                     {"min_confidence", min_confidence},
+                     {"stationary", mem.stationary()},
+                     {"loops", loops}};
+    if (a.gt.empty() && a.gt_poses.empty()) {
+      if (a.json) {
+        ex::print_json(j);
+        return 0;
+      }
+      std::printf("memory %s: %zu frames, %zu key images\n", file.c_str(), mem.frames(), mem.key_images());
+      if (mem.stationary()) std::printf("the camera never left its place: no key image is a revisit\n");
+      std::printf("%zu loop edges (confidence >= %.2f):\n", mem.loops().size(), min_confidence);
+      ex::print_loop_edges(mem, a.edges);
+      return 0;
+    }
+    // Each key image proposes its most confident edge, as each query frame proposes its
+    // best candidate in the frame-level evaluation (lcd/evaluation.hpp).
+    const auto gt = key_ground_truth(a, mem);
+    std::vector<vmap::LoopScore> scores(mem.key_images());
+    for (std::size_t k = 0; k < scores.size(); ++k) scores[k].query = k;
+    std::size_t true_edges = 0;
+    for (const auto& e : mem.loops()) {
+      auto& s = scores[e.from];
+      if (!s.match || e.link.confidence > s.score) {
+        s.match = e.link.key;
+        s.score = e.link.confidence;
+      }
+      true_edges += gt(e.from, e.link.key) ? 1 : 0;
+    }
+    const auto pr = vmap::evaluate_loops(scores, gt, min_confidence);
+    const auto full = vmap::recall_at_full_precision(vmap::precision_recall_curve(scores, gt));
+    for (auto& l : loops) l["true"] = gt(l["from"].get<std::size_t>(), l["to"].get<std::size_t>());
     if (a.json) {
+      j["loops"] = loops;
+      j["loops_gt"] = pr.positives;
+      j["true_positives"] = pr.true_positives;
+      j["false_positives"] = pr.false_positives;
+      j["precision"] = ex::finite_or_null(pr.precision);
+      j["recall"] = ex::finite_or_null(pr.recall);
+      j["recall_at_100_precision"] = ex::finite_or_null(full.recall);
+      j["true_edges"] = true_edges;
       ex::print_json(j);
       return 0;
     }
-    std::printf("memory %s: %zu frames, %zu key images\n", file.c_str(), mem.frames(), mem.key_images());
-    if (mem.stationary()) std::printf("the camera never left its place: no key image is a revisit\n");
-    std::printf("%zu loop edges (confidence >= %.2f):\n", mem.loops().size(), min_confidence);
+    std::printf("memory %s: %zu frames, %zu key images, %zu with a ground-truth loop to a key image %zu or more before\n",
+                file.c_str(), mem.frames(), mem.key_images(), pr.positives, mem.options().loops.window + 1);
+    std::printf("%zu loop edges (confidence >= %.2f), %zu true:\n", mem.loops().size(), min_confidence, true_edges);
     ex::print_loop_edges(mem, a.edges);
+    std::printf("key images (best edge each): TP %zu, FP %zu, precision %.3f, recall %.3f; recall@100%%P %.3f\n",
+                pr.true_positives, pr.false_positives, pr.precision, pr.recall, full.recall);
     return 0;
-  }
-  // Each key image proposes its most confident edge, as each query frame proposes its
-  // best candidate in the frame-level evaluation (lcd/evaluation.hpp).
-  const auto gt = key_ground_truth(a, mem);
-  std::vector<vmap::LoopScore> scores(mem.key_images());
-  for (std::size_t k = 0; k < scores.size(); ++k) scores[k].query = k;
-  std::size_t true_edges = 0;
-  for (const auto& e : mem.loops()) {
-    auto& s = scores[e.from];
-    if (!s.match || e.link.confidence > s.score) {
-      s.match = e.link.key;
-      s.score = e.link.confidence;
-    }
-    true_edges += gt(e.from, e.link.key) ? 1 : 0;
-  }
-  const auto pr = vmap::evaluate_loops(scores, gt, min_confidence);
-  const auto full = vmap::recall_at_full_precision(vmap::precision_recall_curve(scores, gt));
-  for (auto& l : loops) l["true"] = gt(l["from"].get<std::size_t>(), l["to"].get<std::size_t>());
-  if (a.json) {
-    j["loops"] = loops;
-    j["loops_gt"] = pr.positives;
-    j["true_positives"] = pr.true_positives;
-    j["false_positives"] = pr.false_positives;
-    j["precision"] = ex::finite_or_null(pr.precision);
-    j["recall"] = ex::finite_or_null(pr.recall);
-    j["recall_at_100_precision"] = ex::finite_or_null(full.recall);
-    j["true_edges"] = true_edges;
-    ex::print_json(j);
-    return 0;
-  }
-  std::printf("memory %s: %zu frames, %zu key images, %zu with a ground-truth loop to a key image %zu or more before\n",
-              file.c_str(), mem.frames(), mem.key_images(), pr.positives, mem.options().loops.window + 1);
-  std::printf("%zu loop edges (confidence >= %.2f), %zu true:\n", mem.loops().size(), min_confidence, true_edges);
-  ex::print_loop_edges(mem, a.edges);
-  std::printf("key images (best edge each): TP %zu, FP %zu, precision %.3f, recall %.3f; recall@100%%P %.3f\n",
-              pr.true_positives, pr.false_positives, pr.precision, pr.recall, full.recall);
-  return 0;
+  });
 }
 
 int run(LoopsArgs& a, const CLI::App& app) {
@@ -550,7 +552,7 @@ std::function<int()> setup(CLI::App& app) {
                "Print one line per frame to stderr (candidates, best, inliers, confidence, status and reason)");
   app.add_option("--memory", a->memory,
                  "Instead of INPUT: the loop edges of a saved visual memory (vmap build --memory; a folder means "
-                 "DIR/memory.vmem), evaluated over its key images with --gt / --gt-poses");
+                 "DIR/memory.vmdb), evaluated over its key images with --gt / --gt-poses");
   app.add_flag("--edges", a->edges, "With --memory: list every loop edge (default: a summary and the 5 strongest)");
   return [a, &app] {
     if (!a->memory.empty()) return run_memory(*a, app);

@@ -6,6 +6,7 @@
 // `vmap build --memory`, `vmap localize --memory` and `vmap loops --memory` do the same
 // within the main subcommands; both share common/memory_cli.hpp.
 #include "common/cli_support.hpp"
+#include "common/keyframe_cli.hpp"
 #include "common/memory_cli.hpp"
 #include "common/memory_export.hpp"
 #include "vmap/cli.hpp"
@@ -41,6 +42,9 @@ struct MemoryArgs {
   std::string storage = "none";
   std::size_t start = 0, end = 0, stride = 1, save_every = 0;
   std::size_t working_memory = ex::default_working_memory;
+  // build: the memory's policy stack (recorded in it; common/memory_cli.hpp)
+  std::string features = "orb", model, refine_model, estimator = "magsac", camera;
+  int nfeatures = 1000;
 };
 
 int build(const MemoryArgs& a, const CLI::App& app) {
@@ -50,52 +54,63 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   const auto continuation = ex::continuation_of(a.resume, !a.session.empty(), a.force);
   const bool continued = continuation.has_value();
   const auto how = continuation.value_or(ex::Continuation::resume);
-  std::optional<ex::MemoryWriter> writer;
   vmap::FrameSourceOptions so{.start = a.start, .stride = a.stride, .grey = true, .time_offset = a.time_offset};
   if (a.end > 0) so.end = a.end;
+  ex::MemoryStack stack;
+  if (!continued) stack = ex::stack_of_args({a.features, a.nfeatures, a.model, a.refine_model}, a.estimator, a.camera);
   ex::prepare_memory_output(file, "--memory", {a.input}, continued, a.force);
-  std::optional<ex::CliMemory> fresh;
+  std::optional<vmap::MemoryStore> kept;
   if (continued) {
-    writer.emplace(ex::memory_to_continue(file, app, {"--threshold", "--images", "--vocabulary", "--min-confidence"},
-                                          a.working_memory, how));
-    if (a.resume) so = ex::resume_range(writer->memory, so, file.string());
-  } else {
-    ex::NewMemory n{.tau = a.tau, .images = a.storage, .vocabulary = a.vocabulary};
-    if (a.min_confidence) n.min_confidence = *a.min_confidence;
-    fresh.emplace(ex::new_memory(n));
+    kept.emplace(ex::store_to_continue(file, app, {"--threshold", "--images", "--vocabulary", "--min-confidence"}, how));
+    stack = ex::recorded_stack(*kept);
   }
-  auto src = vmap::FrameSource::open(a.input, so);
-  const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
-  if (continued) {
-    ex::record_input(*writer, how, fingerprint);
-    if (a.resume) ex::check_frames_left(writer->memory, src, so, file.string());
-  } else {
-    writer.emplace(ex::create_memory(file, a.force, std::move(*fresh)));
-    writer->store.set_note("input", fingerprint);
-  }
-  ex::NewMemoryGuard guard(writer, !continued);
-  const auto r = ex::stream_into(*writer, src, a.save_every, a.working_memory, std::nullopt, [](const ex::CliMemory&) {});
-  if (r.pushed == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
-  guard.keep();
-  writer->store.checkpoint();
-  const auto* mem = &writer->memory;
-  const double ms = r.pushed ? 1000.0 * r.seconds / static_cast<double>(r.pushed) : 0.0;
-  if (a.json) {
-    nlohmann::json loops = nlohmann::json::array();
-    for (const auto& e : r.loops) loops.push_back(ex::loop_json(*mem, e));
-    ex::print_json({{"memory", ex::path_string(file)}, {"session", mem->sessions().size() - 1}, {"pushed", r.pushed}, {"frames", mem->frames()},
-                    {"key_images", mem->key_images()}, {"loops", mem->loops().size()}, {"new_loops", loops},
-                    {"last_frame_index", mem->last_frame_index().value_or(0)}, {"bytes", fs::file_size(file)},
-                    {"seconds", r.seconds}});
-  } else {
-    std::printf("session %zu: %s %zu frames (%zu in all): %zu key images, %zu loop edges (%zu new), %.1f ms per frame\n",
-                mem->sessions().size(), a.resume ? "resumed with" : "pushed", r.pushed, mem->frames(), mem->key_images(), mem->loops().size(),
-                r.loops.size(), ms);
-    std::printf("wrote '%s' (%ju bytes, %zu syncs in %.2f s); last frame %zu\n", file.c_str(),
-                static_cast<std::uintmax_t>(fs::file_size(file)), r.saves, r.save_seconds,
-                mem->last_frame_index().value_or(0));
-  }
-  return 0;
+  return ex::with_stack(stack, [&](auto descriptor, auto matcher, auto estimator) -> int {
+    using Memory = ex::MemoryOf<decltype(descriptor), decltype(matcher), decltype(estimator)>;
+    std::optional<ex::MemoryWriter<Memory>> writer;
+    std::optional<Memory> fresh;
+    if (continued) {
+      writer.emplace(ex::memory_to_continue(std::move(*kept), a.working_memory, how, std::move(descriptor),
+                                            std::move(matcher), std::move(estimator)));
+      if (a.resume) so = ex::resume_range(writer->memory, so, file.string());
+    } else {
+      ex::NewMemory n{.tau = a.tau, .images = a.storage, .vocabulary = a.vocabulary};
+      if (a.min_confidence) n.min_confidence = *a.min_confidence;
+      fresh.emplace(ex::new_memory(n, std::move(descriptor), std::move(matcher), std::move(estimator)));
+    }
+    auto src = vmap::FrameSource::open(a.input, so);
+    const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
+    if (continued) {
+      ex::record_input(*writer, how, fingerprint);
+      if (a.resume) ex::check_frames_left(writer->memory, src, so, file.string());
+    } else {
+      writer.emplace(ex::create_memory(file, a.force, std::move(*fresh), stack));
+      writer->store.set_note("input", fingerprint);
+    }
+    ex::NewMemoryGuard guard(writer, !continued);
+    const auto r = ex::stream_into(*writer, src, a.save_every, a.working_memory, std::nullopt, [](const Memory&) {});
+    if (r.pushed == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
+    guard.keep();
+    writer->store.checkpoint();
+    const auto* mem = &writer->memory;
+    const double ms = r.pushed ? 1000.0 * r.seconds / static_cast<double>(r.pushed) : 0.0;
+    if (a.json) {
+      nlohmann::json loops = nlohmann::json::array();
+      for (const auto& e : r.loops) loops.push_back(ex::loop_json(*mem, e));
+      ex::print_json({{"memory", ex::path_string(file)}, {"stack", ex::stack_json(stack)},
+                      {"session", mem->sessions().size() - 1}, {"pushed", r.pushed}, {"frames", mem->frames()},
+                      {"key_images", mem->key_images()}, {"loops", mem->loops().size()}, {"new_loops", loops},
+                      {"last_frame_index", mem->last_frame_index().value_or(0)}, {"bytes", fs::file_size(file)},
+                      {"seconds", r.seconds}});
+    } else {
+      std::printf("session %zu: %s %zu frames (%zu in all): %zu key images, %zu loop edges (%zu new), %.1f ms per frame\n",
+                  mem->sessions().size(), a.resume ? "resumed with" : "pushed", r.pushed, mem->frames(), mem->key_images(), mem->loops().size(),
+                  r.loops.size(), ms);
+      std::printf("wrote '%s' (%s; %ju bytes, %zu syncs in %.2f s); last frame %zu\n", file.c_str(),
+                  ex::stack_text(stack).c_str(), static_cast<std::uintmax_t>(fs::file_size(file)), r.saves,
+                  r.save_seconds, mem->last_frame_index().value_or(0));
+    }
+    return 0;
+  });
 }
 
 /// One session of a memory as `memory info` shows it.
@@ -106,7 +121,8 @@ struct SessionInfo {
   std::optional<std::uintmax_t> bytes;             ///< its key images' rows (stores)
 };
 
-std::vector<SessionInfo> session_infos(const ex::CliMemory& mem, const std::filesystem::path& file) {
+template <class Memory>
+std::vector<SessionInfo> session_infos(const Memory& mem, const std::filesystem::path& file) {
   const auto& sessions = mem.sessions();
   std::vector<SessionInfo> out(sessions.size());
   for (std::size_t s = 0; s < sessions.size(); ++s) {
@@ -137,52 +153,55 @@ std::vector<SessionInfo> session_infos(const ex::CliMemory& mem, const std::file
 int info(const MemoryArgs& a) {
   const auto file = ex::memory_file(a.memory);
   ex::current_inputs() = {file.string()};
-  const auto mem = ex::load_memory(file, "memory", false);
-  const auto sessions = session_infos(mem, file);
-  nlohmann::json keys = nlohmann::json::array(), loops = nlohmann::json::array(), sess = nlohmann::json::array();
-  for (std::size_t k = 0; k < mem.key_images(); ++k)
-    keys.push_back({{"key", k},
-                    {"session", mem.session_of(k)},
-                    {"frame_index", mem.map().keys[k].frame_index},
-                    {"name", mem.map().keys[k].name},
-                    {"pose", ex::pose_json(mem.poses()[k])}});
-  for (const auto& e : mem.loops()) loops.push_back(ex::loop_json(mem, e));
-  for (const auto& s : sessions)
-    sess.push_back({{"first_key", s.first_key},
-                    {"key_images", s.key_images},
-                    {"frames", s.frames},
-                    {"loops_within", s.loops_within},
-                    {"loops_across", s.loops_across},
-                    {"input", s.input ? nlohmann::json(*s.input) : nlohmann::json(nullptr)},
-                    {"bytes", s.bytes ? nlohmann::json(*s.bytes) : nlohmann::json(nullptr)}});
-  const auto file_bytes = std::filesystem::file_size(file);
-  if (a.json) {
-    ex::print_json({{"frames", mem.frames()},
-                    {"last_frame_index", mem.last_frame_index() ? nlohmann::json(*mem.last_frame_index()) : nlohmann::json(nullptr)},
-                    {"bytes", file_bytes},
-                    {"sessions", sess},
-                    {"key_images", keys},
-                    {"stationary", mem.stationary()},
-                    {"loops", loops}});
-    return 0;
-  }
-  std::printf("%zu frames, %zu key images, %zu loop edges, vocabulary of %zu words, last frame %zu\n", mem.frames(),
-              mem.key_images(), mem.loops().size(), mem.vocabulary().size(), mem.last_frame_index().value_or(0));
-  if (sessions.size() > 1) {
-    std::printf("%zu sessions (%ju bytes in all):\n", sessions.size(), static_cast<std::uintmax_t>(file_bytes));
-    for (std::size_t s = 0; s < sessions.size(); ++s) {
-      const auto& i = sessions[s];
-      std::printf("  session %zu: %zu frames, %zu key images (from key %zu), %zu loop edges within, %zu to earlier "
-                  "sessions",
-                  s + 1, i.frames, i.key_images, i.first_key, i.loops_within, i.loops_across);
-      if (i.bytes) std::printf(", %ju bytes of key images", *i.bytes);
-      if (i.input) std::printf(", from %s", i.input->c_str());
-      std::printf("\n");
+  return ex::with_memory(file, "memory", false, [&](const auto& mem, const ex::MemoryStack& stack) -> int {
+    const auto sessions = session_infos(mem, file);
+    nlohmann::json keys = nlohmann::json::array(), loops = nlohmann::json::array(), sess = nlohmann::json::array();
+    for (std::size_t k = 0; k < mem.key_images(); ++k)
+      keys.push_back({{"key", k},
+                      {"session", mem.session_of(k)},
+                      {"frame_index", mem.map().keys[k].frame_index},
+                      {"name", mem.map().keys[k].name},
+                      {"pose", ex::pose_json(mem.poses()[k])}});
+    for (const auto& e : mem.loops()) loops.push_back(ex::loop_json(mem, e));
+    for (const auto& s : sessions)
+      sess.push_back({{"first_key", s.first_key},
+                      {"key_images", s.key_images},
+                      {"frames", s.frames},
+                      {"loops_within", s.loops_within},
+                      {"loops_across", s.loops_across},
+                      {"input", s.input ? nlohmann::json(*s.input) : nlohmann::json(nullptr)},
+                      {"bytes", s.bytes ? nlohmann::json(*s.bytes) : nlohmann::json(nullptr)}});
+    const auto file_bytes = std::filesystem::file_size(file);
+    if (a.json) {
+      ex::print_json({{"stack", ex::stack_json(stack)},
+                      {"frames", mem.frames()},
+                      {"last_frame_index", mem.last_frame_index() ? nlohmann::json(*mem.last_frame_index()) : nlohmann::json(nullptr)},
+                      {"bytes", file_bytes},
+                      {"sessions", sess},
+                      {"key_images", keys},
+                      {"stationary", mem.stationary()},
+                      {"loops", loops}});
+      return 0;
     }
-  }
-  if (mem.stationary()) std::printf("the camera never left its place: no key image is a revisit\n");
-  ex::print_loop_edges(mem, a.edges);
-  return 0;
+    std::printf("%zu frames, %zu key images, %zu loop edges, vocabulary of %zu words, last frame %zu (%s)\n",
+                mem.frames(), mem.key_images(), mem.loops().size(), mem.vocabulary().size(),
+                mem.last_frame_index().value_or(0), ex::stack_text(stack).c_str());
+    if (sessions.size() > 1) {
+      std::printf("%zu sessions (%ju bytes in all):\n", sessions.size(), static_cast<std::uintmax_t>(file_bytes));
+      for (std::size_t s = 0; s < sessions.size(); ++s) {
+        const auto& i = sessions[s];
+        std::printf("  session %zu: %zu frames, %zu key images (from key %zu), %zu loop edges within, %zu to earlier "
+                    "sessions",
+                    s + 1, i.frames, i.key_images, i.first_key, i.loops_within, i.loops_across);
+        if (i.bytes) std::printf(", %ju bytes of key images", *i.bytes);
+        if (i.input) std::printf(", from %s", i.input->c_str());
+        std::printf("\n");
+      }
+    }
+    if (mem.stationary()) std::printf("the camera never left its place: no key image is a revisit\n");
+    ex::print_loop_edges(mem, a.edges);
+    return 0;
+  });
 }
 
 /// `memory convert IN OUT`: a memory of either kind (a .vmem file of any version, or a
@@ -195,25 +214,26 @@ int convert(const MemoryArgs& a) {
   const fs::path out = a.convert_out;
   ex::prepare_memory_output(out, "OUTPUT", {a.convert_in}, false, a.force);
   const auto t0 = std::chrono::steady_clock::now();
-  auto mem = ex::load_memory(a.convert_in, "INPUT");
-  std::optional<ex::MemoryWriter> writer;
-  writer.emplace(ex::create_memory(out, a.force, std::move(mem)));
-  ex::NewMemoryGuard guard(writer, true);
-  writer->store.sync(writer->memory);
-  writer->store.checkpoint();
-  guard.keep();
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const auto& m = writer->memory;
-  if (a.json) {
-    ex::print_json({{"input", ex::path_string(a.convert_in)}, {"memory", ex::path_string(out)}, {"frames", m.frames()},
-                    {"key_images", m.key_images()}, {"loops", m.loops().size()}, {"bytes", fs::file_size(out)},
-                    {"seconds", seconds}});
+  return ex::with_memory(a.convert_in, "INPUT", true, [&](auto& mem, const ex::MemoryStack& stack) -> int {
+    std::optional<ex::MemoryWriter<std::remove_cvref_t<decltype(mem)>>> writer;
+    writer.emplace(ex::create_memory(out, a.force, std::move(mem), stack));
+    ex::NewMemoryGuard guard(writer, true);
+    writer->store.sync(writer->memory);
+    writer->store.checkpoint();
+    guard.keep();
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const auto& m = writer->memory;
+    if (a.json) {
+      ex::print_json({{"input", ex::path_string(a.convert_in)}, {"memory", ex::path_string(out)}, {"frames", m.frames()},
+                      {"key_images", m.key_images()}, {"loops", m.loops().size()}, {"bytes", fs::file_size(out)},
+                      {"seconds", seconds}});
+      return 0;
+    }
+    std::printf("%s: %zu frames, %zu key images, %zu loop edges (memory store, %ju bytes) from %s in %.2f s\n",
+                out.c_str(), m.frames(), m.key_images(), m.loops().size(), static_cast<std::uintmax_t>(fs::file_size(out)),
+                a.convert_in.c_str(), seconds);
     return 0;
-  }
-  std::printf("%s: %zu frames, %zu key images, %zu loop edges (memory store, %ju bytes) from %s in %.2f s\n",
-              out.c_str(), m.frames(), m.key_images(), m.loops().size(), static_cast<std::uintmax_t>(fs::file_size(out)),
-              a.convert_in.c_str(), seconds);
-  return 0;
+  });
 }
 
 /// `memory merge A B --out C`: B's sessions appended to A's, loops searched from B's key
@@ -230,54 +250,67 @@ int merge(const MemoryArgs& a) {
   const fs::path out = ex::memory_file(a.out);
   ex::prepare_memory_output(out, "--out", {a.merge_a, a.merge_b}, false, a.force);
   const auto t0 = std::chrono::steady_clock::now();
-  auto mem = ex::load_memory(a.merge_a, "A");
-  auto other = ex::load_memory(a.merge_b, "B");
-  const std::size_t sessions_a = mem.sessions().size(), sessions_b = other.sessions().size();
-  const std::size_t keys_a = mem.key_images(), loops_a = mem.loops().size();
-  mem.merge(std::move(other), "memory '" + a.merge_a + "'", "memory '" + a.merge_b + "'");
-  // The inputs each session was built from (a store's notes), renumbered.
-  std::vector<std::optional<std::string>> inputs;
-  for (const auto& [in, n] : {std::pair{a.merge_a, sessions_a}, std::pair{a.merge_b, sessions_b}}) {
-    std::optional<vmap::MemoryStore> store;
-    if (ex::memory_file_kind(in) == ex::MemoryFileKind::store) store.emplace(vmap::MemoryStore::open(in, vmap::sqlite::Access::read));
-    for (std::size_t s = 0; s < n; ++s) inputs.push_back(store ? store->note(ex::session_note(s)) : std::nullopt);
-  }
-  const fs::path tmp = out.string() + ".merging";
-  std::optional<ex::MemoryWriter> writer;
-  writer.emplace(ex::create_memory(tmp, true, std::move(mem)));
-  {
-    ex::NewMemoryGuard guard(writer, true);
-    writer->store.sync(writer->memory);
-    for (std::size_t s = 0; s < inputs.size(); ++s)
-      if (inputs[s]) writer->store.set_note(ex::session_note(s), *inputs[s]);
-    writer->store.checkpoint();
-    guard.keep();
-  }
-  const auto& m = writer->memory;
-  const std::size_t frames = m.frames(), key_images = m.key_images(), loops = m.loops().size(), sessions = m.sessions().size();
-  std::size_t across = 0;
-  for (const auto& e : m.loops()) across += m.session_of(e.from) != m.session_of(e.link.key) ? 1 : 0;
-  writer.reset();  // closes the store (its write-ahead log is empty after the checkpoint)
-  std::error_code ec;
-  for (const char* suffix : {"-wal", "-shm"}) {
-    fs::remove(tmp.string() + suffix, ec);
-    fs::remove(out.string() + suffix, ec);
-  }
-  fs::rename(tmp, out);
-  vmap::detail::sync_folder(vmap::detail::folder_of(out));
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  if (a.json) {
-    ex::print_json({{"a", ex::path_string(a.merge_a)}, {"b", ex::path_string(a.merge_b)}, {"memory", ex::path_string(out)},
-                    {"sessions", sessions}, {"frames", frames}, {"key_images", key_images}, {"loops", loops},
-                    {"new_loops", loops - loops_a}, {"loops_across_sessions", across}, {"bytes", fs::file_size(out)},
-                    {"seconds", seconds}});
+  // Both memories must have been built with one policy stack (the camera compared by its
+  // parameters, not by the name of its file).
+  const ex::MemoryStack stack = ex::memory_stack(a.merge_a, "A"), stack_b = ex::memory_stack(a.merge_b, "B");
+  const auto comparable = [](const ex::MemoryStack& s) {
+    auto j = ex::stack_json(s);
+    if (j["camera"].is_object()) j["camera"].erase("file");
+    return j;
+  };
+  if (comparable(stack) != comparable(stack_b))
+    vmap::detail::fail("cannot merge memory '" + a.merge_b + "' (" + ex::stack_text(stack_b) + ") into memory '" +
+                       a.merge_a + "' (" + ex::stack_text(stack) + "): they were built with different policies");
+  return ex::with_stack(stack, [&](auto descriptor, auto matcher, auto estimator) -> int {
+    auto mem = ex::load_memory_with(a.merge_a, "A", true, descriptor, matcher, estimator);
+    auto other = ex::load_memory_with(a.merge_b, "B", true, std::move(descriptor), std::move(matcher), std::move(estimator));
+    const std::size_t sessions_a = mem.sessions().size(), sessions_b = other.sessions().size();
+    const std::size_t keys_a = mem.key_images(), loops_a = mem.loops().size();
+    mem.merge(std::move(other), "memory '" + a.merge_a + "'", "memory '" + a.merge_b + "'");
+    // The inputs each session was built from (a store's notes), renumbered.
+    std::vector<std::optional<std::string>> inputs;
+    for (const auto& [in, n] : {std::pair{a.merge_a, sessions_a}, std::pair{a.merge_b, sessions_b}}) {
+      std::optional<vmap::MemoryStore> store;
+      if (ex::memory_file_kind(in) == ex::MemoryFileKind::store) store.emplace(vmap::MemoryStore::open(in, vmap::sqlite::Access::read));
+      for (std::size_t s = 0; s < n; ++s) inputs.push_back(store ? store->note(ex::session_note(s)) : std::nullopt);
+    }
+    const fs::path tmp = out.string() + ".merging";
+    std::optional<ex::MemoryWriter<decltype(mem)>> writer;
+    writer.emplace(ex::create_memory(tmp, true, std::move(mem), stack));
+    {
+      ex::NewMemoryGuard guard(writer, true);
+      writer->store.sync(writer->memory);
+      for (std::size_t s = 0; s < inputs.size(); ++s)
+        if (inputs[s]) writer->store.set_note(ex::session_note(s), *inputs[s]);
+      writer->store.checkpoint();
+      guard.keep();
+    }
+    const auto& m = writer->memory;
+    const std::size_t frames = m.frames(), key_images = m.key_images(), loops = m.loops().size(), sessions = m.sessions().size();
+    std::size_t across = 0;
+    for (const auto& e : m.loops()) across += m.session_of(e.from) != m.session_of(e.link.key) ? 1 : 0;
+    writer.reset();  // closes the store (its write-ahead log is empty after the checkpoint)
+    std::error_code ec;
+    for (const char* suffix : {"-wal", "-shm"}) {
+      fs::remove(tmp.string() + suffix, ec);
+      fs::remove(out.string() + suffix, ec);
+    }
+    fs::rename(tmp, out);
+    vmap::detail::sync_folder(vmap::detail::folder_of(out));
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (a.json) {
+      ex::print_json({{"a", ex::path_string(a.merge_a)}, {"b", ex::path_string(a.merge_b)}, {"memory", ex::path_string(out)},
+                      {"sessions", sessions}, {"frames", frames}, {"key_images", key_images}, {"loops", loops},
+                      {"new_loops", loops - loops_a}, {"loops_across_sessions", across}, {"bytes", fs::file_size(out)},
+                      {"seconds", seconds}});
+      return 0;
+    }
+    std::printf("%s: %zu sessions, %zu frames, %zu key images (%zu from A), %zu loop edges (%zu found for B's key "
+                "images, %zu across sessions), %ju bytes, in %.2f s\n",
+                out.c_str(), sessions, frames, key_images, keys_a, loops, loops - loops_a, across,
+                static_cast<std::uintmax_t>(fs::file_size(out)), seconds);
     return 0;
-  }
-  std::printf("%s: %zu sessions, %zu frames, %zu key images (%zu from A), %zu loop edges (%zu found for B's key "
-              "images, %zu across sessions), %ju bytes, in %.2f s\n",
-              out.c_str(), sessions, frames, key_images, keys_a, loops, loops - loops_a, across,
-              static_cast<std::uintmax_t>(fs::file_size(out)), seconds);
-  return 0;
+  });
 }
 
 /// `memory export M --out DIR`: key images, trajectory and loop edges for other tools.
@@ -285,17 +318,18 @@ int export_files(const MemoryArgs& a) {
   const auto file = ex::memory_file(a.memory);
   ex::current_inputs() = {file.string()};
   ex::OutputFolder out(a.export_out, "--out", {file}, ex::export_file_names());
-  const auto mem = ex::load_memory(file, "memory", false);
-  const auto written = ex::export_memory(mem, out.path());
-  out.commit();
-  if (a.json) {
-    ex::print_json({{"memory", ex::path_string(file)}, {"out", a.export_out}, {"files", written},
-                    {"key_images", mem.key_images()}, {"loops", mem.loops().size()}});
+  return ex::with_memory(file, "memory", false, [&](const auto& mem, const ex::MemoryStack&) -> int {
+    const auto written = ex::export_memory(mem, out.path());
+    out.commit();
+    if (a.json) {
+      ex::print_json({{"memory", ex::path_string(file)}, {"out", a.export_out}, {"files", written},
+                      {"key_images", mem.key_images()}, {"loops", mem.loops().size()}});
+      return 0;
+    }
+    std::printf("%zu key images, %zu loop edges: wrote %s\n", mem.key_images(), mem.loops().size(),
+                ex::written_files(a.export_out, written).c_str());
     return 0;
-  }
-  std::printf("%zu key images, %zu loop edges: wrote %s\n", mem.key_images(), mem.loops().size(),
-              ex::written_files(a.export_out, written).c_str());
-  return 0;
+  });
 }
 
 std::function<int()> setup(CLI::App& app) {
@@ -330,6 +364,11 @@ std::function<int()> setup(CLI::App& app) {
   ex::add_time_offset_option(*b, a->time_offset);
   b->add_option("--min-confidence", a->min_confidence, "A loop edge needs this place-decision confidence in [0, 1]")
       ->check(ex::real_in(0.0, 1.0));
+  ex::add_feature_options(*b, a->features, a->model, a->nfeatures, a->refine_model);
+  b->add_option("--estimator", a->estimator, "F-matrix estimation: magsac, ransac, lmeds or 8point");
+  b->add_option("--camera", a->camera,
+                "Calibration file (as vmap build --camera): kept in the memory; its F-matrices fit undistorted "
+                "keypoints and a localized query gets its pose relative to the key image");
   auto* l = app.add_subcommand("localize", "The key image(s) each query image matches");
   l->add_option("memory", a->memory, "Memory file")->required();
   l->add_option("images", a->images, "Query images")->required();

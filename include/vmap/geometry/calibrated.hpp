@@ -232,7 +232,9 @@ class Calibrated {
   /// The motion from camera a to camera b behind a verified F of the ideal image: E =
   /// K^T F K (Hartley and Zisserman, eq. 9.12), decomposed by cv::recoverPose on the ideal
   /// pixels of the inliers (the cheirality test picks one of the four solutions). No pose
-  /// is an expected outcome (no inlier in front of both cameras).
+  /// is an expected outcome: when no inlier triangulates in front of both cameras (a
+  /// camera that only turns gives no parallax), the test cannot choose, and the "best"
+  /// solution is as often the twisted pair, 180 degrees off (measured on tum_fr1_rpy).
   void recover_pose(const std::vector<cv::Point2f>& ia, const std::vector<cv::Point2f>& ib, Verification& v) const
     requires std::same_as<E, FundamentalEstimator>
   {
@@ -240,15 +242,9 @@ class Calibrated {
     cv::Mat R, t;
     try {
       const int front = cv::recoverPose(cv::Mat(K.t() * v.model * K), ia, ib, cv::Mat(K), R, t);
-      RelativePose p;
-      for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < 3; ++c) p.rotation(r, c) = R.at<double>(r, c);
-        p.translation[r] = t.at<double>(r, 0);
-      }
-      p.points_in_front = front;
-      v.relative_pose = p;
+      if (front > 0) v.relative_pose = detail::relative_pose_of(R, t, front);
     } catch (const cv::Exception&) {
-      v.relative_pose.reset();
+      // No pose (as above): recoverPose refuses a degenerate E.
     }
   }
 

@@ -109,13 +109,7 @@ class EssentialEstimator {
         pose_mask.at<std::uint8_t>(static_cast<int>(k)) = v.inlier_mask[static_cast<std::size_t>(kept_order[k])];
       try {
         const int front = cv::recoverPose(E, ka, kb, cv::Mat::eye(3, 3, CV_64F), R, t, pose_mask);
-        RelativePose p;
-        for (int r = 0; r < 3; ++r) {
-          for (int c = 0; c < 3; ++c) p.rotation(r, c) = R.at<double>(r, c);
-          p.translation[r] = t.at<double>(r, 0);
-        }
-        p.points_in_front = front;
-        v.relative_pose = p;
+        v.relative_pose = detail::relative_pose_of(R, t, front);
       } catch (const cv::Exception&) {
         // No pose is an expected outcome (e.g. no inlier in front of both cameras).
       }

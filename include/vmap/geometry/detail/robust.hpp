@@ -95,4 +95,15 @@ inline void fill_from_estimate(const cv::Mat& model, const cv::Mat& mask, const 
   v.status = v.inliers >= min_inliers ? VerificationStatus::verified : VerificationStatus::too_few_inliers;
 }
 
+/// cv::recoverPose's R (3x3) and t (3x1), both CV_64F, as a RelativePose.
+inline RelativePose relative_pose_of(const cv::Mat& R, const cv::Mat& t, int points_in_front) {
+  RelativePose p;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) p.rotation(r, c) = R.at<double>(r, c);
+    p.translation[r] = t.at<double>(r, 0);
+  }
+  p.points_in_front = points_in_front;
+  return p;
+}
+
 }  // namespace vmap::detail
