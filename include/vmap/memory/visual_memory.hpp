@@ -87,12 +87,14 @@
 #include <vmap/lcd/place_ranking.hpp>
 #include <vmap/matching/brute_force.hpp>
 #include <vmap/memory/detail/format.hpp>
+#include <vmap/memory/gcs.hpp>
 #include <vmap/memory/types.hpp>
 #include <vmap/place/bow.hpp>
 #include <vmap/place/database.hpp>
 #include <vmap/place/vocabulary.hpp>
 #include <vmap/som/gcs.hpp>
 #include <vmap/som/histogram.hpp>
+#include <vmap/som/localizer.hpp>
 #include <vmap/som/pose_map.hpp>
 
 #include <opencv2/core.hpp>
@@ -243,7 +245,7 @@ class VisualMemory {
       }
     std::stable_sort(links.begin(), links.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
     for (auto& [rank, l] : links) out.matches.push_back(std::move(l));
-    if (gcs_) out.position = gcs_->map.localize({gcs_->histogram(q)});
+    if (gcs_) out.position = gcs_->localize(q);
     return out;
   }
 
@@ -270,17 +272,11 @@ class VisualMemory {
                     "VisualMemory::train_gcs: the BowHistogram needs binary (CV_8UC1) descriptors, the key images "
                     "have " + cv::typeToString(f.descriptors.type()));
     BowHistogram histogram(options.histogram);
-    histogram.fit(features);
-    std::vector<Eigen::VectorXf> vectors;
-    for (const Features& f : features) vectors.push_back(histogram(f));
-    GcsXf network(options.gcs);
-    const GcsTrainStats stats = network.train(vectors);
-    std::vector<std::size_t> winners;
-    for (const auto& v : vectors) winners.push_back(network.bmu(v).cell);
-    gcs_.emplace(GcsPart{options, std::move(histogram), PoseMap<GcsXf>::from_assignments(std::move(network), winners, poses),
-                         std::move(keys), std::move(winners)});
+    PoseMapTraining<GcsXf> trained = train_pose_map<GcsXf>(histogram, options.gcs, features, poses);
+    gcs_.emplace(MemoryGcs{options, std::move(histogram), std::move(trained.map), std::move(keys),
+                           std::move(trained.winners)});
     ++gcs_generation_;
-    return stats;
+    return trained.gcs;
   }
 
   /// Whether a GCS was trained (train_gcs) or loaded with the memory.
@@ -650,7 +646,7 @@ class VisualMemory {
       auto labl = detail::memory_open_section(file, "labl");
       mem.read_labels(labl, options, m, has_prev == 1);
       auto gcsl = detail::memory_open_section(file, "gcsl");
-      mem.read_gcs(gcsl, m);
+      mem.read_gcs(gcsl);
     }
     EngineState engine_state;
     if (version >= 3) {
@@ -1339,73 +1335,23 @@ class VisualMemory {
     return s;
   }
 
+  /// "gcsl": a flag, then the trained GCS (MemoryGcs::bytes).
   std::string gcs_bytes() const {
     detail::BinaryWriter w;
     w.u8(gcs_ ? 1 : 0);
-    if (!gcs_) return std::move(w).take();
-    const BowHistogramOptions& h = gcs_->options.histogram;
-    w.i32(h.vocabulary.words);
-    w.i32(h.vocabulary.iterations);
-    w.u64(h.vocabulary.max_descriptors);
-    w.u64(h.vocabulary.seed);
-    w.u8(static_cast<std::uint8_t>(h.norm));
-    const std::string voc = gcs_->histogram.vocabulary().serialize();
-    w.u64(voc.size());
-    w.bytes(voc);
-    const std::string net = gcs_->map.network().serialize();  // holds the GcsOptions
-    w.u64(net.size());
-    w.bytes(net);
-    w.u32(static_cast<std::uint32_t>(gcs_->keys.size()));
-    for (std::size_t i = 0; i < gcs_->keys.size(); ++i) {
-      w.u32(gcs_->keys[i]);
-      w.u64(gcs_->winners[i]);
-    }
+    if (gcs_) w.bytes(gcs_->bytes());
     return std::move(w).take();
   }
 
-  void read_gcs(detail::BinaryReader& r, std::uint32_t m) {
+  /// Reads "gcsl" for the key images' poses (read before it, from "keys").
+  void read_gcs(detail::BinaryReader& r) {
     const std::uint8_t has = r.u8("GCS flag");
     if (has > 1) r.corrupt("GCS flag is not 0 or 1");
     if (has == 0) {
       r.expect_end("the GCS flag");
       return;
     }
-    MemoryGcsOptions o;
-    o.histogram.vocabulary.words = r.i32("histogram words");
-    o.histogram.vocabulary.iterations = r.i32("histogram iterations");
-    o.histogram.vocabulary.max_descriptors = static_cast<std::size_t>(r.u64("histogram max_descriptors"));
-    o.histogram.vocabulary.seed = r.u64("histogram seed");
-    const std::uint8_t norm = r.u8("histogram norm");
-    if (norm > 1) r.corrupt("unknown histogram norm");
-    o.histogram.norm = static_cast<HistogramNorm>(norm);
-    const std::uint64_t vlen = r.u64("histogram vocabulary length");
-    BinaryVocabularyTree voc = BinaryVocabularyTree::deserialize(r.bytes(vlen, "histogram vocabulary"),
-                                                                 r.source() + " histogram vocabulary");
-    if (voc.size() == 0) r.corrupt("the histogram vocabulary has no words");
-    const std::uint64_t nlen = r.u64("network length");
-    GcsXf net = GcsXf::deserialize(r.bytes(nlen, "network"), r.source() + " network");
-    if (net.empty()) r.corrupt("the network is not trained");
-    if (net.dimension() != voc.size()) r.corrupt("the network's dimension is not the histogram's");
-    o.gcs = net.options();
-    const std::uint32_t n = r.u32("GCS key count");
-    r.require_items(n, 12, "GCS key count");
-    std::vector<std::uint32_t> keys(n);
-    std::vector<std::size_t> winners(n);
-    std::vector<Pose2> poses;
-    for (std::uint32_t i = 0; i < n; ++i) {
-      keys[i] = r.u32("GCS key");
-      winners[i] = static_cast<std::size_t>(r.u64("GCS winner"));
-      if (keys[i] >= m || (i > 0 && keys[i] <= keys[i - 1])) r.corrupt("GCS key images are not increasing key images");
-      const auto* p = std::get_if<Pose2>(&poses_[keys[i]]);
-      if (!p) r.corrupt("GCS key image " + std::to_string(keys[i]) + " has no SE(2) pose");
-      if (winners[i] >= net.size()) r.corrupt("a GCS winner is not a neuron");
-      poses.push_back(*p);
-    }
-    r.expect_end("the GCS key images");
-    if (n < 3) r.corrupt("a GCS trained on fewer than 3 key images");
-    gcs_.emplace(GcsPart{o, BowHistogram(std::move(voc), o.histogram),
-                         PoseMap<GcsXf>::from_assignments(std::move(net), winners, poses), std::move(keys),
-                         std::move(winners)});
+    gcs_.emplace(MemoryGcs::read(r, poses_));
   }
 
   static PairScore read_score(detail::BinaryReader& r) {
@@ -1429,15 +1375,6 @@ class VisualMemory {
       r.corrupt("invalid score");
     return p;
   }
-
-  /// The GCS part (train_gcs): what it was trained with and on, and the trained map.
-  struct GcsPart {
-    MemoryGcsOptions options;
-    BowHistogram histogram;
-    PoseMap<GcsXf> map;
-    std::vector<std::uint32_t> keys;   ///< the key images trained on
-    std::vector<std::size_t> winners;  ///< the neuron each of them won (Algorithm 4)
-  };
 
   /// A memory loaded without decoding its pixels (MapLoadOptions::decode_images) cannot
   /// write them: refused, so that no file loses the pixels it had.
@@ -1469,7 +1406,7 @@ class VisualMemory {
   std::vector<std::vector<Detection>> key_detections_;  ///< per key image
   std::vector<Detection> previous_detections_;          ///< of the last pushed frame
   std::optional<LabelSchema> schema_;
-  std::optional<GcsPart> gcs_;
+  std::optional<MemoryGcs> gcs_;  ///< once train_gcs ran (or loaded)
   std::uint64_t gcs_generation_ = 0;  ///< counts train_gcs calls (a store rewrites the GCS when it changes)
   std::size_t working_memory_ = 0;    ///< bound_features (0: unbounded)
   KeyFeatureSource source_;           ///< where released features are read
