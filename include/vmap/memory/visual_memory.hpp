@@ -88,6 +88,7 @@
 #include <vmap/matching/brute_force.hpp>
 #include <vmap/memory/detail/format.hpp>
 #include <vmap/memory/gcs.hpp>
+#include <vmap/memory/labels.hpp>
 #include <vmap/memory/types.hpp>
 #include <vmap/place/bow.hpp>
 #include <vmap/place/database.hpp>
@@ -146,7 +147,7 @@ class VisualMemory {
         selector_(std::move(descriptor), std::move(matcher), std::move(estimator), std::move(similarity),
                   selector_options(options_)),
         vocabulary_(std::make_shared<const AnyVocabulary>(std::move(vocabulary))) {
-    if (!options_.labels.order.empty()) schema_ = LabelSchema(options_.labels.order);
+    if (!options_.labels.order.empty()) labels_.schema = LabelSchema(options_.labels.order);
   }
 
   explicit VisualMemory(const MemoryOptions& options, AnyVocabulary vocabulary = {})
@@ -317,7 +318,7 @@ class VisualMemory {
     sessions_.push_back({key_images(), frames()});
     selector_.start_chain();
     previous_pose_ = OdometryPose{};
-    previous_detections_.clear();
+    labels_.previous_detections.clear();
   }
 
   /// The sessions, in order; the first starts at key image 0 and frame 0.
@@ -351,8 +352,8 @@ class VisualMemory {
     if (options_bytes(options_.images) != other.options_bytes(other.options_.images) ||
         decision_options_bytes() != other.decision_options_bytes())
       refuse("they were made with other options (threshold, key images' storage, vocabulary, loop or decision options)");
-    if (frames() > 0 && labelled_ != other.labelled_)
-      refuse(std::string("the frames of ") + (labelled_ ? name : other_name) +
+    if (frames() > 0 && labels_.labelled != other.labels_.labelled)
+      refuse(std::string("the frames of ") + (labels_.labelled ? name : other_name) +
              " came with detections, the other's without");
     if (other.released_ > 0) refuse(other_name + " holds only its working memory's features in RAM (load it whole)");
     if (pixels_unread_ || other.pixels_unread_) refuse("a memory was loaded without its key images' pixels");
@@ -376,15 +377,16 @@ class VisualMemory {
     selector_.restore(std::move(state));
     if (m0 == 0) {
       sessions_.clear();
-      labelled_ = other.labelled_;
+      labels_.labelled = other.labels_.labelled;
     } else if (sessions_.size() > 1 && sessions_.back().first_frame == f0) {
       sessions_.pop_back();  // a session started here and never pushed into: other's first takes its place
     }
     for (const MemorySession& s : other.sessions_) sessions_.push_back({s.first_key + m0, s.first_frame + f0});
     poses_.insert(poses_.end(), other.poses_.begin(), other.poses_.end());
-    key_detections_.insert(key_detections_.end(), other.key_detections_.begin(), other.key_detections_.end());
+    const auto& theirs_detections = other.labels_.key_detections;
+    labels_.key_detections.insert(labels_.key_detections.end(), theirs_detections.begin(), theirs_detections.end());
     previous_pose_ = other.previous_pose_;
-    previous_detections_ = other.previous_detections_;
+    labels_.previous_detections = other.labels_.previous_detections;
     last_index_ = other.last_index_;
     if (sessions_.back().first_key == key_images()) selector_.start_chain();
     for (std::size_t k = m0; k < key_images(); ++k) {
@@ -418,10 +420,10 @@ class VisualMemory {
   [[nodiscard]] const MemoryOptions& options() const noexcept { return options_; }
   [[nodiscard]] Selector& selector() noexcept { return selector_; }
   /// Whether the frames come with detections (the label-tree loop detection runs).
-  [[nodiscard]] bool labelled() const noexcept { return labelled_; }
+  [[nodiscard]] bool labelled() const noexcept { return labels_.labelled; }
   /// The label schema once fixed (given order, or after MemoryLabelOptions::sample key
   /// images); nullopt before, and in a memory without detections.
-  [[nodiscard]] const std::optional<LabelSchema>& label_schema() const noexcept { return schema_; }
+  [[nodiscard]] const std::optional<LabelSchema>& label_schema() const noexcept { return labels_.schema; }
   /// The binary classified tree: the key images older than the window of the last one
   /// checked for loops, each at the leaf of its label vector (empty before the schema).
   [[nodiscard]] const BinaryClassifiedTree<std::size_t>& label_tree() const noexcept {
@@ -429,7 +431,7 @@ class VisualMemory {
     return engine_ ? engine_->tree() : none;
   }
   /// The detections pushed with each key image's frame (empty without detections).
-  [[nodiscard]] const std::vector<std::vector<Detection>>& key_detections() const noexcept { return key_detections_; }
+  [[nodiscard]] const std::vector<std::vector<Detection>>& key_detections() const noexcept { return labels_.key_detections; }
   /// What the memory records of its policies (descriptor, matcher, estimator,
   /// similarity): name and options, "" for a policy that does not describe itself (file "plcy").
   [[nodiscard]] const std::array<std::string, 4>& policy_records() const noexcept { return policies_; }
@@ -639,12 +641,13 @@ class VisualMemory {
       for (std::size_t i = 0; i < ids.size(); ++i)
         if (ids[i] != i || ids[i] >= m) detail::fail(db.source() + ": image id " + std::to_string(ids[i]) + " is not key image " + std::to_string(i));
     }
-    mem.key_detections_.assign(m, {});
+    mem.labels_.key_detections.assign(m, {});
     if (version >= 2) {
       auto plcy = detail::memory_open_section(file, "plcy");
       mem.read_policies(plcy);
       auto labl = detail::memory_open_section(file, "labl");
-      mem.read_labels(labl, options, m, has_prev == 1);
+      mem.labels_ = MemoryLabels::read(labl, mem.options_, m, has_prev == 1,
+                                       [](const MemoryOptions& o) { return checked(o); });
       auto gcsl = detail::memory_open_section(file, "gcsl");
       mem.read_gcs(gcsl);
     }
@@ -728,8 +731,8 @@ class VisualMemory {
   MemoryStep push_frame(const Frame& frame, const OdometryPose& pose, const std::vector<Detection>* detections) {
     const bool with = detections != nullptr;
     if (!last_index_) {
-      labelled_ = with;  // the first frame decides
-    } else if (with != labelled_) {
+      labels_.labelled = with;  // the first frame decides
+    } else if (with != labels_.labelled) {
       detail::fail("VisualMemory::push: frame " + std::to_string(frame.index) +
                    (with ? " comes with detections, but the memory's frames had none"
                          : " comes without detections, but the memory's frames had them (give an empty list when "
@@ -745,28 +748,28 @@ class VisualMemory {
 
   /// Eq. 5 over the first `sample` key images' detections (label order by mean box area).
   void sample_schema(std::size_t key_images) {
-    if (!labelled_ || schema_ || key_images < options_.labels.sample) return;
+    if (!labels_.labelled || labels_.schema || key_images < options_.labels.sample) return;
     LabelStatistics stats(options_.loops.labels);
-    for (std::size_t k = 0; k < options_.labels.sample; ++k) stats.observe(key_detections_[k]);
-    schema_ = make_label_schema(stats, options_.labels.influence);
+    for (std::size_t k = 0; k < options_.labels.sample; ++k) stats.observe(labels_.key_detections[k]);
+    labels_.schema = make_label_schema(stats, options_.labels.influence);
   }
 
   /// Loop detection runs once there is a vocabulary and, for labels, a schema.
-  [[nodiscard]] bool detecting() const noexcept { return !vocabulary_->empty() && (!labelled_ || schema_); }
+  [[nodiscard]] bool detecting() const noexcept { return !vocabulary_->empty() && (!labels_.labelled || labels_.schema); }
 
   /// Key image k's label vector (eq. 3-4; empty without detections).
   [[nodiscard]] LabelVector label_vector(std::size_t k) const {
-    return labelled_ ? schema_->vector(key_detections_[k], options_.loops.labels) : LabelVector{};
+    return labels_.labelled ? labels_.schema->vector(labels_.key_detections[k], options_.loops.labels) : LabelVector{};
   }
 
   /// The loop engine over the key images, its ranker over `database` (the key images
   /// checked so far): label sources with detections, bag of words without.
   void start_engine(PlaceDatabase<std::uint32_t> database) {
     LoopOptions o = options_.loops;
-    if (!labelled_) o.index = CandidateIndex::bow;
+    if (!labels_.labelled) o.index = CandidateIndex::bow;
     engine_.emplace(selector_.front_end().matcher(), selector_.front_end().estimator(), o,
                     BasicPlaceRanker<std::uint32_t>(vocabulary_, std::move(database)),
-                    labelled_ ? *schema_ : LabelSchema{});
+                    labels_.labelled ? *labels_.schema : LabelSchema{});
   }
 
   static SelectorOptions selector_options(const MemoryOptions& o) { return o.selector; }
@@ -785,12 +788,12 @@ class VisualMemory {
       // Eq. 6 takes I_{j-1}: its pose and detections are the ones pushed with it.
       const bool this_frame = *r.key_frame == index;
       poses_.push_back(this_frame ? pose : previous_pose_);
-      key_detections_.push_back(this_frame ? current : previous_detections_);
+      labels_.key_detections.push_back(this_frame ? current : labels_.previous_detections);
       step.new_key = static_cast<std::uint32_t>(key_images() - 1);
       on_new_key(*step.new_key, step.loops);
     }
     previous_pose_ = pose;
-    previous_detections_ = current;
+    labels_.previous_detections = current;
     last_index_ = index;
   }
 
@@ -1119,110 +1122,20 @@ class VisualMemory {
     r.expect_end("the policies");
   }
 
-  /// "labl" up to the key images' detections: the label options, whether the frames are
-  /// labelled, the schema.
-  std::string labels_head_bytes() const {
-    const MemoryLabelOptions& o = options_.labels;
-    detail::BinaryWriter w;
-    w.f32(options_.loops.labels.min_score);
-    w.u64(o.sample);
-    w.f64(o.influence.min_influence);
-    w.f64(o.influence.max_influence);
-    w.u8(static_cast<std::uint8_t>(options_.loops.index));
-    w.u64(options_.loops.min_candidates);
-    const auto write_labels = [&](const std::vector<int>& labels) {
-      w.u32(static_cast<std::uint32_t>(labels.size()));
-      for (const int l : labels) w.i32(l);
-    };
-    write_labels(o.order);
-    w.u8(labelled_ ? 1 : 0);
-    w.u8(schema_ ? 1 : 0);
-    if (schema_) write_labels(schema_->labels());
-    return std::move(w).take();
-  }
+  /// "labl" up to the key images' detections (the store writes their rows apart).
+  std::string labels_head_bytes() const { return labels_.head_bytes(options_); }
 
-  /// "labl"'s last part: the detections of I_{j-1} only while the selector holds it (not
-  /// when the last frame is the last key image): the only case a later key image can be
-  /// that frame.
-  std::string previous_detections_bytes() const {
-    detail::BinaryWriter w;
+  /// Whether the selector holds an I_{j-1} (not when the last frame is the last key
+  /// image): only then can a later key image be that frame, and its detections are kept.
+  bool holds_previous_frame() const {
     const auto& keys = selector_.map().keys;
-    const bool has_previous = last_index_ && !(!keys.empty() && keys.back().frame_index == *last_index_);
-    detail::memory_write_detections(w, has_previous ? previous_detections_ : std::vector<Detection>{});
-    return std::move(w).take();
+    return last_index_ && !(!keys.empty() && keys.back().frame_index == *last_index_);
   }
 
-  std::string labels_bytes() const {
-    detail::BinaryWriter w;
-    w.bytes(labels_head_bytes());
-    w.u32(static_cast<std::uint32_t>(key_detections_.size()));
-    for (const auto& d : key_detections_) detail::memory_write_detections(w, d);
-    w.bytes(previous_detections_bytes());
-    return std::move(w).take();
-  }
+  /// "labl"'s last part: the detections of I_{j-1} (MemoryLabels::previous_bytes).
+  std::string previous_detections_bytes() const { return labels_.previous_bytes(holds_previous_frame()); }
 
-  /// Reads "labl" (the tree is rebuilt by the engine from the schema and the key images'
-  /// detections: LoopEngine::restore).
-  void read_labels(detail::BinaryReader& r, const MemoryOptions& file_options, std::uint32_t m, bool has_previous) {
-    MemoryLabelOptions o;
-    MemoryOptions all = file_options;
-    all.loops.labels.min_score = r.f32("label min_score");
-    o.sample = static_cast<std::size_t>(r.u64("label sample"));
-    o.influence.min_influence = r.f64("min_influence");
-    o.influence.max_influence = r.f64("max_influence");
-    const std::uint8_t index = r.u8("label candidate source");
-    if (index > static_cast<std::uint8_t>(CandidateIndex::brute_force)) r.corrupt("unknown candidate source");
-    all.loops.index = static_cast<CandidateIndex>(index);
-    all.loops.min_candidates = static_cast<std::size_t>(r.u64("min_candidates"));
-    const auto read_labels = [&](const char* what) {
-      const std::uint32_t n = r.u32(what);
-      r.require_items(n, 4, what);
-      std::vector<int> labels(n);
-      for (int& l : labels) l = r.i32(what);
-      return labels;
-    };
-    o.order = read_labels("label order");
-    all.labels = o;
-    try {
-      options_ = checked(all);
-      if (!o.order.empty()) schema_ = LabelSchema(o.order);
-      else schema_.reset();
-    } catch (const Error& e) {
-      r.corrupt(e.what());
-    }
-    const std::uint8_t labelled = r.u8("labelled flag");
-    if (labelled > 1) r.corrupt("labelled flag is not 0 or 1");
-    labelled_ = labelled == 1;
-    const std::uint8_t has_schema = r.u8("schema flag");
-    if (has_schema > 1) r.corrupt("schema flag is not 0 or 1");
-    if (has_schema == 1) {
-      std::vector<int> labels = read_labels("schema label count");
-      if (!o.order.empty() && labels != o.order) r.corrupt("the schema is not the given label order");
-      try {
-        schema_ = LabelSchema(std::move(labels));
-      } catch (const Error& e) {
-        r.corrupt(e.what());
-      }
-    } else if (!o.order.empty()) {
-      r.corrupt("a given label order but no schema");
-    }
-    const std::uint32_t n = r.u32("key detection count");
-    if (n != m) r.corrupt("detections for " + std::to_string(n) + " key images, the memory has " + std::to_string(m));
-    key_detections_.clear();
-    for (std::uint32_t k = 0; k < m; ++k) key_detections_.push_back(detail::memory_read_detections(r));
-    previous_detections_ = detail::memory_read_detections(r);
-    r.expect_end("the detections");
-    if (!labelled_) {
-      for (const auto& d : key_detections_)
-        if (!d.empty()) r.corrupt("detections in a memory without labels");
-      if (!previous_detections_.empty()) r.corrupt("detections in a memory without labels");
-    }
-    // Without an I_{j-1} in the selector no later key image can be that frame: its
-    // detections are never read.
-    if (!has_previous) previous_detections_.clear();
-    if (schema_ && o.order.empty() && (!labelled_ || m < o.sample)) r.corrupt("a schema before its sample");
-    if (labelled_ && o.order.empty() && !schema_ && m >= o.sample) r.corrupt("no schema after the sample");
-  }
+  std::string labels_bytes() const { return labels_.bytes(options_, holds_previous_frame()); }
 
   /// What "dcsn" restores of the loop engine.
   struct EngineState {
@@ -1402,10 +1315,7 @@ class VisualMemory {
   std::vector<OdometryPose> poses_;  ///< per key image
   OdometryPose previous_pose_;       ///< of the last pushed frame (eq. 6's I_{j-1})
   std::optional<std::size_t> last_index_;
-  bool labelled_ = false;                              ///< frames come with detections
-  std::vector<std::vector<Detection>> key_detections_;  ///< per key image
-  std::vector<Detection> previous_detections_;          ///< of the last pushed frame
-  std::optional<LabelSchema> schema_;
+  MemoryLabels labels_;  ///< the frames' object labels (LFM-LCD)
   std::optional<MemoryGcs> gcs_;  ///< once train_gcs ran (or loaded)
   std::uint64_t gcs_generation_ = 0;  ///< counts train_gcs calls (a store rewrites the GCS when it changes)
   std::size_t working_memory_ = 0;    ///< bound_features (0: unbounded)
