@@ -651,7 +651,7 @@ class VisualMemory {
       auto gcsl = detail::memory_open_section(file, "gcsl");
       mem.read_gcs(gcsl);
     }
-    EngineState engine_state;
+    LoopEngineState engine_state;
     if (version >= 3) {
       auto dcsn = detail::memory_open_section(file, "dcsn");
       engine_state = mem.read_decision(dcsn, database.size());
@@ -675,8 +675,7 @@ class VisualMemory {
         // The session of the last key image checked: as the engine was when it checked it.
         const std::size_t last_checked = mem.engine_->ranker().database().size() - 1;
         const std::size_t session_start = mem.sessions_[mem.session_of_key(last_checked)].first_key;
-        mem.engine_->restore(std::move(labels), engine_state.past_window, engine_state.left_queries,
-                             engine_state.not_revisit, engine_state.consistency, session_start);
+        mem.engine_->restore(std::move(labels), engine_state, session_start);
       } catch (const Error& err) {
         detail::fail(file.source() + " section 'dcsn': " + err.what());
       }
@@ -1137,52 +1136,22 @@ class VisualMemory {
 
   std::string labels_bytes() const { return labels_.bytes(options_, holds_previous_frame()); }
 
-  /// What "dcsn" restores of the loop engine.
-  struct EngineState {
-    std::size_t past_window = 0;
-    std::size_t left_queries = 0;
-    std::size_t not_revisit = 0;
-    ConsistencyState<std::size_t> consistency{};
-  };
-
-  /// "dcsn" without the loop edges' confidences: the decision's options and the
-  /// engine's state.
-  /// The decision's options, as "dcsn" begins.
+  /// The decision's options, as "dcsn" begins (lcd/loop_engine.hpp).
   std::string decision_options_bytes() const {
-    const LoopOptions& o = options_.loops;
     detail::BinaryWriter w;
-    w.u64(o.temporal_consistency);
-    w.u64(o.temporal_tolerance);
-    w.f64(o.min_bow_score);
-    w.f64(o.left_ratio);
-    w.f64(o.decision.min_confidence);
-    w.f64(o.decision.chance_inlier_rate);
-    w.f64(o.decision.half_significance);
-    w.i32(o.decision.spread_grid);
-    w.f64(o.decision.full_spread);
-    w.f64(o.decision.ambiguity_ratio);
+    detail::write_decision_options(w, options_.loops);
     return std::move(w).take();
   }
 
+  /// "dcsn" without the loop edges' confidences: the decision's options and the loop
+  /// engine's state (LoopEngineState; zero before the engine runs).
   std::string decision_head_bytes() const {
     detail::BinaryWriter w;
     w.bytes(decision_options_bytes());
-    w.u64(engine_ ? engine_->queries_past_window() : 0);
-    w.u64(engine_ ? engine_->left_queries() : 0);
-    w.u64(engine_ ? engine_->not_a_revisit_queries() : 0);
-    // Field by field from the engine (GCC 12 at -O2 reports a copy of the state's
-    // std::optional as possibly uninitialised).
-    const bool has_state = engine_.has_value();
-    const ConsistencyState<std::size_t> none{};
-    const ConsistencyState<std::size_t>& c = has_state ? engine_->consistency() : none;
-    std::uint64_t last = 0;
-    if (c.last.has_value()) last = *c.last;
-    w.i32(c.consecutive);
-    w.u8(c.last.has_value() ? 1 : 0);
-    w.u64(last);
-    w.u64(c.island_begin);
-    w.u64(c.island_end);
-    w.u8(c.accepted ? 1 : 0);
+    if (engine_)
+      engine_->state().write(w);
+    else
+      LoopEngineState{}.write(w);
     return std::move(w).take();
   }
 
@@ -1197,45 +1166,15 @@ class VisualMemory {
   /// Reads "dcsn": the decision's options (checked with the rest), the engine's state and
   /// the loop edges' confidences; `checked_keys` is the number of key images the
   /// database holds.
-  EngineState read_decision(detail::BinaryReader& r, std::size_t checked_keys) {
+  LoopEngineState read_decision(detail::BinaryReader& r, std::size_t checked_keys) {
     MemoryOptions all = options_;
-    LoopOptions& o = all.loops;
-    o.temporal_consistency = static_cast<std::size_t>(r.u64("temporal_consistency"));
-    o.temporal_tolerance = static_cast<std::size_t>(r.u64("temporal_tolerance"));
-    o.min_bow_score = r.f64("min_bow_score");
-    o.left_ratio = r.f64("left_ratio");
-    o.decision.min_confidence = r.f64("min_confidence");
-    o.decision.chance_inlier_rate = r.f64("chance_inlier_rate");
-    o.decision.half_significance = r.f64("half_significance");
-    o.decision.spread_grid = r.i32("spread_grid");
-    o.decision.full_spread = r.f64("full_spread");
-    o.decision.ambiguity_ratio = r.f64("ambiguity_ratio");
-    if (o.temporal_consistency > 1000) r.corrupt("temporal_consistency above 1000");
+    detail::read_decision_options(r, all.loops);
     try {
       options_ = checked(all);
     } catch (const Error& e) {
       r.corrupt(e.what());
     }
-    EngineState s;
-    s.past_window = static_cast<std::size_t>(r.u64("queries past the window"));
-    s.left_queries = static_cast<std::size_t>(r.u64("queries that left"));
-    s.not_revisit = static_cast<std::size_t>(r.u64("queries not revisits"));
-    if (s.past_window > checked_keys || s.left_queries + s.not_revisit > s.past_window)
-      r.corrupt("query counts do not fit the key images checked");
-    s.consistency.consecutive = r.i32("consistent queries");
-    const std::uint8_t has_last = r.u8("consistency flag");
-    if (has_last > 1) r.corrupt("consistency flag is not 0 or 1");
-    const std::uint64_t last = r.u64("consistency last");
-    if (has_last == 1) s.consistency.last = static_cast<std::size_t>(last);
-    s.consistency.island_begin = static_cast<std::size_t>(r.u64("island begin"));
-    s.consistency.island_end = static_cast<std::size_t>(r.u64("island end"));
-    const std::uint8_t accepted = r.u8("consistency accepted");
-    if (accepted > 1) r.corrupt("consistency accepted flag is not 0 or 1");
-    s.consistency.accepted = accepted == 1;
-    if (s.consistency.consecutive < 0 || static_cast<std::size_t>(s.consistency.consecutive) > checked_keys ||
-        s.consistency.island_begin > s.consistency.island_end || s.consistency.island_end > checked_keys ||
-        (s.consistency.last && *s.consistency.last >= checked_keys))
-      r.corrupt("invalid temporal-consistency state");
+    LoopEngineState s = LoopEngineState::read(r, checked_keys);
     const std::uint32_t e = r.u32("loop edge count");
     if (e != loops_.size())
       r.corrupt(std::to_string(e) + " confidences for " + std::to_string(loops_.size()) + " loop edges");
