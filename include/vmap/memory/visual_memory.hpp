@@ -556,17 +556,7 @@ class VisualMemory {
     auto links = detail::memory_open_section(file, "link");
     const std::uint32_t p = links.u32("pair count");
     if (p != (m == 0 ? 0U : m - 1U)) links.corrupt("pair count " + std::to_string(p) + " for " + std::to_string(m) + " key images");
-    for (std::uint32_t i = 0; i < p; ++i) {
-      KeyPair pair;
-      pair.status = detail::memory_read_status(links);
-      pair.fundamental = detail::memory_read_matx(links, "fundamental matrix");
-      pair.matches = links.i32("matches");
-      pair.inliers = links.i32("inliers");
-      if (pair.matches < 0 || pair.inliers < 0 || pair.inliers > pair.matches) links.corrupt("invalid match/inlier counts");
-      pair.similarity = links.f64("similarity");
-      if (!(pair.similarity >= 0.0 && pair.similarity <= 1.0)) links.corrupt("similarity outside [0, 1]");
-      state.map.pairs.push_back(pair);
-    }
+    for (std::uint32_t i = 0; i < p; ++i) state.map.pairs.push_back(detail::read_key_pair(links, "verification status"));
     links.expect_end("the last pair");
 
     auto loops = detail::memory_open_section(file, "loop");
@@ -601,7 +591,7 @@ class VisualMemory {
     }
     const std::uint8_t has_score = sel.u8("previous score flag");
     if (has_score > 1 || (has_score == 1 && has_prev == 0)) sel.corrupt("invalid previous score flag");
-    if (has_score == 1) state.previous_score = read_score(sel);
+    if (has_score == 1) state.previous_score = detail::read_pair_score(sel);
     const std::uint8_t has_last = sel.u8("last frame flag");
     if (has_last > 1 || (has_last == 0 && m > 0)) sel.corrupt("invalid last frame flag");
     if (has_last == 1) {
@@ -1041,12 +1031,7 @@ class VisualMemory {
 
   /// Link i (key image i to i + 1) as "link" holds it.
   void write_link_record(detail::BinaryWriter& w, std::size_t i) const {
-    const auto& p = selector_.map().pairs[i];
-    w.u8(static_cast<std::uint8_t>(p.status));
-    detail::memory_write_matx(w, p.fundamental);
-    w.i32(p.matches);
-    w.i32(p.inliers);
-    w.f64(p.similarity);
+    detail::write_key_pair(w, selector_.map().pairs[i]);
   }
 
   std::string links_bytes() const {
@@ -1082,21 +1067,7 @@ class VisualMemory {
       detail::memory_write_pose(w, previous_pose_);
     }
     w.u8(s.previous_score ? 1 : 0);
-    if (s.previous_score) {
-      // What the link to the next key image is made of (selector.hpp's add_key); the
-      // inlier mask is not needed and not stored.
-      const PairScore& p = *s.previous_score;
-      w.i32(p.raw_matches);
-      w.f64(p.upper_bound);
-      w.u8(p.verified_run ? 1 : 0);
-      w.u8(static_cast<std::uint8_t>(p.verification.status));
-      detail::memory_write_matx(w, p.verification.model);
-      w.i32(p.verification.inliers);
-      w.i32(p.verification.matches);
-      w.u8(static_cast<std::uint8_t>(p.verification.degeneracy));
-      w.i32(p.verification.homography_inliers);
-      w.f64(p.similarity);
-    }
+    if (s.previous_score) detail::write_pair_score(w, *s.previous_score);
     w.u8(last_index_ ? 1 : 0);
     if (last_index_) w.u64(*last_index_);
     return std::move(w).take();
@@ -1204,28 +1175,6 @@ class VisualMemory {
       return;
     }
     gcs_.emplace(MemoryGcs::read(r, poses_));
-  }
-
-  static PairScore read_score(detail::BinaryReader& r) {
-    PairScore p;
-    p.raw_matches = r.i32("raw matches");
-    p.upper_bound = r.f64("upper bound");
-    const std::uint8_t run = r.u8("verified flag");
-    if (run > 1) r.corrupt("verified flag is not 0 or 1");
-    p.verified_run = run == 1;
-    p.verification.status = detail::memory_read_status(r);
-    p.verification.model = detail::memory_read_matx(r, "fundamental matrix");
-    p.verification.inliers = r.i32("inliers");
-    p.verification.matches = r.i32("matches");
-    const std::uint8_t deg = r.u8("degeneracy");
-    if (deg > 1) r.corrupt("unknown degeneracy");
-    p.verification.degeneracy = static_cast<Degeneracy>(deg);
-    p.verification.homography_inliers = r.i32("homography inliers");
-    p.similarity = r.f64("similarity");
-    if (p.raw_matches < 0 || p.verification.inliers < 0 || p.verification.inliers > p.verification.matches ||
-        !std::isfinite(p.upper_bound) || !(p.similarity >= 0.0 && p.similarity <= 1.0))
-      r.corrupt("invalid score");
-    return p;
   }
 
   /// A memory loaded without decoding its pixels (MapLoadOptions::decode_images) cannot

@@ -94,19 +94,6 @@ inline std::vector<Detection> memory_read_detections(BinaryReader& r) {
   return out;
 }
 
-inline void memory_write_matx(BinaryWriter& w, const cv::Matx33d& m) {
-  for (double e : m.val) w.f64(e);
-}
-
-inline cv::Matx33d memory_read_matx(BinaryReader& r, std::string_view what) {
-  cv::Matx33d m;
-  for (double& e : m.val) {
-    e = r.f64(what);
-    if (!std::isfinite(e)) r.corrupt(std::string(what) + " is not finite");
-  }
-  return m;
-}
-
 inline void write_memory_image(BinaryWriter& w, const cv::Mat& image, ImageStorage storage, int quality) {
   if (image.empty() || storage == ImageStorage::none) {
     w.u8(0);
@@ -196,24 +183,18 @@ inline OdometryPose memory_read_pose(BinaryReader& r) {
 inline void memory_write_link(BinaryWriter& w, const PlaceLink& l) {
   w.f64(l.bow_score);
   w.u8(static_cast<std::uint8_t>(l.status));
-  memory_write_matx(w, l.fundamental);
+  write_matx33(w, l.fundamental);
   w.i32(l.matches);
   w.i32(l.inliers);
   w.f64(l.similarity);
-}
-
-inline VerificationStatus memory_read_status(BinaryReader& r) {
-  const std::uint8_t s = r.u8("verification status");
-  if (s > static_cast<std::uint8_t>(VerificationStatus::too_few_inliers)) r.corrupt("unknown verification status");
-  return static_cast<VerificationStatus>(s);
 }
 
 inline PlaceLink memory_read_link(BinaryReader& r) {
   PlaceLink l;
   l.bow_score = r.f64("BoW score");
   if (!(l.bow_score >= 0.0 && l.bow_score <= 1.0 + 1e-9)) r.corrupt("BoW score outside [0, 1]");
-  l.status = memory_read_status(r);
-  l.fundamental = memory_read_matx(r, "fundamental matrix");
+  l.status = read_verification_status(r, "verification status");
+  l.fundamental = read_matx33(r, "fundamental matrix");
   l.matches = r.i32("matches");
   l.inliers = r.i32("inliers");
   if (l.matches < 0 || l.inliers < 0 || l.inliers > l.matches) r.corrupt("invalid match/inlier counts");
