@@ -42,7 +42,11 @@
 // examples/memory.md, "The single-file format (.vmem)"; each section is parsed by its own
 // reader, so every error names its section, and counts are checked against the bytes
 // that remain before anything is allocated. Key images' descriptors are checked against
-// the layout of the descriptor given to load (core/concepts.hpp, StatesLayout).
+// the layout of the descriptor given to load (core/concepts.hpp, StatesLayout). The
+// memory frames the sections; the parts encode their own state in them: the GCS
+// (memory/gcs.hpp), the object labels (memory/labels.hpp), the loop engine's state and
+// decision options (lcd/loop_engine.hpp), the selector's links and score
+// (keyframe/map_io.hpp), the vocabulary (place/vocabulary.hpp) and the place database.
 //
 // Bytes per key image (ORB 1000, 32-byte descriptors): 28 per keypoint + 32 per
 // descriptor, about 60 KB of features in the file and in memory (measured by
@@ -384,7 +388,8 @@ class VisualMemory {
     for (const MemorySession& s : other.sessions_) sessions_.push_back({s.first_key + m0, s.first_frame + f0});
     poses_.insert(poses_.end(), other.poses_.begin(), other.poses_.end());
     const auto& theirs_detections = other.labels_.key_detections;
-    labels_.key_detections.insert(labels_.key_detections.end(), theirs_detections.begin(), theirs_detections.end());
+    labels_.key_detections.insert(labels_.key_detections.end(), theirs_detections.begin(),
+                                  theirs_detections.end());
     previous_pose_ = other.previous_pose_;
     labels_.previous_detections = other.labels_.previous_detections;
     last_index_ = other.last_index_;
@@ -431,7 +436,9 @@ class VisualMemory {
     return engine_ ? engine_->tree() : none;
   }
   /// The detections pushed with each key image's frame (empty without detections).
-  [[nodiscard]] const std::vector<std::vector<Detection>>& key_detections() const noexcept { return labels_.key_detections; }
+  [[nodiscard]] const std::vector<std::vector<Detection>>& key_detections() const noexcept {
+    return labels_.key_detections;
+  }
   /// What the memory records of its policies (descriptor, matcher, estimator,
   /// similarity): name and options, "" for a policy that does not describe itself (file "plcy").
   [[nodiscard]] const std::array<std::string, 4>& policy_records() const noexcept { return policies_; }
@@ -556,7 +563,8 @@ class VisualMemory {
     auto links = detail::memory_open_section(file, "link");
     const std::uint32_t p = links.u32("pair count");
     if (p != (m == 0 ? 0U : m - 1U)) links.corrupt("pair count " + std::to_string(p) + " for " + std::to_string(m) + " key images");
-    for (std::uint32_t i = 0; i < p; ++i) state.map.pairs.push_back(detail::read_key_pair(links, "verification status"));
+    for (std::uint32_t i = 0; i < p; ++i)
+      state.map.pairs.push_back(detail::read_key_pair(links, "verification status"));
     links.expect_end("the last pair");
 
     auto loops = detail::memory_open_section(file, "loop");
@@ -609,11 +617,8 @@ class VisualMemory {
     if (has_voc == 1) {
       const std::uint64_t len = voc.u64("vocabulary length");
       const std::string_view vb = voc.bytes(len, "vocabulary");
-      const std::string vname = voc.source() + " vocabulary";
-      if (vb.size() > detail::place_header_size && static_cast<std::uint8_t>(vb[detail::place_header_size]) == 1)
-        mem.vocabulary_ = std::make_shared<const AnyVocabulary>(FloatVocabularyTree::deserialize(vb, vname));
-      else
-        mem.vocabulary_ = std::make_shared<const AnyVocabulary>(BinaryVocabularyTree::deserialize(vb, vname));
+      mem.vocabulary_ =
+          std::make_shared<const AnyVocabulary>(AnyVocabulary::deserialize(vb, voc.source() + " vocabulary"));
     }
     voc.expect_end("the vocabulary");
 
@@ -744,11 +749,14 @@ class VisualMemory {
   }
 
   /// Loop detection runs once there is a vocabulary and, for labels, a schema.
-  [[nodiscard]] bool detecting() const noexcept { return !vocabulary_->empty() && (!labels_.labelled || labels_.schema); }
+  [[nodiscard]] bool detecting() const noexcept {
+    return !vocabulary_->empty() && (!labels_.labelled || labels_.schema);
+  }
 
   /// Key image k's label vector (eq. 3-4; empty without detections).
   [[nodiscard]] LabelVector label_vector(std::size_t k) const {
-    return labels_.labelled ? labels_.schema->vector(labels_.key_detections[k], options_.loops.labels) : LabelVector{};
+    return labels_.labelled ? labels_.schema->vector(labels_.key_detections[k], options_.loops.labels)
+                            : LabelVector{};
   }
 
   /// The loop engine over the key images, its ranker over `database` (the key images
@@ -898,8 +906,7 @@ class VisualMemory {
     detail::BinaryWriter v;
     v.u8(vocabulary_->empty() ? 0 : 1);
     if (!vocabulary_->empty()) {
-      const std::string bytes =
-          vocabulary_->binary() ? vocabulary_->binary()->serialize() : vocabulary_->floating()->serialize();
+      const std::string bytes = vocabulary_->serialize();
       v.u64(bytes.size());
       v.bytes(bytes);
     }
