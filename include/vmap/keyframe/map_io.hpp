@@ -43,6 +43,7 @@
 #include <vmap/io/binary.hpp>
 #include <vmap/io/files.hpp>
 #include <vmap/io/image.hpp>
+#include <vmap/keyframe/front_end.hpp>
 #include <vmap/keyframe/visual_map.hpp>
 
 #include <opencv2/core.hpp>
@@ -83,6 +84,88 @@ inline constexpr std::size_t map_header_size = 24;
 inline constexpr std::uint32_t map_max_string = 4096;
 inline constexpr int map_max_descriptor_cols = 4096;
 inline constexpr int map_max_image_side = 16384;
+
+/// A 3x3 model (F, E or H) row-major, as the map file's pairs and the memory's records
+/// hold it.
+inline void write_matx33(BinaryWriter& w, const cv::Matx33d& m) {
+  for (double e : m.val) w.f64(e);
+}
+
+inline cv::Matx33d read_matx33(BinaryReader& r, std::string_view what) {
+  cv::Matx33d m;
+  for (double& e : m.val) {
+    e = r.f64(what);
+    if (!std::isfinite(e)) r.corrupt(std::string(what) + " is not finite");
+  }
+  return m;
+}
+
+inline VerificationStatus read_verification_status(BinaryReader& r, std::string_view what) {
+  const std::uint8_t s = r.u8(what);
+  if (s > static_cast<std::uint8_t>(VerificationStatus::too_few_inliers)) r.corrupt("unknown verification status");
+  return static_cast<VerificationStatus>(s);
+}
+
+/// The selector's link between consecutive key images (KeyPair): the map file's pair
+/// record, which the memory's section "link" and its store's links hold too.
+inline void write_key_pair(BinaryWriter& w, const KeyPair& p) {
+  w.u8(static_cast<std::uint8_t>(p.status));
+  write_matx33(w, p.fundamental);
+  w.i32(p.matches);
+  w.i32(p.inliers);
+  w.f64(p.similarity);
+}
+
+/// Reads write_key_pair()'s bytes; `status_what` names the status byte in an error.
+inline KeyPair read_key_pair(BinaryReader& r, std::string_view status_what) {
+  KeyPair pair;
+  pair.status = read_verification_status(r, status_what);
+  pair.fundamental = read_matx33(r, "fundamental matrix");
+  pair.matches = r.i32("matches");
+  pair.inliers = r.i32("inliers");
+  if (pair.matches < 0 || pair.inliers < 0 || pair.inliers > pair.matches) r.corrupt("invalid match/inlier counts");
+  pair.similarity = r.f64("similarity");
+  if (!(pair.similarity >= 0.0 && pair.similarity <= 1.0)) r.corrupt("similarity outside [0, 1]");
+  return pair;
+}
+
+/// The selector's score of its frame I_{j-1} against the key image (SelectorState::
+/// previous_score): what the link to the next key image is made of (selector.hpp's
+/// add_key). The inlier mask is not needed and not written.
+inline void write_pair_score(BinaryWriter& w, const PairScore& p) {
+  w.i32(p.raw_matches);
+  w.f64(p.upper_bound);
+  w.u8(p.verified_run ? 1 : 0);
+  w.u8(static_cast<std::uint8_t>(p.verification.status));
+  write_matx33(w, p.verification.model);
+  w.i32(p.verification.inliers);
+  w.i32(p.verification.matches);
+  w.u8(static_cast<std::uint8_t>(p.verification.degeneracy));
+  w.i32(p.verification.homography_inliers);
+  w.f64(p.similarity);
+}
+
+inline PairScore read_pair_score(BinaryReader& r) {
+  PairScore p;
+  p.raw_matches = r.i32("raw matches");
+  p.upper_bound = r.f64("upper bound");
+  const std::uint8_t run = r.u8("verified flag");
+  if (run > 1) r.corrupt("verified flag is not 0 or 1");
+  p.verified_run = run == 1;
+  p.verification.status = read_verification_status(r, "verification status");
+  p.verification.model = read_matx33(r, "fundamental matrix");
+  p.verification.inliers = r.i32("inliers");
+  p.verification.matches = r.i32("matches");
+  const std::uint8_t deg = r.u8("degeneracy");
+  if (deg > 1) r.corrupt("unknown degeneracy");
+  p.verification.degeneracy = static_cast<Degeneracy>(deg);
+  p.verification.homography_inliers = r.i32("homography inliers");
+  p.similarity = r.f64("similarity");
+  if (p.raw_matches < 0 || p.verification.inliers < 0 || p.verification.inliers > p.verification.matches ||
+      !std::isfinite(p.upper_bound) || !(p.similarity >= 0.0 && p.similarity <= 1.0))
+    r.corrupt("invalid score");
+  return p;
+}
 
 inline bool valid_image_type(int type) {
   return type == CV_8UC1 || type == CV_8UC3 || type == CV_8UC4 || type == CV_16UC1;
@@ -279,22 +362,7 @@ inline VisualMap parse_map(std::string_view file, const std::string& name, const
   }
   const std::uint32_t p = r.u32("pair count");
   if (p != (m == 0 ? 0U : m - 1U)) r.corrupt("pair count " + std::to_string(p) + " does not match " + std::to_string(m) + " key images");
-  for (std::uint32_t i = 0; i < p; ++i) {
-    KeyPair pair;
-    const std::uint8_t status = r.u8("pair status");
-    if (status > static_cast<std::uint8_t>(VerificationStatus::too_few_inliers)) r.corrupt("unknown verification status");
-    pair.status = static_cast<VerificationStatus>(status);
-    for (int e = 0; e < 9; ++e) {
-      pair.fundamental.val[e] = r.f64("fundamental matrix");
-      if (!std::isfinite(pair.fundamental.val[e])) r.corrupt("fundamental matrix is not finite");
-    }
-    pair.matches = r.i32("matches");
-    pair.inliers = r.i32("inliers");
-    if (pair.matches < 0 || pair.inliers < 0 || pair.inliers > pair.matches) r.corrupt("invalid match/inlier counts");
-    pair.similarity = r.f64("similarity");
-    if (!(pair.similarity >= 0.0 && pair.similarity <= 1.0)) r.corrupt("similarity outside [0, 1]");
-    map.pairs.push_back(pair);
-  }
+  for (std::uint32_t i = 0; i < p; ++i) map.pairs.push_back(read_key_pair(r, "pair status"));
   r.expect_end("the last pair");
   return map;
 }
@@ -318,13 +386,7 @@ inline VisualMap parse_map(std::string_view file, const std::string& name, const
     detail::write_image(w, k.image);
   }
   w.u32(static_cast<std::uint32_t>(map.pairs.size()));
-  for (const auto& p : map.pairs) {
-    w.u8(static_cast<std::uint8_t>(p.status));
-    for (double e : p.fundamental.val) w.f64(e);
-    w.i32(p.matches);
-    w.i32(p.inliers);
-    w.f64(p.similarity);
-  }
+  for (const auto& p : map.pairs) detail::write_key_pair(w, p);
   const std::string payload = std::move(w).take();
   detail::BinaryWriter h;
   h.bytes(detail::map_magic, 8);

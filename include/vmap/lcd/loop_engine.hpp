@@ -33,6 +33,7 @@
 #include <vmap/core/features.hpp>
 #include <vmap/geometry/calibrated.hpp>
 #include <vmap/geometry/essential.hpp>
+#include <vmap/io/binary.hpp>
 #include <vmap/lcd/binary_tree.hpp>
 #include <vmap/lcd/label_vector.hpp>
 #include <vmap/lcd/place_decision.hpp>
@@ -177,7 +178,92 @@ struct PlaceDecision {
   [[nodiscard]] bool accepted() const noexcept { return status == PlaceStatus::accepted; }
 };
 
+/// What a stopped run restores of the loop engine besides each frame's label vector and
+/// bag of words (LoopEngine::restore): the stationarity counts and the temporal-consistency
+/// state. Written and read here as the visual memory's section "dcsn" holds it after the
+/// decision's options (examples/memory.md, "The single-file format (.vmem)").
+struct LoopEngineState {
+  std::size_t past_window = 0;   ///< queries past the window
+  std::size_t left_queries = 0;  ///< of those, queries with a candidate whose place the camera had left
+  std::size_t not_revisit = 0;   ///< of those, queries whose best verified candidate was not a revisit
+  ConsistencyState<std::size_t> consistency{};
+
+  void write(detail::BinaryWriter& w) const {
+    w.u64(past_window);
+    w.u64(left_queries);
+    w.u64(not_revisit);
+    // Field by field (GCC 12 at -O2 reports a copy of the state's std::optional as
+    // possibly uninitialised).
+    std::uint64_t last = 0;
+    if (consistency.last.has_value()) last = *consistency.last;
+    w.i32(consistency.consecutive);
+    w.u8(consistency.last.has_value() ? 1 : 0);
+    w.u64(last);
+    w.u64(consistency.island_begin);
+    w.u64(consistency.island_end);
+    w.u8(consistency.accepted ? 1 : 0);
+  }
+
+  /// Reads write()'s bytes for an engine that has checked `frames` frames (the key
+  /// images a memory's database holds): the counts and the state must fit them.
+  [[nodiscard]] static LoopEngineState read(detail::BinaryReader& r, std::size_t frames) {
+    LoopEngineState s;
+    s.past_window = static_cast<std::size_t>(r.u64("queries past the window"));
+    s.left_queries = static_cast<std::size_t>(r.u64("queries that left"));
+    s.not_revisit = static_cast<std::size_t>(r.u64("queries not revisits"));
+    if (s.past_window > frames || s.left_queries + s.not_revisit > s.past_window)
+      r.corrupt("query counts do not fit the key images checked");
+    s.consistency.consecutive = r.i32("consistent queries");
+    const std::uint8_t has_last = r.u8("consistency flag");
+    if (has_last > 1) r.corrupt("consistency flag is not 0 or 1");
+    const std::uint64_t last = r.u64("consistency last");
+    if (has_last == 1) s.consistency.last = static_cast<std::size_t>(last);
+    s.consistency.island_begin = static_cast<std::size_t>(r.u64("island begin"));
+    s.consistency.island_end = static_cast<std::size_t>(r.u64("island end"));
+    const std::uint8_t accepted = r.u8("consistency accepted");
+    if (accepted > 1) r.corrupt("consistency accepted flag is not 0 or 1");
+    s.consistency.accepted = accepted == 1;
+    if (s.consistency.consecutive < 0 || static_cast<std::size_t>(s.consistency.consecutive) > frames ||
+        s.consistency.island_begin > s.consistency.island_end || s.consistency.island_end > frames ||
+        (s.consistency.last && *s.consistency.last >= frames))
+      r.corrupt("invalid temporal-consistency state");
+    return s;
+  }
+};
+
 namespace detail {
+
+/// The place decision's options of `o` (temporal consistency, BoW floor, revisit rule,
+/// PlaceDecisionOptions), as the memory's section "dcsn" begins.
+inline void write_decision_options(BinaryWriter& w, const LoopOptions& o) {
+  w.u64(o.temporal_consistency);
+  w.u64(o.temporal_tolerance);
+  w.f64(o.min_bow_score);
+  w.f64(o.left_ratio);
+  w.f64(o.decision.min_confidence);
+  w.f64(o.decision.chance_inlier_rate);
+  w.f64(o.decision.half_significance);
+  w.i32(o.decision.spread_grid);
+  w.f64(o.decision.full_spread);
+  w.f64(o.decision.ambiguity_ratio);
+}
+
+/// Reads write_decision_options()'s bytes into `o`; the caller checks the options whole
+/// (LoopEngine::check_options).
+inline void read_decision_options(BinaryReader& r, LoopOptions& o) {
+  o.temporal_consistency = static_cast<std::size_t>(r.u64("temporal_consistency"));
+  o.temporal_tolerance = static_cast<std::size_t>(r.u64("temporal_tolerance"));
+  o.min_bow_score = r.f64("min_bow_score");
+  o.left_ratio = r.f64("left_ratio");
+  o.decision.min_confidence = r.f64("min_confidence");
+  o.decision.chance_inlier_rate = r.f64("chance_inlier_rate");
+  o.decision.half_significance = r.f64("half_significance");
+  o.decision.spread_grid = r.i32("spread_grid");
+  o.decision.full_spread = r.f64("full_spread");
+  o.decision.ambiguity_ratio = r.f64("ambiguity_ratio");
+  if (o.temporal_consistency > 1000) r.corrupt("temporal_consistency above 1000");
+}
+
 template <class E>
 struct fits_essential : std::false_type {};
 template <>
@@ -340,9 +426,9 @@ class LoopEngine {
   /// temporal-consistency state, and the first frame of the last frame's session
   /// (begin_session). The tree is rebuilt exactly: the frames the last query had
   /// inserted, in order.
-  void restore(std::vector<LabelVector> labels, std::size_t past_window, std::size_t left_queries,
-               std::size_t not_revisit, const ConsistencyState<std::size_t>& consistency,
-               std::size_t session_start = 0) {
+  void restore(std::vector<LabelVector> labels, const LoopEngineState& state, std::size_t session_start = 0) {
+    const std::size_t past_window = state.past_window, left_queries = state.left_queries,
+                      not_revisit = state.not_revisit;
     detail::check(frames_ == 0, "LoopEngine::restore: frames were added already");
     detail::check(session_start <= labels.size(), "LoopEngine::restore: the session starts after the last frame");
     detail::check(not_revisit + left_queries <= past_window && past_window <= labels.size(),
@@ -355,7 +441,7 @@ class LoopEngine {
     past_window_ = past_window;
     left_queries_ = left_queries;
     not_revisit_ = not_revisit;
-    set_consistency(consistency);
+    set_consistency(state.consistency);
     session_start_ = session_start;
     if (uses_labels(options_.index) && frames_ > 0)
       while (tree_next_ < candidates_below(frames_ - 1)) tree_.insert(labels_[tree_next_], tree_next_), ++tree_next_;
@@ -385,6 +471,10 @@ class LoopEngine {
   [[nodiscard]] const M& matcher() const noexcept { return matcher_; }
   [[nodiscard]] const E& estimator() const noexcept { return estimator_; }
   [[nodiscard]] const ConsistencyState<std::size_t>& consistency() const noexcept { return consistency_.state(); }
+  /// What restore() takes back besides the label vectors.
+  [[nodiscard]] LoopEngineState state() const {
+    return {past_window_, left_queries_, not_revisit_, consistency_.state()};
+  }
   /// Restores the temporal-consistency state (a resumed stream).
   void set_consistency(const ConsistencyState<std::size_t>& s) {
     consistency_ = TemporalConsistency<std::size_t>(consistency_.options(), s);

@@ -143,7 +143,7 @@ class MemoryStore {
       const KeyImage& key = map.keys[k];
       detail::BinaryWriter record, detections;
       memory.write_key_record(record, k, storage);
-      detail::memory_write_detections(detections, memory.key_detections_[k]);
+      detail::memory_write_detections(detections, memory.labels_.key_detections[k]);
       insert_key_->bind(1, static_cast<std::int64_t>(k))
           .bind(2, static_cast<std::int64_t>(key.frame_index))
           .bind(3, key.timestamp)

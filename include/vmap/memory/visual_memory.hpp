@@ -42,7 +42,11 @@
 // examples/memory.md, "The single-file format (.vmem)"; each section is parsed by its own
 // reader, so every error names its section, and counts are checked against the bytes
 // that remain before anything is allocated. Key images' descriptors are checked against
-// the layout of the descriptor given to load (core/concepts.hpp, StatesLayout).
+// the layout of the descriptor given to load (core/concepts.hpp, StatesLayout). The
+// memory frames the sections; the parts encode their own state in them: the GCS
+// (memory/gcs.hpp), the object labels (memory/labels.hpp), the loop engine's state and
+// decision options (lcd/loop_engine.hpp), the selector's links and score
+// (keyframe/map_io.hpp), the vocabulary (place/vocabulary.hpp) and the place database.
 //
 // Bytes per key image (ORB 1000, 32-byte descriptors): 28 per keypoint + 32 per
 // descriptor, about 60 KB of features in the file and in memory (measured by
@@ -86,11 +90,16 @@
 #include <vmap/lcd/loop_engine.hpp>
 #include <vmap/lcd/place_ranking.hpp>
 #include <vmap/matching/brute_force.hpp>
+#include <vmap/memory/detail/format.hpp>
+#include <vmap/memory/gcs.hpp>
+#include <vmap/memory/labels.hpp>
+#include <vmap/memory/types.hpp>
 #include <vmap/place/bow.hpp>
 #include <vmap/place/database.hpp>
 #include <vmap/place/vocabulary.hpp>
 #include <vmap/som/gcs.hpp>
 #include <vmap/som/histogram.hpp>
+#include <vmap/som/localizer.hpp>
 #include <vmap/som/pose_map.hpp>
 
 #include <opencv2/core.hpp>
@@ -116,362 +125,7 @@
 
 namespace vmap {
 
-/// Written by this build; version 1 and 2 files still load.
-inline constexpr std::uint32_t memory_format_version = 4;
-
-/// How key images' pixels are kept and saved.
-enum class ImageStorage : std::uint8_t {
-  none,  ///< features only (the smallest memory; localize and loops need no pixels)
-  png,   ///< lossless
-  jpeg,  ///< lossy, MemoryOptions::jpeg_quality (about 8x smaller than PNG)
-};
-
-/// An odometry pose given with a frame: none, SE(2) (a ground robot) or SE(3).
-using OdometryPose = std::variant<std::monostate, Pose2, cv::Affine3d>;
-
-namespace detail {
-/// The default pose argument of push(). A named object rather than a `{}` temporary:
-/// GCC 12 at -O2 reports copying a defaulted std::variant temporary as a read of
-/// uninitialised storage (a false -Wmaybe-uninitialized).
-inline const OdometryPose no_odometry_pose{};
-}  // namespace detail
-
-/// LFM-LCD's label tree inside the memory (Zhu et al., Sensors 2021, sec. 3.2-3.3;
-/// DESIGN.md sec. 1.2), used when the frames are pushed with object detections.
-/// (Eq. 3's score threshold, the candidate source and m of sec. 3.3 are the loop
-/// engine's: MemoryOptions::loops.labels, .index, .min_candidates.)
-struct MemoryLabelOptions {
-  /// The label order, large objects first. Given: it is the schema from the first key
-  /// image on, as given (no eq. 5 pruning). Empty: the schema is learned online (below).
-  std::vector<int> order{};
-  /// Without an order: the detections of the first `sample` key images are the eq. 5
-  /// sample M; the schema (labels by mean box area, pruned to the `influence` band) is
-  /// then fixed, the tree built and the earlier key images caught up in order (>= 1).
-  std::size_t sample = 20;
-  InfluenceOptions influence{};
-};
-
-/// The GCS localizer trained on the memory's key images (Trujillo-Romero 2024,
-/// DESIGN.md sec. 1.3): their own features -> BowHistogram -> GCS -> a pose per neuron.
-struct MemoryGcsOptions {
-  BowHistogramOptions histogram{};  ///< its vocabulary is learned from the key images
-  GcsOptions gcs{};                 ///< the network's options (max_cells 100, seed 1)
-};
-
-struct MemoryOptions {
-  /// The key-image selector's options (tau, eq. 6 / Algorithm 1 rule, fast path).
-  /// `keep_images` is set from `images`.
-  SelectorOptions selector{};
-  ImageStorage images = ImageStorage::none;
-  int jpeg_quality = 90;  ///< 1..100, for ImageStorage::jpeg
-  /// Without a vocabulary given to the constructor, one is learned from the descriptors
-  /// of the first `vocabulary_after` key images (>= 1); loop detection then runs for
-  /// those in order, as if the vocabulary had been there from the start.
-  std::size_t vocabulary_after = 20;
-  /// The learned vocabulary's shape (DBoW2-like tree; default 10^3 words, seeded).
-  VocabularyTreeOptions vocabulary{};
-  BowScoring scoring = BowScoring::l1;
-  /// The loop engine's options (lcd/loop_engine.hpp): the window of recent key images
-  /// that are not candidates, the top k verified, the decision (confidence threshold),
-  /// the revisit rule. `index` is used with detections (tree or tree_ranked); without,
-  /// the memory ranks every key image by bag of words (bow).
-  LoopOptions loops{};
-  /// localize() verifies the best `localize_candidates` key images by BoW score (>= 1)
-  /// and decides with loops.decision.
-  std::size_t localize_candidates = 5;
-  /// The label-tree loop detection, used when frames are pushed with detections.
-  MemoryLabelOptions labels{};
-};
-
-/// A verified match between two key images (a loop edge) or a query and a key image.
-struct PlaceLink {
-  std::uint32_t key = 0;        ///< the matched key image (the older one for a loop)
-  double bow_score = 0.0;       ///< its rank score (place/bow.hpp), in [0, 1]
-  VerificationStatus status = VerificationStatus::too_few_matches;
-  cv::Matx33d fundamental = cv::Matx33d::zeros();  ///< x_query^T F x_key = 0 (when verified)
-  int matches = 0;                                 ///< raw correspondences
-  int inliers = 0;                                 ///< F-matrix inliers
-  double similarity = 0.0;                         ///< eq. 5
-  double confidence = 0.0;                         ///< the place decision's (lcd/place_decision.hpp)
-};
-
-/// A loop closure: key image `from` (the newer) revisits key image `link.key`.
-struct LoopEdge {
-  std::uint32_t from = 0;
-  PlaceLink link;
-};
-
-/// What push() did: the selector's answer, the key image it added, the loops found.
-struct MemoryStep {
-  FrameResult frame;
-  std::optional<std::uint32_t> new_key;  ///< index of the key image added, if any
-  std::vector<LoopEdge> loops;           ///< loop edges found in this step
-};
-
-/// localize()'s answer: the place decision (lcd/loop_engine.hpp) and the verified key
-/// images behind it.
-struct MemoryLocalization {
-  /// accepted, or why not: unknown place (verified candidates, none confident enough),
-  /// ambiguous (two places equally likely), too little evidence (an empty memory, a
-  /// query without features, no candidate verified).
-  PlaceStatus status = PlaceStatus::too_little_evidence;
-  std::string reason = "the memory has no key image";
-  double confidence = 0.0;   ///< of the best key image, in [0, 1]
-  PlaceEvidence evidence;    ///< of the best key image
-  /// Every verified key image, most confident first (matches.front() is the decision's
-  /// candidate, accepted or not).
-  std::vector<PlaceLink> matches;
-  std::size_t verified_candidates = 0;  ///< key images the estimator ran on
-  /// The query's pose relative to the best key image (R and the direction of t), when the
-  /// memory's estimator recovers one (EssentialEstimator with a calibrated camera).
-  std::optional<RelativePose> relative_pose;
-  /// The GCS position estimate (Algorithm 5 with the one query image), when a GCS was
-  /// trained (VisualMemory::train_gcs) and the query has features; independent of the
-  /// place decision.
-  std::optional<Localization> position;
-  [[nodiscard]] bool ok() const noexcept { return status == PlaceStatus::accepted; }
-  /// The accepted key image; nullptr unless ok().
-  [[nodiscard]] const PlaceLink* best() const noexcept { return ok() && !matches.empty() ? &matches.front() : nullptr; }
-};
-
-/// A session: one run of the robot, its own chain of key images (consecutive key images
-/// of a session are linked; the first key image of a session is not linked to the last
-/// of the one before). Loops are searched across all sessions, and localization searches
-/// every session.
-struct MemorySession {
-  std::size_t first_key = 0;    ///< its first key image (== key_images() while it has none)
-  std::size_t first_frame = 0;  ///< frames pushed into the memory before it
-};
-
-/// A neighbour of a key image in the memory's graph.
-struct GraphNeighbour {
-  enum class Kind : std::uint8_t { link, loop };
-  std::uint32_t key = 0;
-  Kind kind = Kind::link;
-};
-
 class MemoryStore;
-
-namespace detail {
-
-inline constexpr char memory_magic[8] = {'V', 'M', 'A', 'P', 'M', 'E', 'M', 'O'};
-inline constexpr std::uint32_t memory_sections_v1 = 7;
-inline constexpr std::uint32_t memory_sections_v2 = 10;
-inline constexpr std::uint32_t memory_sections_v3 = 11;
-inline constexpr std::uint32_t memory_sections = 12;
-/// Longest policy description a file may hold.
-inline constexpr std::uint32_t memory_max_policy = 4096;
-/// Most detections one key image may have in a file (a detector gives a few hundred).
-inline constexpr std::uint32_t memory_max_detections = 1U << 16;
-/// The most frames a memory file may say were pushed: 2^40, 348 years at 100 frames a
-/// second. A larger count is a damaged or crafted file, not a robot's.
-inline constexpr std::uint64_t memory_max_frames = std::uint64_t{1} << 40;
-
-// What the file records of a policy (section "plcy"): its own description
-// (core/concepts.hpp, DescribesItself), so that a mismatch on load reads as it is; a
-// policy that does not describe itself is recorded as "" (not recorded, not checked).
-template <class P>
-std::string memory_policy_record(const P& policy) {
-  if constexpr (DescribesItself<P>)
-    return std::string(policy.describe());
-  else
-    return {};
-}
-
-inline void memory_write_detections(BinaryWriter& w, const std::vector<Detection>& d) {
-  if (d.size() > memory_max_detections)
-    fail("VisualMemory::save: a key image has " + std::to_string(d.size()) + " detections, more than " +
-         std::to_string(memory_max_detections));
-  w.u32(static_cast<std::uint32_t>(d.size()));
-  for (const Detection& x : d) {
-    w.i32(x.label);
-    w.f32(x.score);
-    w.f32(x.box.x);
-    w.f32(x.box.y);
-    w.f32(x.box.width);
-    w.f32(x.box.height);
-  }
-}
-
-inline std::vector<Detection> memory_read_detections(BinaryReader& r) {
-  const std::uint32_t n = r.u32("detection count");
-  if (n > memory_max_detections) r.corrupt(std::to_string(n) + " detections in one key image");
-  r.require_items(n, 24, "detection count");
-  std::vector<Detection> out(n);
-  for (Detection& d : out) {
-    d.label = r.i32("detection label");
-    d.score = r.f32("detection score");
-    d.box.x = r.f32("detection box");
-    d.box.y = r.f32("detection box");
-    d.box.width = r.f32("detection box");
-    d.box.height = r.f32("detection box");
-    if (!(d.score >= 0.0f && d.score <= 1.0f)) r.corrupt("a detection score is not in [0, 1]");
-    if (!std::isfinite(d.box.x) || !std::isfinite(d.box.y) || !std::isfinite(d.box.width) ||
-        !std::isfinite(d.box.height))
-      r.corrupt("a detection box is not finite");
-  }
-  return out;
-}
-
-inline void memory_write_matx(BinaryWriter& w, const cv::Matx33d& m) {
-  for (double e : m.val) w.f64(e);
-}
-
-inline cv::Matx33d memory_read_matx(BinaryReader& r, std::string_view what) {
-  cv::Matx33d m;
-  for (double& e : m.val) {
-    e = r.f64(what);
-    if (!std::isfinite(e)) r.corrupt(std::string(what) + " is not finite");
-  }
-  return m;
-}
-
-inline void write_memory_image(BinaryWriter& w, const cv::Mat& image, ImageStorage storage, int quality) {
-  if (image.empty() || storage == ImageStorage::none) {
-    w.u8(0);
-    return;
-  }
-  check(valid_image_type(image.type()) && (storage == ImageStorage::png || image.depth() == CV_8U),
-        "VisualMemory::save: a key image of type " + cv::typeToString(image.type()) + " cannot be stored as " +
-            (storage == ImageStorage::png ? "PNG" : "JPEG"));
-  std::vector<unsigned char> buf;
-  const bool png = storage == ImageStorage::png;
-  const std::vector<int> params = png ? std::vector<int>{} : std::vector<int>{cv::IMWRITE_JPEG_QUALITY, quality};
-  if (!cv::imencode(png ? ".png" : ".jpg", image, buf, params)) fail("VisualMemory::save: encoding a key image failed");
-  w.u8(png ? 1 : 2);
-  w.i32(image.rows);
-  w.i32(image.cols);
-  w.i32(image.type());
-  w.u32(static_cast<std::uint32_t>(buf.size()));
-  w.bytes(buf.data(), buf.size());
-}
-
-/// A key image's pixels (none, PNG or JPEG); with MapLoadOptions::decode_images false the
-/// encoded image is checked but not decoded, and `skipped` (when given) is set.
-inline cv::Mat read_memory_image(BinaryReader& r, const MapLoadOptions& limits, std::uint64_t& total_pixels,
-                                 bool* skipped = nullptr) {
-  const std::uint8_t kind = r.u8("image kind");
-  if (kind == 0) return {};
-  if (kind > 2) r.corrupt("image kind " + std::to_string(kind) + " is not 0, 1 or 2");
-  int type = 0;
-  const cv::Size size = read_key_image_size(r, limits, total_pixels, type);
-  const int rows = size.height;
-  const int cols = size.width;
-  if (kind == 2 && CV_MAT_DEPTH(type) != CV_8U) r.corrupt("invalid key image type " + std::to_string(type));
-  const std::uint32_t len = r.u32("image length");
-  const std::string_view bytes = r.bytes(len, "image");
-  // The encoded header's size is checked before decoding, so a hostile file cannot make
-  // the decoder allocate more than the recorded (bounded) size.
-  const auto header = image_header_size(bytes);
-  if (!header || header->width != cols || header->height != rows)
-    r.corrupt("key image is not a " + std::string(kind == 1 ? "PNG" : "JPEG") + " of the recorded size");
-  if (!limits.decode_images) {
-    if (skipped) *skipped = true;
-    return {};
-  }
-  const cv::Mat buf(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
-  cv::Mat img;
-  try {
-    img = cv::imdecode(buf, cv::IMREAD_UNCHANGED);
-  } catch (const cv::Exception&) {
-    r.corrupt("key image cannot be decoded");
-  }
-  if (img.empty() || img.rows != rows || img.cols != cols || img.type() != type)
-    r.corrupt("key image cannot be decoded to the recorded size and type");
-  return img;
-}
-
-inline void memory_write_pose(BinaryWriter& w, const OdometryPose& p) {
-  if (const auto* p2 = std::get_if<Pose2>(&p)) {
-    w.u8(1);
-    w.f64(p2->x());
-    w.f64(p2->y());
-    w.f64(p2->theta());
-  } else if (const auto* p3 = std::get_if<cv::Affine3d>(&p)) {
-    w.u8(2);
-    for (int i = 0; i < 12; ++i) w.f64(p3->matrix.val[i]);
-  } else {
-    w.u8(0);
-  }
-}
-
-inline OdometryPose memory_read_pose(BinaryReader& r) {
-  const std::uint8_t kind = r.u8("pose kind");
-  if (kind == 0) return {};
-  if (kind == 1) {
-    const double x = r.f64("pose"), y = r.f64("pose"), t = r.f64("pose");
-    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(t)) r.corrupt("SE(2) pose is not finite");
-    return Pose2(x, y, t);
-  }
-  if (kind != 2) r.corrupt("pose kind " + std::to_string(kind) + " is not 0, 1 or 2");
-  cv::Matx44d m = cv::Matx44d::eye();
-  for (int i = 0; i < 12; ++i) {
-    m.val[i] = r.f64("pose");
-    if (!std::isfinite(m.val[i])) r.corrupt("SE(3) pose is not finite");
-  }
-  return cv::Affine3d(m);
-}
-
-inline void memory_write_link(BinaryWriter& w, const PlaceLink& l) {
-  w.f64(l.bow_score);
-  w.u8(static_cast<std::uint8_t>(l.status));
-  memory_write_matx(w, l.fundamental);
-  w.i32(l.matches);
-  w.i32(l.inliers);
-  w.f64(l.similarity);
-}
-
-inline VerificationStatus memory_read_status(BinaryReader& r) {
-  const std::uint8_t s = r.u8("verification status");
-  if (s > static_cast<std::uint8_t>(VerificationStatus::too_few_inliers)) r.corrupt("unknown verification status");
-  return static_cast<VerificationStatus>(s);
-}
-
-inline PlaceLink memory_read_link(BinaryReader& r) {
-  PlaceLink l;
-  l.bow_score = r.f64("BoW score");
-  if (!(l.bow_score >= 0.0 && l.bow_score <= 1.0 + 1e-9)) r.corrupt("BoW score outside [0, 1]");
-  l.status = memory_read_status(r);
-  l.fundamental = memory_read_matx(r, "fundamental matrix");
-  l.matches = r.i32("matches");
-  l.inliers = r.i32("inliers");
-  if (l.matches < 0 || l.inliers < 0 || l.inliers > l.matches) r.corrupt("invalid match/inlier counts");
-  l.similarity = r.f64("similarity");
-  if (!(l.similarity >= 0.0 && l.similarity <= 1.0)) r.corrupt("similarity outside [0, 1]");
-  return l;
-}
-
-/// Sections: tag + length + CRC, each read by a reader that names it.
-class MemorySectionWriter {
- public:
-  void add(const char (&tag)[5], const std::string& bytes) {
-    out_.bytes(tag, 4);
-    out_.u64(bytes.size());
-    out_.u32(crc32(bytes));
-    out_.bytes(bytes);
-  }
-  BinaryWriter out_;
-};
-
-inline BinaryReader memory_open_section(BinaryReader& file, const char (&tag)[5]) {
-  const std::string name = file.source() + " section '" + std::string(tag, 4) + "'";
-  const std::size_t at = file.offset();
-  if (file.remaining() < 16)
-    fail(name + ": truncated (the file ends at byte " + std::to_string(at + file.remaining()) + " inside its header)");
-  if (file.bytes(4, "section tag") != std::string_view(tag, 4))
-    fail(name + ": missing (another tag at byte " + std::to_string(at) + ")");
-  const std::uint64_t len = file.u64("section length");
-  const std::uint32_t crc = file.u32("section checksum");
-  if (len > file.remaining())
-    fail(name + ": truncated (" + std::to_string(len) + " bytes announced, " + std::to_string(file.remaining()) +
-         " left)");
-  const std::size_t base = file.offset();
-  const std::string_view bytes = file.bytes(len, "section");
-  if (crc32(bytes) != crc) fail(name + ": checksum mismatch (the file is corrupt)");
-  return BinaryReader(bytes, name, base);
-}
-
-}  // namespace detail
 
 /// The memory over the paper's feature stack (Descriptor, Matcher, Estimator,
 /// Similarity; keyframe/selector.hpp).
@@ -497,7 +151,7 @@ class VisualMemory {
         selector_(std::move(descriptor), std::move(matcher), std::move(estimator), std::move(similarity),
                   selector_options(options_)),
         vocabulary_(std::make_shared<const AnyVocabulary>(std::move(vocabulary))) {
-    if (!options_.labels.order.empty()) schema_ = LabelSchema(options_.labels.order);
+    if (!options_.labels.order.empty()) labels_.schema = LabelSchema(options_.labels.order);
   }
 
   explicit VisualMemory(const MemoryOptions& options, AnyVocabulary vocabulary = {})
@@ -596,7 +250,7 @@ class VisualMemory {
       }
     std::stable_sort(links.begin(), links.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
     for (auto& [rank, l] : links) out.matches.push_back(std::move(l));
-    if (gcs_) out.position = gcs_->map.localize({gcs_->histogram(q)});
+    if (gcs_) out.position = gcs_->localize(q);
     return out;
   }
 
@@ -623,17 +277,11 @@ class VisualMemory {
                     "VisualMemory::train_gcs: the BowHistogram needs binary (CV_8UC1) descriptors, the key images "
                     "have " + cv::typeToString(f.descriptors.type()));
     BowHistogram histogram(options.histogram);
-    histogram.fit(features);
-    std::vector<Eigen::VectorXf> vectors;
-    for (const Features& f : features) vectors.push_back(histogram(f));
-    GcsXf network(options.gcs);
-    const GcsTrainStats stats = network.train(vectors);
-    std::vector<std::size_t> winners;
-    for (const auto& v : vectors) winners.push_back(network.bmu(v).cell);
-    gcs_.emplace(GcsPart{options, std::move(histogram), PoseMap<GcsXf>::from_assignments(std::move(network), winners, poses),
-                         std::move(keys), std::move(winners)});
+    PoseMapTraining<GcsXf> trained = train_pose_map<GcsXf>(histogram, options.gcs, features, poses);
+    gcs_.emplace(MemoryGcs{options, std::move(histogram), std::move(trained.map), std::move(keys),
+                           std::move(trained.winners)});
     ++gcs_generation_;
-    return stats;
+    return trained.gcs;
   }
 
   /// Whether a GCS was trained (train_gcs) or loaded with the memory.
@@ -674,7 +322,7 @@ class VisualMemory {
     sessions_.push_back({key_images(), frames()});
     selector_.start_chain();
     previous_pose_ = OdometryPose{};
-    previous_detections_.clear();
+    labels_.previous_detections.clear();
   }
 
   /// The sessions, in order; the first starts at key image 0 and frame 0.
@@ -708,8 +356,8 @@ class VisualMemory {
     if (options_bytes(options_.images) != other.options_bytes(other.options_.images) ||
         decision_options_bytes() != other.decision_options_bytes())
       refuse("they were made with other options (threshold, key images' storage, vocabulary, loop or decision options)");
-    if (frames() > 0 && labelled_ != other.labelled_)
-      refuse(std::string("the frames of ") + (labelled_ ? name : other_name) +
+    if (frames() > 0 && labels_.labelled != other.labels_.labelled)
+      refuse(std::string("the frames of ") + (labels_.labelled ? name : other_name) +
              " came with detections, the other's without");
     if (other.released_ > 0) refuse(other_name + " holds only its working memory's features in RAM (load it whole)");
     if (pixels_unread_ || other.pixels_unread_) refuse("a memory was loaded without its key images' pixels");
@@ -733,15 +381,17 @@ class VisualMemory {
     selector_.restore(std::move(state));
     if (m0 == 0) {
       sessions_.clear();
-      labelled_ = other.labelled_;
+      labels_.labelled = other.labels_.labelled;
     } else if (sessions_.size() > 1 && sessions_.back().first_frame == f0) {
       sessions_.pop_back();  // a session started here and never pushed into: other's first takes its place
     }
     for (const MemorySession& s : other.sessions_) sessions_.push_back({s.first_key + m0, s.first_frame + f0});
     poses_.insert(poses_.end(), other.poses_.begin(), other.poses_.end());
-    key_detections_.insert(key_detections_.end(), other.key_detections_.begin(), other.key_detections_.end());
+    const auto& theirs_detections = other.labels_.key_detections;
+    labels_.key_detections.insert(labels_.key_detections.end(), theirs_detections.begin(),
+                                  theirs_detections.end());
     previous_pose_ = other.previous_pose_;
-    previous_detections_ = other.previous_detections_;
+    labels_.previous_detections = other.labels_.previous_detections;
     last_index_ = other.last_index_;
     if (sessions_.back().first_key == key_images()) selector_.start_chain();
     for (std::size_t k = m0; k < key_images(); ++k) {
@@ -775,10 +425,10 @@ class VisualMemory {
   [[nodiscard]] const MemoryOptions& options() const noexcept { return options_; }
   [[nodiscard]] Selector& selector() noexcept { return selector_; }
   /// Whether the frames come with detections (the label-tree loop detection runs).
-  [[nodiscard]] bool labelled() const noexcept { return labelled_; }
+  [[nodiscard]] bool labelled() const noexcept { return labels_.labelled; }
   /// The label schema once fixed (given order, or after MemoryLabelOptions::sample key
   /// images); nullopt before, and in a memory without detections.
-  [[nodiscard]] const std::optional<LabelSchema>& label_schema() const noexcept { return schema_; }
+  [[nodiscard]] const std::optional<LabelSchema>& label_schema() const noexcept { return labels_.schema; }
   /// The binary classified tree: the key images older than the window of the last one
   /// checked for loops, each at the leaf of its label vector (empty before the schema).
   [[nodiscard]] const BinaryClassifiedTree<std::size_t>& label_tree() const noexcept {
@@ -786,7 +436,9 @@ class VisualMemory {
     return engine_ ? engine_->tree() : none;
   }
   /// The detections pushed with each key image's frame (empty without detections).
-  [[nodiscard]] const std::vector<std::vector<Detection>>& key_detections() const noexcept { return key_detections_; }
+  [[nodiscard]] const std::vector<std::vector<Detection>>& key_detections() const noexcept {
+    return labels_.key_detections;
+  }
   /// What the memory records of its policies (descriptor, matcher, estimator,
   /// similarity): name and options, "" for a policy that does not describe itself (file "plcy").
   [[nodiscard]] const std::array<std::string, 4>& policy_records() const noexcept { return policies_; }
@@ -911,17 +563,8 @@ class VisualMemory {
     auto links = detail::memory_open_section(file, "link");
     const std::uint32_t p = links.u32("pair count");
     if (p != (m == 0 ? 0U : m - 1U)) links.corrupt("pair count " + std::to_string(p) + " for " + std::to_string(m) + " key images");
-    for (std::uint32_t i = 0; i < p; ++i) {
-      KeyPair pair;
-      pair.status = detail::memory_read_status(links);
-      pair.fundamental = detail::memory_read_matx(links, "fundamental matrix");
-      pair.matches = links.i32("matches");
-      pair.inliers = links.i32("inliers");
-      if (pair.matches < 0 || pair.inliers < 0 || pair.inliers > pair.matches) links.corrupt("invalid match/inlier counts");
-      pair.similarity = links.f64("similarity");
-      if (!(pair.similarity >= 0.0 && pair.similarity <= 1.0)) links.corrupt("similarity outside [0, 1]");
-      state.map.pairs.push_back(pair);
-    }
+    for (std::uint32_t i = 0; i < p; ++i)
+      state.map.pairs.push_back(detail::read_key_pair(links, "verification status"));
     links.expect_end("the last pair");
 
     auto loops = detail::memory_open_section(file, "loop");
@@ -956,7 +599,7 @@ class VisualMemory {
     }
     const std::uint8_t has_score = sel.u8("previous score flag");
     if (has_score > 1 || (has_score == 1 && has_prev == 0)) sel.corrupt("invalid previous score flag");
-    if (has_score == 1) state.previous_score = read_score(sel);
+    if (has_score == 1) state.previous_score = detail::read_pair_score(sel);
     const std::uint8_t has_last = sel.u8("last frame flag");
     if (has_last > 1 || (has_last == 0 && m > 0)) sel.corrupt("invalid last frame flag");
     if (has_last == 1) {
@@ -974,11 +617,8 @@ class VisualMemory {
     if (has_voc == 1) {
       const std::uint64_t len = voc.u64("vocabulary length");
       const std::string_view vb = voc.bytes(len, "vocabulary");
-      const std::string vname = voc.source() + " vocabulary";
-      if (vb.size() > detail::place_header_size && static_cast<std::uint8_t>(vb[detail::place_header_size]) == 1)
-        mem.vocabulary_ = std::make_shared<const AnyVocabulary>(FloatVocabularyTree::deserialize(vb, vname));
-      else
-        mem.vocabulary_ = std::make_shared<const AnyVocabulary>(BinaryVocabularyTree::deserialize(vb, vname));
+      mem.vocabulary_ =
+          std::make_shared<const AnyVocabulary>(AnyVocabulary::deserialize(vb, voc.source() + " vocabulary"));
     }
     voc.expect_end("the vocabulary");
 
@@ -996,16 +636,17 @@ class VisualMemory {
       for (std::size_t i = 0; i < ids.size(); ++i)
         if (ids[i] != i || ids[i] >= m) detail::fail(db.source() + ": image id " + std::to_string(ids[i]) + " is not key image " + std::to_string(i));
     }
-    mem.key_detections_.assign(m, {});
+    mem.labels_.key_detections.assign(m, {});
     if (version >= 2) {
       auto plcy = detail::memory_open_section(file, "plcy");
       mem.read_policies(plcy);
       auto labl = detail::memory_open_section(file, "labl");
-      mem.read_labels(labl, options, m, has_prev == 1);
+      mem.labels_ = MemoryLabels::read(labl, mem.options_, m, has_prev == 1,
+                                       [](const MemoryOptions& o) { return checked(o); });
       auto gcsl = detail::memory_open_section(file, "gcsl");
-      mem.read_gcs(gcsl, m);
+      mem.read_gcs(gcsl);
     }
-    EngineState engine_state;
+    LoopEngineState engine_state;
     if (version >= 3) {
       auto dcsn = detail::memory_open_section(file, "dcsn");
       engine_state = mem.read_decision(dcsn, database.size());
@@ -1029,8 +670,7 @@ class VisualMemory {
         // The session of the last key image checked: as the engine was when it checked it.
         const std::size_t last_checked = mem.engine_->ranker().database().size() - 1;
         const std::size_t session_start = mem.sessions_[mem.session_of_key(last_checked)].first_key;
-        mem.engine_->restore(std::move(labels), engine_state.past_window, engine_state.left_queries,
-                             engine_state.not_revisit, engine_state.consistency, session_start);
+        mem.engine_->restore(std::move(labels), engine_state, session_start);
       } catch (const Error& err) {
         detail::fail(file.source() + " section 'dcsn': " + err.what());
       }
@@ -1085,8 +725,8 @@ class VisualMemory {
   MemoryStep push_frame(const Frame& frame, const OdometryPose& pose, const std::vector<Detection>* detections) {
     const bool with = detections != nullptr;
     if (!last_index_) {
-      labelled_ = with;  // the first frame decides
-    } else if (with != labelled_) {
+      labels_.labelled = with;  // the first frame decides
+    } else if (with != labels_.labelled) {
       detail::fail("VisualMemory::push: frame " + std::to_string(frame.index) +
                    (with ? " comes with detections, but the memory's frames had none"
                          : " comes without detections, but the memory's frames had them (give an empty list when "
@@ -1102,28 +742,31 @@ class VisualMemory {
 
   /// Eq. 5 over the first `sample` key images' detections (label order by mean box area).
   void sample_schema(std::size_t key_images) {
-    if (!labelled_ || schema_ || key_images < options_.labels.sample) return;
+    if (!labels_.labelled || labels_.schema || key_images < options_.labels.sample) return;
     LabelStatistics stats(options_.loops.labels);
-    for (std::size_t k = 0; k < options_.labels.sample; ++k) stats.observe(key_detections_[k]);
-    schema_ = make_label_schema(stats, options_.labels.influence);
+    for (std::size_t k = 0; k < options_.labels.sample; ++k) stats.observe(labels_.key_detections[k]);
+    labels_.schema = make_label_schema(stats, options_.labels.influence);
   }
 
   /// Loop detection runs once there is a vocabulary and, for labels, a schema.
-  [[nodiscard]] bool detecting() const noexcept { return !vocabulary_->empty() && (!labelled_ || schema_); }
+  [[nodiscard]] bool detecting() const noexcept {
+    return !vocabulary_->empty() && (!labels_.labelled || labels_.schema);
+  }
 
   /// Key image k's label vector (eq. 3-4; empty without detections).
   [[nodiscard]] LabelVector label_vector(std::size_t k) const {
-    return labelled_ ? schema_->vector(key_detections_[k], options_.loops.labels) : LabelVector{};
+    return labels_.labelled ? labels_.schema->vector(labels_.key_detections[k], options_.loops.labels)
+                            : LabelVector{};
   }
 
   /// The loop engine over the key images, its ranker over `database` (the key images
   /// checked so far): label sources with detections, bag of words without.
   void start_engine(PlaceDatabase<std::uint32_t> database) {
     LoopOptions o = options_.loops;
-    if (!labelled_) o.index = CandidateIndex::bow;
+    if (!labels_.labelled) o.index = CandidateIndex::bow;
     engine_.emplace(selector_.front_end().matcher(), selector_.front_end().estimator(), o,
                     BasicPlaceRanker<std::uint32_t>(vocabulary_, std::move(database)),
-                    labelled_ ? *schema_ : LabelSchema{});
+                    labels_.labelled ? *labels_.schema : LabelSchema{});
   }
 
   static SelectorOptions selector_options(const MemoryOptions& o) { return o.selector; }
@@ -1142,12 +785,12 @@ class VisualMemory {
       // Eq. 6 takes I_{j-1}: its pose and detections are the ones pushed with it.
       const bool this_frame = *r.key_frame == index;
       poses_.push_back(this_frame ? pose : previous_pose_);
-      key_detections_.push_back(this_frame ? current : previous_detections_);
+      labels_.key_detections.push_back(this_frame ? current : labels_.previous_detections);
       step.new_key = static_cast<std::uint32_t>(key_images() - 1);
       on_new_key(*step.new_key, step.loops);
     }
     previous_pose_ = pose;
-    previous_detections_ = current;
+    labels_.previous_detections = current;
     last_index_ = index;
   }
 
@@ -1263,8 +906,7 @@ class VisualMemory {
     detail::BinaryWriter v;
     v.u8(vocabulary_->empty() ? 0 : 1);
     if (!vocabulary_->empty()) {
-      const std::string bytes =
-          vocabulary_->binary() ? vocabulary_->binary()->serialize() : vocabulary_->floating()->serialize();
+      const std::string bytes = vocabulary_->serialize();
       v.u64(bytes.size());
       v.bytes(bytes);
     }
@@ -1396,12 +1038,7 @@ class VisualMemory {
 
   /// Link i (key image i to i + 1) as "link" holds it.
   void write_link_record(detail::BinaryWriter& w, std::size_t i) const {
-    const auto& p = selector_.map().pairs[i];
-    w.u8(static_cast<std::uint8_t>(p.status));
-    detail::memory_write_matx(w, p.fundamental);
-    w.i32(p.matches);
-    w.i32(p.inliers);
-    w.f64(p.similarity);
+    detail::write_key_pair(w, selector_.map().pairs[i]);
   }
 
   std::string links_bytes() const {
@@ -1437,21 +1074,7 @@ class VisualMemory {
       detail::memory_write_pose(w, previous_pose_);
     }
     w.u8(s.previous_score ? 1 : 0);
-    if (s.previous_score) {
-      // What the link to the next key image is made of (selector.hpp's add_key); the
-      // inlier mask is not needed and not stored.
-      const PairScore& p = *s.previous_score;
-      w.i32(p.raw_matches);
-      w.f64(p.upper_bound);
-      w.u8(p.verified_run ? 1 : 0);
-      w.u8(static_cast<std::uint8_t>(p.verification.status));
-      detail::memory_write_matx(w, p.verification.model);
-      w.i32(p.verification.inliers);
-      w.i32(p.verification.matches);
-      w.u8(static_cast<std::uint8_t>(p.verification.degeneracy));
-      w.i32(p.verification.homography_inliers);
-      w.f64(p.similarity);
-    }
+    if (s.previous_score) detail::write_pair_score(w, *s.previous_score);
     w.u8(last_index_ ? 1 : 0);
     if (last_index_) w.u64(*last_index_);
     return std::move(w).take();
@@ -1476,157 +1099,37 @@ class VisualMemory {
     r.expect_end("the policies");
   }
 
-  /// "labl" up to the key images' detections: the label options, whether the frames are
-  /// labelled, the schema.
-  std::string labels_head_bytes() const {
-    const MemoryLabelOptions& o = options_.labels;
-    detail::BinaryWriter w;
-    w.f32(options_.loops.labels.min_score);
-    w.u64(o.sample);
-    w.f64(o.influence.min_influence);
-    w.f64(o.influence.max_influence);
-    w.u8(static_cast<std::uint8_t>(options_.loops.index));
-    w.u64(options_.loops.min_candidates);
-    const auto write_labels = [&](const std::vector<int>& labels) {
-      w.u32(static_cast<std::uint32_t>(labels.size()));
-      for (const int l : labels) w.i32(l);
-    };
-    write_labels(o.order);
-    w.u8(labelled_ ? 1 : 0);
-    w.u8(schema_ ? 1 : 0);
-    if (schema_) write_labels(schema_->labels());
-    return std::move(w).take();
-  }
+  /// "labl" up to the key images' detections (the store writes their rows apart).
+  std::string labels_head_bytes() const { return labels_.head_bytes(options_); }
 
-  /// "labl"'s last part: the detections of I_{j-1} only while the selector holds it (not
-  /// when the last frame is the last key image): the only case a later key image can be
-  /// that frame.
-  std::string previous_detections_bytes() const {
-    detail::BinaryWriter w;
+  /// Whether the selector holds an I_{j-1} (not when the last frame is the last key
+  /// image): only then can a later key image be that frame, and its detections are kept.
+  bool holds_previous_frame() const {
     const auto& keys = selector_.map().keys;
-    const bool has_previous = last_index_ && !(!keys.empty() && keys.back().frame_index == *last_index_);
-    detail::memory_write_detections(w, has_previous ? previous_detections_ : std::vector<Detection>{});
-    return std::move(w).take();
+    return last_index_ && !(!keys.empty() && keys.back().frame_index == *last_index_);
   }
 
-  std::string labels_bytes() const {
-    detail::BinaryWriter w;
-    w.bytes(labels_head_bytes());
-    w.u32(static_cast<std::uint32_t>(key_detections_.size()));
-    for (const auto& d : key_detections_) detail::memory_write_detections(w, d);
-    w.bytes(previous_detections_bytes());
-    return std::move(w).take();
-  }
+  /// "labl"'s last part: the detections of I_{j-1} (MemoryLabels::previous_bytes).
+  std::string previous_detections_bytes() const { return labels_.previous_bytes(holds_previous_frame()); }
 
-  /// Reads "labl" (the tree is rebuilt by the engine from the schema and the key images'
-  /// detections: LoopEngine::restore).
-  void read_labels(detail::BinaryReader& r, const MemoryOptions& file_options, std::uint32_t m, bool has_previous) {
-    MemoryLabelOptions o;
-    MemoryOptions all = file_options;
-    all.loops.labels.min_score = r.f32("label min_score");
-    o.sample = static_cast<std::size_t>(r.u64("label sample"));
-    o.influence.min_influence = r.f64("min_influence");
-    o.influence.max_influence = r.f64("max_influence");
-    const std::uint8_t index = r.u8("label candidate source");
-    if (index > static_cast<std::uint8_t>(CandidateIndex::brute_force)) r.corrupt("unknown candidate source");
-    all.loops.index = static_cast<CandidateIndex>(index);
-    all.loops.min_candidates = static_cast<std::size_t>(r.u64("min_candidates"));
-    const auto read_labels = [&](const char* what) {
-      const std::uint32_t n = r.u32(what);
-      r.require_items(n, 4, what);
-      std::vector<int> labels(n);
-      for (int& l : labels) l = r.i32(what);
-      return labels;
-    };
-    o.order = read_labels("label order");
-    all.labels = o;
-    try {
-      options_ = checked(all);
-      if (!o.order.empty()) schema_ = LabelSchema(o.order);
-      else schema_.reset();
-    } catch (const Error& e) {
-      r.corrupt(e.what());
-    }
-    const std::uint8_t labelled = r.u8("labelled flag");
-    if (labelled > 1) r.corrupt("labelled flag is not 0 or 1");
-    labelled_ = labelled == 1;
-    const std::uint8_t has_schema = r.u8("schema flag");
-    if (has_schema > 1) r.corrupt("schema flag is not 0 or 1");
-    if (has_schema == 1) {
-      std::vector<int> labels = read_labels("schema label count");
-      if (!o.order.empty() && labels != o.order) r.corrupt("the schema is not the given label order");
-      try {
-        schema_ = LabelSchema(std::move(labels));
-      } catch (const Error& e) {
-        r.corrupt(e.what());
-      }
-    } else if (!o.order.empty()) {
-      r.corrupt("a given label order but no schema");
-    }
-    const std::uint32_t n = r.u32("key detection count");
-    if (n != m) r.corrupt("detections for " + std::to_string(n) + " key images, the memory has " + std::to_string(m));
-    key_detections_.clear();
-    for (std::uint32_t k = 0; k < m; ++k) key_detections_.push_back(detail::memory_read_detections(r));
-    previous_detections_ = detail::memory_read_detections(r);
-    r.expect_end("the detections");
-    if (!labelled_) {
-      for (const auto& d : key_detections_)
-        if (!d.empty()) r.corrupt("detections in a memory without labels");
-      if (!previous_detections_.empty()) r.corrupt("detections in a memory without labels");
-    }
-    // Without an I_{j-1} in the selector no later key image can be that frame: its
-    // detections are never read.
-    if (!has_previous) previous_detections_.clear();
-    if (schema_ && o.order.empty() && (!labelled_ || m < o.sample)) r.corrupt("a schema before its sample");
-    if (labelled_ && o.order.empty() && !schema_ && m >= o.sample) r.corrupt("no schema after the sample");
-  }
+  std::string labels_bytes() const { return labels_.bytes(options_, holds_previous_frame()); }
 
-  /// What "dcsn" restores of the loop engine.
-  struct EngineState {
-    std::size_t past_window = 0;
-    std::size_t left_queries = 0;
-    std::size_t not_revisit = 0;
-    ConsistencyState<std::size_t> consistency{};
-  };
-
-  /// "dcsn" without the loop edges' confidences: the decision's options and the
-  /// engine's state.
-  /// The decision's options, as "dcsn" begins.
+  /// The decision's options, as "dcsn" begins (lcd/loop_engine.hpp).
   std::string decision_options_bytes() const {
-    const LoopOptions& o = options_.loops;
     detail::BinaryWriter w;
-    w.u64(o.temporal_consistency);
-    w.u64(o.temporal_tolerance);
-    w.f64(o.min_bow_score);
-    w.f64(o.left_ratio);
-    w.f64(o.decision.min_confidence);
-    w.f64(o.decision.chance_inlier_rate);
-    w.f64(o.decision.half_significance);
-    w.i32(o.decision.spread_grid);
-    w.f64(o.decision.full_spread);
-    w.f64(o.decision.ambiguity_ratio);
+    detail::write_decision_options(w, options_.loops);
     return std::move(w).take();
   }
 
+  /// "dcsn" without the loop edges' confidences: the decision's options and the loop
+  /// engine's state (LoopEngineState; zero before the engine runs).
   std::string decision_head_bytes() const {
     detail::BinaryWriter w;
     w.bytes(decision_options_bytes());
-    w.u64(engine_ ? engine_->queries_past_window() : 0);
-    w.u64(engine_ ? engine_->left_queries() : 0);
-    w.u64(engine_ ? engine_->not_a_revisit_queries() : 0);
-    // Field by field from the engine (GCC 12 at -O2 reports a copy of the state's
-    // std::optional as possibly uninitialised).
-    const bool has_state = engine_.has_value();
-    const ConsistencyState<std::size_t> none{};
-    const ConsistencyState<std::size_t>& c = has_state ? engine_->consistency() : none;
-    std::uint64_t last = 0;
-    if (c.last.has_value()) last = *c.last;
-    w.i32(c.consecutive);
-    w.u8(c.last.has_value() ? 1 : 0);
-    w.u64(last);
-    w.u64(c.island_begin);
-    w.u64(c.island_end);
-    w.u8(c.accepted ? 1 : 0);
+    if (engine_)
+      engine_->state().write(w);
+    else
+      LoopEngineState{}.write(w);
     return std::move(w).take();
   }
 
@@ -1641,45 +1144,15 @@ class VisualMemory {
   /// Reads "dcsn": the decision's options (checked with the rest), the engine's state and
   /// the loop edges' confidences; `checked_keys` is the number of key images the
   /// database holds.
-  EngineState read_decision(detail::BinaryReader& r, std::size_t checked_keys) {
+  LoopEngineState read_decision(detail::BinaryReader& r, std::size_t checked_keys) {
     MemoryOptions all = options_;
-    LoopOptions& o = all.loops;
-    o.temporal_consistency = static_cast<std::size_t>(r.u64("temporal_consistency"));
-    o.temporal_tolerance = static_cast<std::size_t>(r.u64("temporal_tolerance"));
-    o.min_bow_score = r.f64("min_bow_score");
-    o.left_ratio = r.f64("left_ratio");
-    o.decision.min_confidence = r.f64("min_confidence");
-    o.decision.chance_inlier_rate = r.f64("chance_inlier_rate");
-    o.decision.half_significance = r.f64("half_significance");
-    o.decision.spread_grid = r.i32("spread_grid");
-    o.decision.full_spread = r.f64("full_spread");
-    o.decision.ambiguity_ratio = r.f64("ambiguity_ratio");
-    if (o.temporal_consistency > 1000) r.corrupt("temporal_consistency above 1000");
+    detail::read_decision_options(r, all.loops);
     try {
       options_ = checked(all);
     } catch (const Error& e) {
       r.corrupt(e.what());
     }
-    EngineState s;
-    s.past_window = static_cast<std::size_t>(r.u64("queries past the window"));
-    s.left_queries = static_cast<std::size_t>(r.u64("queries that left"));
-    s.not_revisit = static_cast<std::size_t>(r.u64("queries not revisits"));
-    if (s.past_window > checked_keys || s.left_queries + s.not_revisit > s.past_window)
-      r.corrupt("query counts do not fit the key images checked");
-    s.consistency.consecutive = r.i32("consistent queries");
-    const std::uint8_t has_last = r.u8("consistency flag");
-    if (has_last > 1) r.corrupt("consistency flag is not 0 or 1");
-    const std::uint64_t last = r.u64("consistency last");
-    if (has_last == 1) s.consistency.last = static_cast<std::size_t>(last);
-    s.consistency.island_begin = static_cast<std::size_t>(r.u64("island begin"));
-    s.consistency.island_end = static_cast<std::size_t>(r.u64("island end"));
-    const std::uint8_t accepted = r.u8("consistency accepted");
-    if (accepted > 1) r.corrupt("consistency accepted flag is not 0 or 1");
-    s.consistency.accepted = accepted == 1;
-    if (s.consistency.consecutive < 0 || static_cast<std::size_t>(s.consistency.consecutive) > checked_keys ||
-        s.consistency.island_begin > s.consistency.island_end || s.consistency.island_end > checked_keys ||
-        (s.consistency.last && *s.consistency.last >= checked_keys))
-      r.corrupt("invalid temporal-consistency state");
+    LoopEngineState s = LoopEngineState::read(r, checked_keys);
     const std::uint32_t e = r.u32("loop edge count");
     if (e != loops_.size())
       r.corrupt(std::to_string(e) + " confidences for " + std::to_string(loops_.size()) + " loop edges");
@@ -1692,105 +1165,24 @@ class VisualMemory {
     return s;
   }
 
+  /// "gcsl": a flag, then the trained GCS (MemoryGcs::bytes).
   std::string gcs_bytes() const {
     detail::BinaryWriter w;
     w.u8(gcs_ ? 1 : 0);
-    if (!gcs_) return std::move(w).take();
-    const BowHistogramOptions& h = gcs_->options.histogram;
-    w.i32(h.vocabulary.words);
-    w.i32(h.vocabulary.iterations);
-    w.u64(h.vocabulary.max_descriptors);
-    w.u64(h.vocabulary.seed);
-    w.u8(static_cast<std::uint8_t>(h.norm));
-    const std::string voc = gcs_->histogram.vocabulary().serialize();
-    w.u64(voc.size());
-    w.bytes(voc);
-    const std::string net = gcs_->map.network().serialize();  // holds the GcsOptions
-    w.u64(net.size());
-    w.bytes(net);
-    w.u32(static_cast<std::uint32_t>(gcs_->keys.size()));
-    for (std::size_t i = 0; i < gcs_->keys.size(); ++i) {
-      w.u32(gcs_->keys[i]);
-      w.u64(gcs_->winners[i]);
-    }
+    if (gcs_) w.bytes(gcs_->bytes());
     return std::move(w).take();
   }
 
-  void read_gcs(detail::BinaryReader& r, std::uint32_t m) {
+  /// Reads "gcsl" for the key images' poses (read before it, from "keys").
+  void read_gcs(detail::BinaryReader& r) {
     const std::uint8_t has = r.u8("GCS flag");
     if (has > 1) r.corrupt("GCS flag is not 0 or 1");
     if (has == 0) {
       r.expect_end("the GCS flag");
       return;
     }
-    MemoryGcsOptions o;
-    o.histogram.vocabulary.words = r.i32("histogram words");
-    o.histogram.vocabulary.iterations = r.i32("histogram iterations");
-    o.histogram.vocabulary.max_descriptors = static_cast<std::size_t>(r.u64("histogram max_descriptors"));
-    o.histogram.vocabulary.seed = r.u64("histogram seed");
-    const std::uint8_t norm = r.u8("histogram norm");
-    if (norm > 1) r.corrupt("unknown histogram norm");
-    o.histogram.norm = static_cast<HistogramNorm>(norm);
-    const std::uint64_t vlen = r.u64("histogram vocabulary length");
-    BinaryVocabularyTree voc = BinaryVocabularyTree::deserialize(r.bytes(vlen, "histogram vocabulary"),
-                                                                 r.source() + " histogram vocabulary");
-    if (voc.size() == 0) r.corrupt("the histogram vocabulary has no words");
-    const std::uint64_t nlen = r.u64("network length");
-    GcsXf net = GcsXf::deserialize(r.bytes(nlen, "network"), r.source() + " network");
-    if (net.empty()) r.corrupt("the network is not trained");
-    if (net.dimension() != voc.size()) r.corrupt("the network's dimension is not the histogram's");
-    o.gcs = net.options();
-    const std::uint32_t n = r.u32("GCS key count");
-    r.require_items(n, 12, "GCS key count");
-    std::vector<std::uint32_t> keys(n);
-    std::vector<std::size_t> winners(n);
-    std::vector<Pose2> poses;
-    for (std::uint32_t i = 0; i < n; ++i) {
-      keys[i] = r.u32("GCS key");
-      winners[i] = static_cast<std::size_t>(r.u64("GCS winner"));
-      if (keys[i] >= m || (i > 0 && keys[i] <= keys[i - 1])) r.corrupt("GCS key images are not increasing key images");
-      const auto* p = std::get_if<Pose2>(&poses_[keys[i]]);
-      if (!p) r.corrupt("GCS key image " + std::to_string(keys[i]) + " has no SE(2) pose");
-      if (winners[i] >= net.size()) r.corrupt("a GCS winner is not a neuron");
-      poses.push_back(*p);
-    }
-    r.expect_end("the GCS key images");
-    if (n < 3) r.corrupt("a GCS trained on fewer than 3 key images");
-    gcs_.emplace(GcsPart{o, BowHistogram(std::move(voc), o.histogram),
-                         PoseMap<GcsXf>::from_assignments(std::move(net), winners, poses), std::move(keys),
-                         std::move(winners)});
+    gcs_.emplace(MemoryGcs::read(r, poses_));
   }
-
-  static PairScore read_score(detail::BinaryReader& r) {
-    PairScore p;
-    p.raw_matches = r.i32("raw matches");
-    p.upper_bound = r.f64("upper bound");
-    const std::uint8_t run = r.u8("verified flag");
-    if (run > 1) r.corrupt("verified flag is not 0 or 1");
-    p.verified_run = run == 1;
-    p.verification.status = detail::memory_read_status(r);
-    p.verification.model = detail::memory_read_matx(r, "fundamental matrix");
-    p.verification.inliers = r.i32("inliers");
-    p.verification.matches = r.i32("matches");
-    const std::uint8_t deg = r.u8("degeneracy");
-    if (deg > 1) r.corrupt("unknown degeneracy");
-    p.verification.degeneracy = static_cast<Degeneracy>(deg);
-    p.verification.homography_inliers = r.i32("homography inliers");
-    p.similarity = r.f64("similarity");
-    if (p.raw_matches < 0 || p.verification.inliers < 0 || p.verification.inliers > p.verification.matches ||
-        !std::isfinite(p.upper_bound) || !(p.similarity >= 0.0 && p.similarity <= 1.0))
-      r.corrupt("invalid score");
-    return p;
-  }
-
-  /// The GCS part (train_gcs): what it was trained with and on, and the trained map.
-  struct GcsPart {
-    MemoryGcsOptions options;
-    BowHistogram histogram;
-    PoseMap<GcsXf> map;
-    std::vector<std::uint32_t> keys;   ///< the key images trained on
-    std::vector<std::size_t> winners;  ///< the neuron each of them won (Algorithm 4)
-  };
 
   /// A memory loaded without decoding its pixels (MapLoadOptions::decode_images) cannot
   /// write them: refused, so that no file loses the pixels it had.
@@ -1818,11 +1210,8 @@ class VisualMemory {
   std::vector<OdometryPose> poses_;  ///< per key image
   OdometryPose previous_pose_;       ///< of the last pushed frame (eq. 6's I_{j-1})
   std::optional<std::size_t> last_index_;
-  bool labelled_ = false;                              ///< frames come with detections
-  std::vector<std::vector<Detection>> key_detections_;  ///< per key image
-  std::vector<Detection> previous_detections_;          ///< of the last pushed frame
-  std::optional<LabelSchema> schema_;
-  std::optional<GcsPart> gcs_;
+  MemoryLabels labels_;  ///< the frames' object labels (LFM-LCD)
+  std::optional<MemoryGcs> gcs_;  ///< once train_gcs ran (or loaded)
   std::uint64_t gcs_generation_ = 0;  ///< counts train_gcs calls (a store rewrites the GCS when it changes)
   std::size_t working_memory_ = 0;    ///< bound_features (0: unbounded)
   KeyFeatureSource source_;           ///< where released features are read

@@ -23,6 +23,15 @@
 
 namespace vmap {
 
+namespace detail {
+/// Whether the bytes of one of vmap's own vocabulary files (from its start, at least
+/// through the kind) hold a float tree: the kind is the first payload byte; the typed
+/// reader checks the rest.
+[[nodiscard]] inline bool holds_float_tree(std::string_view head) noexcept {
+  return head.size() > place_header_size && static_cast<std::uint8_t>(head[place_header_size]) == L2Traits::file_kind;
+}
+}  // namespace detail
+
 /// A binary or a float vocabulary chosen at run time (a file given on a command line,
 /// descriptors of whatever kind a descriptor produces).
 class AnyVocabulary {
@@ -52,13 +61,24 @@ class AnyVocabulary {
       std::ifstream in = detail::open_regular_file(path);
       char head[detail::place_header_size + 1] = {};
       in.read(head, sizeof head);
-      // vmap's own: the kind is the first payload byte; the typed loader checks the rest.
       if (in.gcount() == static_cast<std::streamsize>(sizeof head) &&
           std::string_view(head, 8) == BinaryVocabularyTree::file_magic() &&
-          static_cast<std::uint8_t>(head[detail::place_header_size]) == L2Traits::file_kind)
+          detail::holds_float_tree(std::string_view(head, sizeof head)))
         return FloatVocabularyTree::load(path);
     }
     return import_binary_vocabulary(path);
+  }
+
+  /// The typed tree's bytes (VocabularyTree::serialize), as its file holds them.
+  [[nodiscard]] std::string serialize() const {
+    return std::visit([](const auto& v) { return v.serialize(); }, v_);
+  }
+
+  /// Reads serialize()'s bytes, a binary or a float tree by its kind; `what` names the
+  /// bytes in an error (e.g. a memory file's section).
+  [[nodiscard]] static AnyVocabulary deserialize(std::string_view bytes, const std::string& what) {
+    if (detail::holds_float_tree(bytes)) return FloatVocabularyTree::deserialize(bytes, what);
+    return BinaryVocabularyTree::deserialize(bytes, what);
   }
 
   [[nodiscard]] BowWeighting weighting() const noexcept {

@@ -6,6 +6,7 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/core/features.hpp>
 #include <vmap/features/akaze.hpp>
 #include <vmap/geometry/pose2.hpp>
 #include <vmap/som/gcs.hpp>
@@ -30,6 +31,48 @@ struct LocalizerTrainReport {
   double gcs_seconds = 0.0;        ///< network training: the paper's "training time"
   double pose_seconds = 0.0;       ///< Algorithm 4
 };
+
+/// What train_pose_map() makes: the trained network with a pose per neuron, the neuron
+/// each training item won (Algorithm 4), and each stage's statistics and time.
+template <class Network>
+struct PoseMapTraining {
+  PoseMap<Network> map;
+  std::vector<std::size_t> winners;  ///< winners[i]: the neuron training item i won
+  GcsTrainStats gcs;
+  double histogram_seconds = 0.0;  ///< histogram fit (vocabulary) + vectors
+  double gcs_seconds = 0.0;        ///< network training: the paper's "training time"
+  double pose_seconds = 0.0;       ///< Algorithm 4
+};
+
+/// The method from features on: `histogram` learns from the training features (fit),
+/// each becomes a vector ("BuildHistos"), the network trains on them (Algorithm 1) and
+/// each neuron gets the mean pose of the items it wins (Algorithm 4). The one training
+/// routine of GcsLocalizer (which extracts the features first) and of the visual memory
+/// (whose key images hold theirs). Deterministic (GcsOptions::seed).
+template <class Network, FeatureHistogram H>
+PoseMapTraining<Network> train_pose_map(H& histogram, const GcsOptions& options, const std::vector<Features>& features,
+                                        const std::vector<Pose2>& poses) {
+  using Vector = typename Network::Vector;
+  detail::check(features.size() == poses.size(), "train_pose_map: " + std::to_string(features.size()) +
+                                                     " feature sets but " + std::to_string(poses.size()) + " poses");
+  using clock = std::chrono::steady_clock;
+  const auto sec = [](auto a, auto b) { return std::chrono::duration<double>(b - a).count(); };
+  const auto t0 = clock::now();
+  histogram.fit(features);
+  std::vector<Vector> vectors;
+  vectors.reserve(features.size());
+  for (const auto& f : features) vectors.push_back(histogram(f).template cast<typename Vector::Scalar>());
+  const auto t1 = clock::now();
+  Network net(options);
+  const GcsTrainStats stats = net.train(vectors);
+  const auto t2 = clock::now();
+  std::vector<std::size_t> winners;
+  winners.reserve(vectors.size());
+  for (const auto& v : vectors) winners.push_back(net.bmu(v).cell);
+  PoseMap<Network> map = PoseMap<Network>::from_assignments(std::move(net), winners, poses);
+  const auto t3 = clock::now();
+  return {std::move(map), std::move(winners), stats, sec(t0, t1), sec(t1, t2), sec(t2, t3)};
+}
 
 /// Not thread-safe (the descriptor keeps scratch state); after train(), localize_vectors
 /// on a const object is.
@@ -56,21 +99,13 @@ class GcsLocalizer {
       features.push_back(descriptor_.extract(images[i]));
     }
     auto t1 = clock::now();
-    histogram_.fit(features);
-    std::vector<Vector> vectors;
-    vectors.reserve(features.size());
-    for (const auto& f : features) vectors.push_back(histogram_(f).template cast<typename Vector::Scalar>());
-    auto t2 = clock::now();
-    Network net(gcs_options_);
-    r.gcs = net.train(vectors);
-    auto t3 = clock::now();
-    map_.emplace(std::move(net), vectors, poses);
-    auto t4 = clock::now();
-    auto sec = [](auto a, auto b) { return std::chrono::duration<double>(b - a).count(); };
-    r.feature_seconds = sec(t0, t1);
-    r.histogram_seconds = sec(t1, t2);
-    r.gcs_seconds = sec(t2, t3);
-    r.pose_seconds = sec(t3, t4);
+    PoseMapTraining<Network> t = train_pose_map<Network>(histogram_, gcs_options_, features, poses);
+    map_.emplace(std::move(t.map));
+    r.gcs = t.gcs;
+    r.feature_seconds = std::chrono::duration<double>(t1 - t0).count();
+    r.histogram_seconds = t.histogram_seconds;
+    r.gcs_seconds = t.gcs_seconds;
+    r.pose_seconds = t.pose_seconds;
     return r;
   }
 

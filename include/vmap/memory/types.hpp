@@ -1,0 +1,163 @@
+#pragma once
+
+// The visual memory's public value types (memory/visual_memory.hpp): its options, what
+// push() and localize() answer, its sessions and graph. Apart from the memory itself so
+// that a program that only passes these around (a configuration, a log of answers) does
+// not compile the memory's templates.
+
+#include <vmap/core/verification.hpp>
+#include <vmap/geometry/pose2.hpp>
+#include <vmap/keyframe/selector.hpp>
+#include <vmap/lcd/influence.hpp>
+#include <vmap/lcd/loop_engine.hpp>
+#include <vmap/lcd/place_decision.hpp>
+#include <vmap/place/bow.hpp>
+#include <vmap/place/vocabulary_tree.hpp>
+#include <vmap/som/gcs.hpp>
+#include <vmap/som/histogram.hpp>
+#include <vmap/som/pose_map.hpp>
+
+#include <opencv2/core.hpp>
+#include <opencv2/core/affine.hpp>
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace vmap {
+
+/// How key images' pixels are kept and saved.
+enum class ImageStorage : std::uint8_t {
+  none,  ///< features only (the smallest memory; localize and loops need no pixels)
+  png,   ///< lossless
+  jpeg,  ///< lossy, MemoryOptions::jpeg_quality (about 8x smaller than PNG)
+};
+
+/// An odometry pose given with a frame: none, SE(2) (a ground robot) or SE(3).
+using OdometryPose = std::variant<std::monostate, Pose2, cv::Affine3d>;
+
+namespace detail {
+/// The default pose argument of push(). A named object rather than a `{}` temporary:
+/// GCC 12 at -O2 reports copying a defaulted std::variant temporary as a read of
+/// uninitialised storage (a false -Wmaybe-uninitialized).
+inline const OdometryPose no_odometry_pose{};
+}  // namespace detail
+
+/// LFM-LCD's label tree inside the memory (Zhu et al., Sensors 2021, sec. 3.2-3.3;
+/// DESIGN.md sec. 1.2), used when the frames are pushed with object detections.
+/// (Eq. 3's score threshold, the candidate source and m of sec. 3.3 are the loop
+/// engine's: MemoryOptions::loops.labels, .index, .min_candidates.)
+struct MemoryLabelOptions {
+  /// The label order, large objects first. Given: it is the schema from the first key
+  /// image on, as given (no eq. 5 pruning). Empty: the schema is learned online (below).
+  std::vector<int> order{};
+  /// Without an order: the detections of the first `sample` key images are the eq. 5
+  /// sample M; the schema (labels by mean box area, pruned to the `influence` band) is
+  /// then fixed, the tree built and the earlier key images caught up in order (>= 1).
+  std::size_t sample = 20;
+  InfluenceOptions influence{};
+};
+
+/// The GCS localizer trained on the memory's key images (Trujillo-Romero 2024,
+/// DESIGN.md sec. 1.3): their own features -> BowHistogram -> GCS -> a pose per neuron.
+struct MemoryGcsOptions {
+  BowHistogramOptions histogram{};  ///< its vocabulary is learned from the key images
+  GcsOptions gcs{};                 ///< the network's options (max_cells 100, seed 1)
+};
+
+struct MemoryOptions {
+  /// The key-image selector's options (tau, eq. 6 / Algorithm 1 rule, fast path).
+  /// `keep_images` is set from `images`.
+  SelectorOptions selector{};
+  ImageStorage images = ImageStorage::none;
+  int jpeg_quality = 90;  ///< 1..100, for ImageStorage::jpeg
+  /// Without a vocabulary given to the constructor, one is learned from the descriptors
+  /// of the first `vocabulary_after` key images (>= 1); loop detection then runs for
+  /// those in order, as if the vocabulary had been there from the start.
+  std::size_t vocabulary_after = 20;
+  /// The learned vocabulary's shape (DBoW2-like tree; default 10^3 words, seeded).
+  VocabularyTreeOptions vocabulary{};
+  BowScoring scoring = BowScoring::l1;
+  /// The loop engine's options (lcd/loop_engine.hpp): the window of recent key images
+  /// that are not candidates, the top k verified, the decision (confidence threshold),
+  /// the revisit rule. `index` is used with detections (tree or tree_ranked); without,
+  /// the memory ranks every key image by bag of words (bow).
+  LoopOptions loops{};
+  /// localize() verifies the best `localize_candidates` key images by BoW score (>= 1)
+  /// and decides with loops.decision.
+  std::size_t localize_candidates = 5;
+  /// The label-tree loop detection, used when frames are pushed with detections.
+  MemoryLabelOptions labels{};
+};
+
+/// A verified match between two key images (a loop edge) or a query and a key image.
+struct PlaceLink {
+  std::uint32_t key = 0;        ///< the matched key image (the older one for a loop)
+  double bow_score = 0.0;       ///< its rank score (place/bow.hpp), in [0, 1]
+  VerificationStatus status = VerificationStatus::too_few_matches;
+  cv::Matx33d fundamental = cv::Matx33d::zeros();  ///< x_query^T F x_key = 0 (when verified)
+  int matches = 0;                                 ///< raw correspondences
+  int inliers = 0;                                 ///< F-matrix inliers
+  double similarity = 0.0;                         ///< eq. 5
+  double confidence = 0.0;                         ///< the place decision's (lcd/place_decision.hpp)
+};
+
+/// A loop closure: key image `from` (the newer) revisits key image `link.key`.
+struct LoopEdge {
+  std::uint32_t from = 0;
+  PlaceLink link;
+};
+
+/// What push() did: the selector's answer, the key image it added, the loops found.
+struct MemoryStep {
+  FrameResult frame;
+  std::optional<std::uint32_t> new_key;  ///< index of the key image added, if any
+  std::vector<LoopEdge> loops;           ///< loop edges found in this step
+};
+
+/// localize()'s answer: the place decision (lcd/loop_engine.hpp) and the verified key
+/// images behind it.
+struct MemoryLocalization {
+  /// accepted, or why not: unknown place (verified candidates, none confident enough),
+  /// ambiguous (two places equally likely), too little evidence (an empty memory, a
+  /// query without features, no candidate verified).
+  PlaceStatus status = PlaceStatus::too_little_evidence;
+  std::string reason = "the memory has no key image";
+  double confidence = 0.0;   ///< of the best key image, in [0, 1]
+  PlaceEvidence evidence;    ///< of the best key image
+  /// Every verified key image, most confident first (matches.front() is the decision's
+  /// candidate, accepted or not).
+  std::vector<PlaceLink> matches;
+  std::size_t verified_candidates = 0;  ///< key images the estimator ran on
+  /// The query's pose relative to the best key image (R and the direction of t), when the
+  /// memory's estimator recovers one (EssentialEstimator with a calibrated camera).
+  std::optional<RelativePose> relative_pose;
+  /// The GCS position estimate (Algorithm 5 with the one query image), when a GCS was
+  /// trained (VisualMemory::train_gcs) and the query has features; independent of the
+  /// place decision.
+  std::optional<Localization> position;
+  [[nodiscard]] bool ok() const noexcept { return status == PlaceStatus::accepted; }
+  /// The accepted key image; nullptr unless ok().
+  [[nodiscard]] const PlaceLink* best() const noexcept { return ok() && !matches.empty() ? &matches.front() : nullptr; }
+};
+
+/// A session: one run of the robot, its own chain of key images (consecutive key images
+/// of a session are linked; the first key image of a session is not linked to the last
+/// of the one before). Loops are searched across all sessions, and localization searches
+/// every session.
+struct MemorySession {
+  std::size_t first_key = 0;    ///< its first key image (== key_images() while it has none)
+  std::size_t first_frame = 0;  ///< frames pushed into the memory before it
+};
+
+/// A neighbour of a key image in the memory's graph.
+struct GraphNeighbour {
+  enum class Kind : std::uint8_t { link, loop };
+  std::uint32_t key = 0;
+  Kind kind = Kind::link;
+};
+
+}  // namespace vmap
