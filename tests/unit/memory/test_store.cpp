@@ -271,6 +271,7 @@ TEST_CASE("store: one writer at a time; readers load the last sync while the wri
   auto memory = make(options(vmap::ImageStorage::none));
   for (std::size_t i = 0; i < 30; ++i) memory.push(frames()[i]);
   writer.sync(memory);
+  writer.flush();  // sync() returns before its commit; a reader sees committed syncs
   const std::size_t first = memory.key_images();
 
   const std::string second = error_of([&] { (void)vmap::MemoryStore::open(file); });
@@ -281,6 +282,7 @@ TEST_CASE("store: one writer at a time; readers load the last sync while the wri
   for (std::size_t i = 30; i < frames().size(); ++i) memory.push(frames()[i]);
   REQUIRE(memory.key_images() > first);
   writer.sync(memory);
+  writer.flush();
   // The reader's next load sees the writer's new sync; a reader cannot write.
   CHECK(load(reader).serialize() == memory.serialize());
   CHECK(error_of([&] { reader.sync(memory); }).find("is open read-only") != std::string::npos);
