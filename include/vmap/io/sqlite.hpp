@@ -14,6 +14,12 @@
 // interact on Linux; the descriptor holding the flock stays open until after SQLite
 // closed the file, so SQLite's locks are never dropped by a close() of ours. Readers
 // (Access::read) take no lock and see the last committed transaction.
+//
+// Threads: a Database and the Statements prepared on it may be used from any thread, by
+// one thread at a time. The connection is opened with SQLITE_OPEN_NOMUTEX (SQLite's
+// multi-thread mode: it does not lock the connection itself), so a program that hands a
+// connection from one thread to another orders the uses itself, e.g. with a mutex as the
+// memory store's writer thread does (memory/store.hpp).
 
 #include <vmap/core/error.hpp>
 

@@ -5,6 +5,7 @@
 //   auto store = vmap::MemoryStore::create("run.vmdb");
 //   vmap::OrbVisualMemory memory;
 //   for (...) { memory.push(frame); store.sync(memory); }   // one transaction per call
+//   store.flush();                                          // the last one committed
 //   ...
 //   auto again = vmap::MemoryStore::open("run.vmdb").load<vmap::OrbVisualMemory>();
 //
@@ -14,21 +15,42 @@
 // rows of state (the selector's I_{j-1}, the loop engine's counters, the options); the
 // vocabulary and the GCS only when they change. Rows once written are never rewritten,
 // so a sync costs the same at key image 10 as at key image 10,000, and a key image's
-// JPEG or PNG is encoded once. A crash or power cut loses at most the sync in flight
-// (SQLite's write-ahead log with synchronous=FULL); the file stays a valid memory.
+// JPEG or PNG is encoded once.
+//
+// sync() collects and serialises the rows in the caller's thread (copies: the memory
+// changes once sync() returns) and hands them to the store's writer thread, which runs
+// the transaction (inserts, COMMIT and its fsync) while the caller pushes the next frame.
+// One sync is in flight at a time: sync() first waits for the previous one's commit.
+// A crash or power cut thus loses at most the sync in flight (SQLite's write-ahead log
+// with synchronous=FULL makes each committed one durable); the file stays a valid memory.
+// A transaction that fails in the writer thread is thrown as a vmap::Error by the next
+// sync(), flush() or reader of the store (below); it stored nothing, and the sync after
+// the error writes its rows again. flush() waits until every sync handed over is
+// committed (and throws its error). The destructor waits too but cannot throw, so a
+// failure of the last sync is seen only by a flush() (or checkpoint()) before the store
+// goes out of scope, as the command line does at the end of a run; a store destroyed
+// without one (e.g. while another exception unwinds) drops it.
+//
 // load() joins the rows back into the memory file's sections (memory/visual_memory.hpp)
 // and parses them with the same checks as a .vmem file: a memory loaded from a store is
 // the memory that was synced, and pushing on continues exactly as the uninterrupted run.
 //
 // A working memory bounds the RAM of a long run: bound(memory, N) keeps the features of
 // the memory's N most recent key images in RAM, sync() releases the older ones once
-// stored, and the memory reads them back from the store when a candidate needs them
+// committed, and the memory reads them back from the store when a candidate needs them
 // (VisualMemory::bound_features); load_bounded<Memory>(N) loads a memory so, reading the
 // older key images' records without their features.
 //
 // One writer at a time (open(..., write) of a memory another program writes is refused
 // with a message naming the file); any number of readers (open(..., read)) load the
-// last synced state while the writer goes on.
+// last committed sync while the writer goes on.
+//
+// Threading: a MemoryStore object is used by one thread at a time (the one that pushes
+// into the memory). Its writer thread uses the SQLite connection only while a sync is
+// in flight; everything else that reads or writes the file through the object
+// (key_images(), loops(), synced(), note(), set_note(), load(), load_bounded(),
+// checkpoint(), key_image_bytes(), features(), bound()) waits for that sync first
+// (flush()), so the connection is used by one thread at a time.
 //
 // Schema (version 2; PRAGMA application_id 0x564D4150 "VMAP", PRAGMA user_version 2),
 // documented for readers without vmap in examples/memory.md:
@@ -58,14 +80,19 @@
 #include <vmap/place/database.hpp>
 
 #include <array>
+#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
+#include <exception>
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <string_view>
+#include <system_error>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -76,22 +103,206 @@ inline constexpr std::int64_t memory_store_version = 2;
 /// PRAGMA application_id of a memory store: "VMAP".
 inline constexpr std::int64_t memory_store_application_id = 0x564D4150;
 
+namespace detail {
+
+/// One sync's rows, copied out of the memory in the caller's thread (the memory changes
+/// once sync() returns) for the store's writer thread to insert.
+struct MemoryStoreRows {
+  struct Key {
+    std::int64_t id = 0, frame_index = 0;
+    double timestamp = 0.0;
+    std::string name;
+    std::int64_t keypoints = 0;
+    std::string record, detections;
+  };
+  struct Link {
+    std::int64_t key = 0, matches = 0, inliers = 0;
+    double similarity = 0.0;
+    std::string record;
+  };
+  struct Bow {
+    std::int64_t key = 0;
+    std::string record;
+  };
+  struct Loop {
+    std::int64_t id = 0, from_key = 0, to_key = 0, inliers = 0;
+    double confidence = 0.0;
+    std::string record;
+  };
+  struct Session {
+    std::int64_t id = 0, first_key = 0, first_frame = 0;
+  };
+  std::vector<Key> keys;
+  std::vector<Link> links;
+  std::vector<Bow> bows;
+  std::vector<Loop> loops;
+  std::vector<Session> sessions;
+  std::vector<std::pair<const char*, std::string>> meta;  ///< the state rows (name, bytes), rewritten at every sync
+};
+
+/// A store's SQLite connection and, for a writer, the thread that commits its syncs, one
+/// at a time. MemoryStore holds it on the heap, so that the thread keeps using it while
+/// the MemoryStore object moves.
+class MemoryStoreConnection {
+ public:
+  MemoryStoreConnection(const std::filesystem::path& path, sqlite::Access access, std::string what)
+      : db(path, access, std::move(what)) {}
+  MemoryStoreConnection(const MemoryStoreConnection&) = delete;
+  MemoryStoreConnection& operator=(const MemoryStoreConnection&) = delete;
+  /// Lets the writer thread commit the rows in flight, then joins it. Their error, if
+  /// any, is dropped here (a destructor does not throw): MemoryStore::flush() reports it.
+  ~MemoryStoreConnection() {
+    if (!thread_.joinable()) return;
+    {
+      std::lock_guard lock(mutex_);
+      stop_ = true;
+    }
+    changed_.notify_all();
+    thread_.join();
+  }
+
+  sqlite::Database db;  ///< declared first: closed after the statements and the thread
+
+  /// Whether the connection writes (a writer thread runs).
+  [[nodiscard]] bool writes() const noexcept { return thread_.joinable(); }
+
+  /// Prepares the writer's statements and starts its thread.
+  void start_writer() {
+    insert_key_.emplace(db.prepare(
+        "INSERT INTO key_images(id, frame_index, timestamp, name, keypoints, record, detections) VALUES(?,?,?,?,?,?,?)",
+        "insert a key image"));
+    insert_link_.emplace(
+        db.prepare("INSERT INTO links(key, matches, inliers, similarity, record) VALUES(?,?,?,?,?)", "insert a link"));
+    update_bow_.emplace(db.prepare("UPDATE key_images SET bow = ? WHERE id = ?", "write a bag of words"));
+    insert_loop_.emplace(db.prepare(
+        "INSERT INTO loops(id, from_key, to_key, inliers, confidence, record) VALUES(?,?,?,?,?,?)", "insert a loop edge"));
+    put_meta_.emplace(db.prepare("INSERT OR REPLACE INTO meta(name, value) VALUES(?,?)", "write the state"));
+    insert_session_.emplace(
+        db.prepare("INSERT INTO sessions(id, first_key, first_frame) VALUES(?,?,?)", "insert a session"));
+    try {
+      thread_ = std::thread([this] { run(); });
+    } catch (const std::system_error& e) {
+      db.fail(std::string("cannot start its writer thread: ") + e.what());
+    }
+  }
+
+  /// Hands one sync's rows to the writer thread. None may be in flight (wait() first):
+  /// the caller holds at most one sync's copies besides the one being written.
+  void hand_over(MemoryStoreRows rows) {
+    {
+      std::lock_guard lock(mutex_);
+      check(!busy_, "MemoryStoreConnection::hand_over: a sync is in flight (wait for it first)");
+      rows_ = std::move(rows);
+      busy_ = true;
+    }
+    changed_.notify_all();
+  }
+
+  /// Waits until the rows handed over are committed or have failed: the failure (a
+  /// vmap::Error), returned once; null when they were committed (or none was handed).
+  [[nodiscard]] std::exception_ptr wait() {
+    std::unique_lock lock(mutex_);
+    changed_.wait(lock, [&] { return !busy_; });
+    return std::exchange(error_, nullptr);
+  }
+
+ private:
+  void run() noexcept {
+    std::unique_lock lock(mutex_);
+    for (;;) {
+      changed_.wait(lock, [&] { return busy_ || stop_; });
+      if (!busy_) return;  // stopped, nothing in flight
+      // The caller does not touch rows_ while busy_: it is this thread's until then.
+      lock.unlock();
+      std::exception_ptr error;
+      try {
+        write(*rows_);
+      } catch (const std::exception& e) {
+        error = std::make_exception_ptr(Error(std::string(e.what()) +
+                                              " (an earlier sync, committed in the store's writer thread: it stored "
+                                              "nothing; the next sync writes its rows again)"));
+      } catch (...) {
+        error = std::make_exception_ptr(Error(db.what() + " write the memory: an unknown error (an earlier sync, "
+                                              "committed in the store's writer thread: it stored nothing; the next "
+                                              "sync writes its rows again)"));
+      }
+      lock.lock();
+      rows_.reset();
+      error_ = error;
+      busy_ = false;
+      changed_.notify_all();
+    }
+  }
+
+  void write(const MemoryStoreRows& rows) {
+    sqlite::Transaction t(db, "write the memory");
+    for (const auto& k : rows.keys) {
+      insert_key_->bind(1, k.id)
+          .bind(2, k.frame_index)
+          .bind(3, k.timestamp)
+          .bind_text(4, k.name)
+          .bind(5, k.keypoints)
+          .bind_blob(6, k.record)
+          .bind_blob(7, k.detections);
+      insert_key_->run();
+    }
+    for (const auto& l : rows.links) {
+      insert_link_->bind(1, l.key).bind(2, l.matches).bind(3, l.inliers).bind(4, l.similarity).bind_blob(5, l.record);
+      insert_link_->run();
+    }
+    for (const auto& b : rows.bows) {
+      update_bow_->bind_blob(1, b.record).bind(2, b.key);
+      update_bow_->run();
+    }
+    for (const auto& e : rows.loops) {
+      insert_loop_->bind(1, e.id)
+          .bind(2, e.from_key)
+          .bind(3, e.to_key)
+          .bind(4, e.inliers)
+          .bind(5, e.confidence)
+          .bind_blob(6, e.record);
+      insert_loop_->run();
+    }
+    for (const auto& x : rows.sessions) {
+      insert_session_->bind(1, x.id).bind(2, x.first_key).bind(3, x.first_frame);
+      insert_session_->run();
+    }
+    for (const auto& [name, value] : rows.meta) {
+      put_meta_->bind_text(1, name).bind_blob(2, value);
+      put_meta_->run();
+    }
+    t.commit();
+  }
+
+  // Prepared once for a writer, used by its thread only.
+  std::optional<sqlite::Statement> insert_key_, insert_link_, update_bow_, insert_loop_, put_meta_, insert_session_;
+  std::mutex mutex_;
+  std::condition_variable changed_;      ///< busy_ or stop_ changed
+  std::optional<MemoryStoreRows> rows_;  ///< the sync in flight
+  bool busy_ = false;                    ///< rows_ handed over, not yet committed or failed
+  bool stop_ = false;                    ///< the destructor asks the thread to end
+  std::exception_ptr error_;             ///< the last sync's failure, until wait() returns it
+  std::thread thread_;                   ///< joined by the destructor, before the members it uses go
+};
+
+}  // namespace detail
+
 class MemoryStore {
  public:
   /// A new, empty store at `path`; refused when the file exists.
   [[nodiscard]] static MemoryStore create(const std::filesystem::path& path) {
     MemoryStore s(path, sqlite::Access::create);
     try {
-      sqlite::Transaction t(s.db_, "create the tables");
-      s.db_.exec(schema_sql(), "create the tables");
+      sqlite::Transaction t(s.db(), "create the tables");
+      s.db().exec(schema_sql(), "create the tables");
       t.commit();
     } catch (...) {
-      s.db_ = {};
+      s.connection_.reset();
       std::error_code ec;
       for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(path.string() + suffix, ec);
       throw;
     }
-    s.prepare();
+    s.connection_->start_writer();
     return s;
   }
 
@@ -105,150 +316,104 @@ class MemoryStore {
                    "written (remove it, or create the memory again)");
     MemoryStore s(path, access);
     s.check_schema(access);
-    if (access == sqlite::Access::write) s.prepare();
     s.count_rows();
+    if (access == sqlite::Access::write) s.connection_->start_writer();
     return s;
   }
 
+  /// A move keeps the sync in flight going (the writer thread and the connection stay
+  /// where they are); a store assigned over waits for its own, as the destructor does.
   MemoryStore(MemoryStore&&) noexcept = default;
   MemoryStore& operator=(MemoryStore&&) noexcept = default;
   MemoryStore(const MemoryStore&) = delete;
   MemoryStore& operator=(const MemoryStore&) = delete;
+  /// Waits until the sync in flight is committed. A failure of that transaction cannot be
+  /// thrown from a destructor and is dropped: flush() first to learn it.
   ~MemoryStore() = default;
 
   [[nodiscard]] const std::filesystem::path& path() const noexcept { return path_; }
-  /// Rows written (as of open or the last sync of this object).
-  [[nodiscard]] std::size_t key_images() const noexcept { return keys_; }
-  /// Whether a memory was ever synced into the store (load() needs one).
-  [[nodiscard]] bool synced() const noexcept { return synced_; }
-  [[nodiscard]] std::size_t loops() const noexcept { return loops_; }
-
-  /// Writes what `memory` made since the last sync into the store, in one transaction.
-  /// `memory` must be the one the store holds, grown: a memory loaded from this store,
-  /// or any memory synced into a new store. Anything else is an Error naming the file.
-  template <Descriptor D, Matcher M, Estimator E, Similarity S>
-  void sync(const VisualMemory<D, M, E, S>& memory) {
-    if (!insert_key_) db_.fail("is open read-only: open it with Access::write to sync a memory into it");
-    check_holds(memory);
-    const VisualMap& map = memory.selector_.map();
-    const std::size_t m = map.keys.size();
-    const std::size_t e = memory.loops_.size();
-    const auto* database = memory.engine_ ? &memory.engine_->ranker().database() : nullptr;
-    const std::size_t checked = database ? database->size() : 0;
-
-    const ImageStorage storage = memory.options_.images;
-    memory.check_pixels_read(storage, "MemoryStore::sync");
-    sqlite::Transaction t(db_, "write the memory");
-    for (std::size_t k = keys_; k < m; ++k) {
-      const KeyImage& key = map.keys[k];
-      detail::BinaryWriter record, detections;
-      memory.write_key_record(record, k, storage);
-      detail::memory_write_detections(detections, memory.labels_.key_detections[k]);
-      insert_key_->bind(1, static_cast<std::int64_t>(k))
-          .bind(2, static_cast<std::int64_t>(key.frame_index))
-          .bind(3, key.timestamp)
-          .bind_text(4, key.name)
-          .bind(5, static_cast<std::int64_t>(key.features.keypoints.size()))
-          .bind_blob(6, record.data())
-          .bind_blob(7, detections.data());
-      insert_key_->run();
-    }
-    for (std::size_t k = std::max<std::size_t>(keys_, 1); k < m; ++k) {
-      const KeyPair& p = map.pairs[k - 1];
-      detail::BinaryWriter record;
-      memory.write_link_record(record, k - 1);
-      insert_link_->bind(1, static_cast<std::int64_t>(k))
-          .bind(2, static_cast<std::int64_t>(p.matches))
-          .bind(3, static_cast<std::int64_t>(p.inliers))
-          .bind(4, p.similarity)
-          .bind_blob(5, record.data());
-      insert_link_->run();
-    }
-    for (std::size_t k = bows_; k < checked; ++k) {
-      update_bow_->bind_blob(1, database->record(static_cast<std::uint32_t>(k))).bind(2, static_cast<std::int64_t>(k));
-      update_bow_->run();
-    }
-    for (std::size_t i = loops_; i < e; ++i) {
-      const LoopEdge& edge = memory.loops_[i];
-      detail::BinaryWriter record;
-      memory.write_loop_record(record, i);
-      insert_loop_->bind(1, static_cast<std::int64_t>(i))
-          .bind(2, static_cast<std::int64_t>(edge.from))
-          .bind(3, static_cast<std::int64_t>(edge.link.key))
-          .bind(4, static_cast<std::int64_t>(edge.link.inliers))
-          .bind(5, edge.link.confidence)
-          .bind_blob(6, record.data());
-      insert_loop_->run();
-    }
-    const auto& sessions = memory.sessions_;
-    for (std::size_t i = sessions_; i < sessions.size(); ++i) {
-      insert_session_->bind(1, static_cast<std::int64_t>(i))
-          .bind(2, static_cast<std::int64_t>(sessions[i].first_key))
-          .bind(3, static_cast<std::int64_t>(sessions[i].first_frame));
-      insert_session_->run();
-    }
-    // The small state, rewritten at every sync (a few hundred bytes, and I_{j-1}'s
-    // features).
-    put("options", memory.options_bytes(storage));
-    put("policies", memory.policies_bytes());
-    put("labels", memory.labels_head_bytes());
-    put("previous_detections", memory.previous_detections_bytes());
-    put("selector", memory.selector_bytes(storage));
-    put("decision", memory.decision_head_bytes());
-    detail::BinaryWriter head;
-    head.u8(static_cast<std::uint8_t>(memory.options_.scoring));
-    head.u64(memory.vocabulary_->size());
-    put("database", head.data());
-    detail::BinaryWriter frames;
-    frames.u64(map.frames);
-    put("frames", frames.data());
-    // The vocabulary once learned, the GCS when trained again: written when they change.
-    const bool has_vocabulary = !memory.vocabulary_->empty();
-    if (!vocabulary_written_ || (has_vocabulary && !*vocabulary_written_))
-      put("vocabulary", memory.vocabulary_bytes());
-    if (gcs_written_ != memory.gcs_generation_) put("gcs", memory.gcs_bytes());
-    t.commit();
-    keys_ = m;
-    loops_ = e;
-    bows_ = checked;
-    sessions_ = sessions.size();
-    synced_ = true;
-    vocabulary_written_ = has_vocabulary;
-    gcs_written_ = memory.gcs_generation_;
+  /// Key images in the store, once every sync handed over is committed (flush() first,
+  /// and its error thrown).
+  [[nodiscard]] std::size_t key_images() {
+    flush();
+    return held_.keys;
+  }
+  /// Whether a memory was ever synced into the store (load() needs one); flushes first.
+  [[nodiscard]] bool synced() {
+    flush();
+    return held_.synced;
+  }
+  /// Loop edges in the store; flushes first.
+  [[nodiscard]] std::size_t loops() {
+    flush();
+    return held_.loops;
   }
 
-  /// sync(), then releases from RAM the features of the key images now stored that are
-  /// older than the memory's working memory (VisualMemory::bound_features; a no-op for a
-  /// memory without one).
+  /// Writes what `memory` made since the last sync into the store, in one transaction.
+  /// The rows are collected here, in the caller's thread; the transaction runs in the
+  /// store's writer thread, and sync() returns before it commits: it first waits for the
+  /// previous sync's commit (one in flight at a time), and throws that one's error if it
+  /// failed (then nothing of it was stored, and the next sync writes its rows again).
+  /// flush() waits for the last. `memory` must be the one the store holds, grown: a
+  /// memory loaded from this store, or any memory synced into a new store. Anything else
+  /// is an Error naming the file (nothing handed over).
+  template <Descriptor D, Matcher M, Estimator E, Similarity S>
+  void sync(const VisualMemory<D, M, E, S>& memory) {
+    (void)hand_over(memory);
+  }
+
+  /// sync(), then releases from RAM the features of the key images older than the
+  /// memory's working memory (VisualMemory::bound_features; a no-op for a memory without
+  /// one) that are committed, so that the memory never reads a key image whose commit is
+  /// in flight or failed. The key images of the sync in flight are the newest: inside
+  /// the working memory anyway, unless one sync adds more key images than it holds (the
+  /// older of those are then released by the next sync).
   template <Descriptor D, Matcher M, Estimator E, Similarity S>
   void sync(VisualMemory<D, M, E, S>& memory) {
-    sync(std::as_const(memory));
-    memory.release_features(keys_);
+    memory.release_features(hand_over(std::as_const(memory)));
+  }
+
+  /// Waits until every sync handed over is committed; a transaction that failed in the
+  /// writer thread is thrown here as its vmap::Error (once; nothing of that sync was
+  /// stored, and the next sync writes its rows again). A no-op for a reader.
+  void flush() {
+    if (!connection_->writes()) return;
+    if (std::exception_ptr error = connection_->wait()) {
+      held_ = committed_;
+      std::rethrow_exception(error);
+    }
+    committed_ = held_;
   }
 
   /// Bounds `memory`'s RAM to the features of its `working_memory` most recent key
   /// images, reading the others from this store (VisualMemory::bound_features), and
-  /// releases those already stored. The memory must be the one this store holds (as for
-  /// sync: anything else is an Error naming the file, and nothing is released).
+  /// releases those already stored (flushes first). The memory must be the one this
+  /// store holds (as for sync: anything else is an Error naming the file, and nothing is
+  /// released).
   template <Descriptor D, Matcher M, Estimator E, Similarity S>
   void bound(VisualMemory<D, M, E, S>& memory, std::size_t working_memory) {
+    flush();
     check_holds(memory);
     memory.bound_features(working_memory, features());
-    memory.release_features(keys_);
+    memory.release_features(held_.keys);
   }
 
   /// Reads a stored key image's features, through a read-only connection of its own (so
   /// it stays valid when this object moves, and reads what was committed): the source of
-  /// VisualMemory::bound_features. A key image the store does not hold, or a damaged
-  /// record, is an Error naming the store.
-  [[nodiscard]] std::function<Features(std::uint32_t)> features() const {
+  /// VisualMemory::bound_features. It reads what is committed when it runs: every key
+  /// image synced before features() was called (it flushes first), later ones once their
+  /// sync is committed (a memory released by sync() or bound() reads committed key images
+  /// only). A key image the store does not hold, or a damaged record, is an Error naming
+  /// the store.
+  [[nodiscard]] std::function<Features(std::uint32_t)> features() {
+    flush();
     struct Reader {
       sqlite::Database db;
       sqlite::Statement query;
     };
-    auto db = sqlite::Database(path_, sqlite::Access::read, db_.what());
-    auto query = db.prepare("SELECT record FROM key_images WHERE id = ?", "read a key image's features");
-    auto reader = std::make_shared<Reader>(Reader{std::move(db), std::move(query)});
+    auto connection = sqlite::Database(path_, sqlite::Access::read, db().what());
+    auto query = connection.prepare("SELECT record FROM key_images WHERE id = ?", "read a key image's features");
+    auto reader = std::make_shared<Reader>(Reader{std::move(connection), std::move(query)});
     return [reader](std::uint32_t key) {
       sqlite::Statement& q = reader->query;
       q.bind(1, static_cast<std::int64_t>(key));
@@ -264,39 +429,46 @@ class MemoryStore {
   }
 
   /// The bytes of each key image's row (its record, detections and bag of words), in
-  /// order: what a key image costs on disk, without SQLite's page overhead.
+  /// order: what a key image costs on disk, without SQLite's page overhead. Flushes first.
   [[nodiscard]] std::vector<std::uintmax_t> key_image_bytes() {
+    flush();
     std::vector<std::uintmax_t> out;
-    auto q = db_.prepare("SELECT length(record) + length(detections) + ifnull(length(bow), 0) FROM key_images ORDER BY id",
-                         "measure the key images");
+    auto q = db().prepare(
+        "SELECT length(record) + length(detections) + ifnull(length(bow), 0) FROM key_images ORDER BY id",
+        "measure the key images");
     while (q.step()) out.push_back(static_cast<std::uintmax_t>(q.integer(0)));
     return out;
   }
 
-  /// Records `value` under `name` in the notes table (its own transaction).
+  /// Records `value` under `name` in the notes table (its own transaction, after the
+  /// syncs handed over are committed).
   void set_note(std::string_view name, std::string_view value) {
-    if (!insert_key_) db_.fail("is open read-only: open it with Access::write to write a note");
-    auto q = db_.prepare("INSERT OR REPLACE INTO notes(name, value) VALUES(?,?)", "write a note");
+    if (!connection_->writes()) db().fail("is open read-only: open it with Access::write to write a note");
+    flush();
+    auto q = db().prepare("INSERT OR REPLACE INTO notes(name, value) VALUES(?,?)", "write a note");
     q.bind_text(1, name).bind_text(2, value);
     q.run();
   }
 
-  /// The note recorded under `name`, if any.
+  /// The note recorded under `name`, if any (flushes first).
   [[nodiscard]] std::optional<std::string> note(std::string_view name) {
-    auto q = db_.prepare("SELECT value FROM notes WHERE name = ?", "read a note");
+    flush();
+    auto q = db().prepare("SELECT value FROM notes WHERE name = ?", "read a note");
     q.bind_text(1, name);
     if (!q.step()) return std::nullopt;
     return q.text(0);
   }
 
-  /// Moves the write-ahead log into the database file (the file then holds every sync
-  /// and its size is the memory's); a no-op for a reader.
+  /// Flushes, then moves the write-ahead log into the database file (the file then holds
+  /// every sync and its size is the memory's); a no-op for a reader.
   void checkpoint() {
-    if (insert_key_) db_.exec("PRAGMA wal_checkpoint(TRUNCATE)", "checkpoint the write-ahead log");
+    if (!connection_->writes()) return;
+    flush();
+    db().exec("PRAGMA wal_checkpoint(TRUNCATE)", "checkpoint the write-ahead log");
   }
 
-  /// The memory the store holds, as synced last (a snapshot, also while a writer goes
-  /// on). `policies` are the memory's descriptor, matcher, estimator and similarity when
+  /// The memory the store holds, as synced last (flushes first; a snapshot, also while
+  /// another program writes). `policies` are the memory's descriptor, matcher, estimator and similarity when
   /// they are not default-constructed, and then the MapLoadOptions bounding the key
   /// images' pixels, as for VisualMemory::load.
   template <class Memory, class... Policies>
@@ -319,7 +491,8 @@ class MemoryStore {
   /// working memory, the key images older than it are joined without their features.
   template <class Memory, class... Policies>
   [[nodiscard]] Memory load_holding(std::size_t working_memory, Policies&&... policies) {
-    sqlite::Transaction snapshot(db_, "read the memory", sqlite::Transaction::Kind::read);
+    flush();
+    sqlite::Transaction snapshot(db(), "read the memory", sqlite::Transaction::Kind::read);
     std::array<std::string, detail::memory_sections> sections;
     sections[0] = meta("options");
     const std::string frames = meta("frames");
@@ -328,13 +501,13 @@ class MemoryStore {
     std::size_t m = 0, checked = 0;
     std::size_t released = 0;  // key images joined without their features
     if (working_memory > 0) {
-      auto q = db_.prepare("SELECT count(*) FROM key_images", "count the key images");
-      if (!q.step()) db_.fail("count the key images: no row");
+      auto q = db().prepare("SELECT count(*) FROM key_images", "count the key images");
+      if (!q.step()) db().fail("count the key images: no row");
       const auto stored = static_cast<std::size_t>(q.integer(0));
       released = stored > working_memory ? stored - working_memory : 0;
     }
     {
-      auto q = db_.prepare("SELECT id, record, detections, bow FROM key_images ORDER BY id", "read the key images");
+      auto q = db().prepare("SELECT id, record, detections, bow FROM key_images ORDER BY id", "read the key images");
       while (q.step()) {
         expect_index(q.integer(0), m, "key image");
         if (m < released)
@@ -343,7 +516,8 @@ class MemoryStore {
           keys += q.blob(1);
         detections += q.blob(2);
         if (!q.is_null(3)) {
-          if (checked != m) db_.fail("is corrupt: key image " + std::to_string(m) + " has a bag of words, an earlier one none");
+          if (checked != m)
+            db().fail("is corrupt: key image " + std::to_string(m) + " has a bag of words, an earlier one none");
           bows += q.blob(3);
           ++checked;
         }
@@ -355,7 +529,7 @@ class MemoryStore {
     std::string links;
     std::size_t p = 0;
     {
-      auto q = db_.prepare("SELECT key, record FROM links ORDER BY key", "read the links");
+      auto q = db().prepare("SELECT key, record FROM links ORDER BY key", "read the links");
       while (q.step()) {
         expect_index(q.integer(0), p + 1, "link");
         links += q.blob(1);
@@ -367,7 +541,7 @@ class MemoryStore {
     std::string loops, confidences;
     std::size_t e = 0;
     {
-      auto q = db_.prepare("SELECT id, record, confidence FROM loops ORDER BY id", "read the loop edges");
+      auto q = db().prepare("SELECT id, record, confidence FROM loops ORDER BY id", "read the loop edges");
       while (q.step()) {
         expect_index(q.integer(0), e, "loop edge");
         loops += q.blob(1);
@@ -382,11 +556,11 @@ class MemoryStore {
     sections[5] = meta("vocabulary");
     {
       const std::string bytes = meta("database");
-      detail::BinaryReader head(bytes, db_.what() + " state 'database'");
+      detail::BinaryReader head(bytes, db().what() + " state 'database'");
       const std::uint8_t scoring = head.u8("scoring");
       const std::uint64_t words = head.u64("words");
       head.expect_end("the database head");
-      if (scoring > static_cast<std::uint8_t>(BowScoring::cosine)) db_.fail("is corrupt: unknown scoring");
+      if (scoring > static_cast<std::uint8_t>(BowScoring::cosine)) db().fail("is corrupt: unknown scoring");
       sections[6] = Memory::database_section(PlaceDatabase<std::uint32_t>::serialize_records(
           static_cast<BowScoring>(scoring), static_cast<std::size_t>(words), checked, bows));
     }
@@ -399,7 +573,7 @@ class MemoryStore {
       std::string rows;
       std::size_t n = 0;
       if (version_ >= 2) {
-        auto q = db_.prepare("SELECT id, first_key, first_frame FROM sessions ORDER BY id", "read the sessions");
+        auto q = db().prepare("SELECT id, first_key, first_frame FROM sessions ORDER BY id", "read the sessions");
         while (q.step()) {
           expect_index(q.integer(0), n, "session");
           if (n > 0) {
@@ -414,7 +588,7 @@ class MemoryStore {
       sections[11] = count32(n > 0 ? n - 1 : 0) + rows;
     }
     snapshot.commit();
-    Memory memory = Memory::deserialize(Memory::file_bytes(sections), db_.what(), std::forward<Policies>(policies)...);
+    Memory memory = Memory::deserialize(Memory::file_bytes(sections), db().what(), std::forward<Policies>(policies)...);
     if (working_memory > 0) {
       memory.bound_features(working_memory, features());
       memory.released_ = released;
@@ -422,8 +596,86 @@ class MemoryStore {
     return memory;
   }
 
+  /// sync(): waits for the sync in flight (throwing its error), collects the rows the
+  /// memory made since, and hands them to the writer thread. Returns the key images
+  /// committed before them (those a working memory may release).
+  template <Descriptor D, Matcher M, Estimator E, Similarity S>
+  std::size_t hand_over(const VisualMemory<D, M, E, S>& memory) {
+    if (!connection_->writes()) db().fail("is open read-only: open it with Access::write to sync a memory into it");
+    flush();
+    check_holds(memory);
+    const VisualMap& map = memory.selector_.map();
+    const std::size_t m = map.keys.size();
+    const std::size_t e = memory.loops_.size();
+    const auto* database = memory.engine_ ? &memory.engine_->ranker().database() : nullptr;
+    const std::size_t checked = database ? database->size() : 0;
+    const auto& sessions = memory.sessions_;
+
+    const ImageStorage storage = memory.options_.images;
+    memory.check_pixels_read(storage, "MemoryStore::sync");
+    detail::MemoryStoreRows rows;
+    rows.keys.reserve(m - held_.keys);
+    for (std::size_t k = held_.keys; k < m; ++k) {
+      const KeyImage& key = map.keys[k];
+      detail::BinaryWriter record, detections;
+      memory.write_key_record(record, k, storage);
+      detail::memory_write_detections(detections, memory.labels_.key_detections[k]);
+      rows.keys.push_back({static_cast<std::int64_t>(k), static_cast<std::int64_t>(key.frame_index), key.timestamp,
+                           key.name, static_cast<std::int64_t>(key.features.keypoints.size()), std::move(record).take(),
+                           std::move(detections).take()});
+    }
+    for (std::size_t k = std::max<std::size_t>(held_.keys, 1); k < m; ++k) {
+      const KeyPair& p = map.pairs[k - 1];
+      detail::BinaryWriter record;
+      memory.write_link_record(record, k - 1);
+      rows.links.push_back({static_cast<std::int64_t>(k), static_cast<std::int64_t>(p.matches),
+                            static_cast<std::int64_t>(p.inliers), p.similarity, std::move(record).take()});
+    }
+    for (std::size_t k = held_.bows; k < checked; ++k)
+      rows.bows.push_back({static_cast<std::int64_t>(k), database->record(static_cast<std::uint32_t>(k))});
+    for (std::size_t i = held_.loops; i < e; ++i) {
+      const LoopEdge& edge = memory.loops_[i];
+      detail::BinaryWriter record;
+      memory.write_loop_record(record, i);
+      rows.loops.push_back({static_cast<std::int64_t>(i), static_cast<std::int64_t>(edge.from),
+                            static_cast<std::int64_t>(edge.link.key), static_cast<std::int64_t>(edge.link.inliers),
+                            edge.link.confidence, std::move(record).take()});
+    }
+    for (std::size_t i = held_.sessions; i < sessions.size(); ++i)
+      rows.sessions.push_back({static_cast<std::int64_t>(i), static_cast<std::int64_t>(sessions[i].first_key),
+                               static_cast<std::int64_t>(sessions[i].first_frame)});
+    // The small state, rewritten at every sync (a few hundred bytes, and I_{j-1}'s
+    // features).
+    auto& meta = rows.meta;
+    meta.emplace_back("options", memory.options_bytes(storage));
+    meta.emplace_back("policies", memory.policies_bytes());
+    meta.emplace_back("labels", memory.labels_head_bytes());
+    meta.emplace_back("previous_detections", memory.previous_detections_bytes());
+    meta.emplace_back("selector", memory.selector_bytes(storage));
+    meta.emplace_back("decision", memory.decision_head_bytes());
+    detail::BinaryWriter head;
+    head.u8(static_cast<std::uint8_t>(memory.options_.scoring));
+    head.u64(memory.vocabulary_->size());
+    meta.emplace_back("database", std::move(head).take());
+    detail::BinaryWriter frames;
+    frames.u64(map.frames);
+    meta.emplace_back("frames", std::move(frames).take());
+    // The vocabulary once learned, the GCS when trained again: written when they change.
+    const bool has_vocabulary = !memory.vocabulary_->empty();
+    if (!held_.vocabulary_written || (has_vocabulary && !*held_.vocabulary_written))
+      meta.emplace_back("vocabulary", memory.vocabulary_bytes());
+    if (held_.gcs_written != memory.gcs_generation_) meta.emplace_back("gcs", memory.gcs_bytes());
+
+    connection_->hand_over(std::move(rows));
+    held_ = {m, e, checked, sessions.size(), true, has_vocabulary, memory.gcs_generation_};
+    return committed_.keys;
+  }
+
   MemoryStore(const std::filesystem::path& path, sqlite::Access access)
-      : path_(path), db_(path, access, "memory '" + path.string() + "'") {}
+      : path_(path),
+        connection_(std::make_unique<detail::MemoryStoreConnection>(path, access, "memory '" + path.string() + "'")) {}
+
+  [[nodiscard]] sqlite::Database& db() const noexcept { return connection_->db; }
 
   static const std::string& schema_sql() {
     static const std::string sql =
@@ -447,8 +699,8 @@ class MemoryStore {
   }
 
   [[nodiscard]] std::int64_t pragma(const char* name) {
-    auto q = db_.prepare(std::string("PRAGMA ") + name, std::string("read ") + name);
-    if (!q.step()) db_.fail(std::string("has no ") + name);
+    auto q = db().prepare(std::string("PRAGMA ") + name, std::string("read ") + name);
+    if (!q.step()) db().fail(std::string("has no ") + name);
     return q.integer(0);
   }
 
@@ -456,94 +708,78 @@ class MemoryStore {
   /// session, no sessions table) to version 2 in one transaction, a reader reads it as is.
   void check_schema(sqlite::Access access) {
     if (pragma("application_id") != memory_store_application_id)
-      db_.fail("is not a vmap memory store (an SQLite file without vmap's application id)");
+      db().fail("is not a vmap memory store (an SQLite file without vmap's application id)");
     const std::int64_t version = pragma("user_version");
     if (version < 1 || version > memory_store_version)
-      db_.fail("has store version " + std::to_string(version) + "; this build reads versions 1 to " +
-               std::to_string(memory_store_version));
+      db().fail("has store version " + std::to_string(version) + "; this build reads versions 1 to " +
+                std::to_string(memory_store_version));
     version_ = version;
     if (version == 1 && access == sqlite::Access::write) {
-      sqlite::Transaction t(db_, "add the sessions table");
-      db_.exec(sessions_sql() + "INSERT INTO sessions SELECT 0, 0, 0 WHERE EXISTS(SELECT 1 FROM key_images);" +
-                   "PRAGMA user_version = " + std::to_string(memory_store_version) + ";",
-               "add the sessions table");
+      sqlite::Transaction t(db(), "add the sessions table");
+      db().exec(sessions_sql() + "INSERT INTO sessions SELECT 0, 0, 0 WHERE EXISTS(SELECT 1 FROM key_images);" +
+                    "PRAGMA user_version = " + std::to_string(memory_store_version) + ";",
+                "add the sessions table");
       t.commit();
       version_ = memory_store_version;
     }
   }
 
-  void prepare() {
-    insert_key_.emplace(db_.prepare(
-        "INSERT INTO key_images(id, frame_index, timestamp, name, keypoints, record, detections) VALUES(?,?,?,?,?,?,?)",
-        "insert a key image"));
-    insert_link_.emplace(db_.prepare("INSERT INTO links(key, matches, inliers, similarity, record) VALUES(?,?,?,?,?)",
-                                     "insert a link"));
-    update_bow_.emplace(db_.prepare("UPDATE key_images SET bow = ? WHERE id = ?", "write a bag of words"));
-    insert_loop_.emplace(db_.prepare(
-        "INSERT INTO loops(id, from_key, to_key, inliers, confidence, record) VALUES(?,?,?,?,?,?)", "insert a loop edge"));
-    put_meta_.emplace(db_.prepare("INSERT OR REPLACE INTO meta(name, value) VALUES(?,?)", "write the state"));
-    insert_session_.emplace(
-        db_.prepare("INSERT INTO sessions(id, first_key, first_frame) VALUES(?,?,?)", "insert a session"));
-  }
-
   void count_rows() {
     const auto count = [&](const char* sql, const char* doing) {
-      auto q = db_.prepare(sql, doing);
-      if (!q.step()) db_.fail(std::string(doing) + ": no row");
+      auto q = db().prepare(sql, doing);
+      if (!q.step()) db().fail(std::string(doing) + ": no row");
       return static_cast<std::size_t>(q.integer(0));
     };
-    keys_ = count("SELECT count(*) FROM key_images", "count the key images");
-    loops_ = count("SELECT count(*) FROM loops", "count the loop edges");
-    bows_ = count("SELECT count(bow) FROM key_images", "count the bags of words");
-    synced_ = count("SELECT count(*) FROM meta WHERE name = 'options'", "look for a sync") > 0;
-    sessions_ = version_ >= 2 ? count("SELECT count(*) FROM sessions", "count the sessions") : (synced_ ? 1 : 0);
+    held_.keys = count("SELECT count(*) FROM key_images", "count the key images");
+    held_.loops = count("SELECT count(*) FROM loops", "count the loop edges");
+    held_.bows = count("SELECT count(bow) FROM key_images", "count the bags of words");
+    held_.synced = count("SELECT count(*) FROM meta WHERE name = 'options'", "look for a sync") > 0;
+    held_.sessions =
+        version_ >= 2 ? count("SELECT count(*) FROM sessions", "count the sessions") : (held_.synced ? 1 : 0);
+    committed_ = held_;
   }
 
   /// `memory` is the one the store holds, grown (sync, bound): it has at least the stored
   /// key images, loop edges and bags of words, and its last stored key image is the
-  /// stored one (checked once per store object).
+  /// stored one (checked once per store object, on the connection: nothing in flight).
   template <Descriptor D, Matcher M, Estimator E, Similarity S>
   void check_holds(const VisualMemory<D, M, E, S>& memory) {
     const VisualMap& map = memory.selector_.map();
     const std::size_t m = map.keys.size();
     const std::size_t e = memory.loops_.size();
     const std::size_t checked = memory.engine_ ? memory.engine_->ranker().database().size() : 0;
-    if (m < keys_ || e < loops_ || checked < bows_ || memory.sessions_.size() < sessions_)
-      db_.fail("holds " + std::to_string(keys_) + " key images and " + std::to_string(loops_) +
-               " loop edges, the memory given " + std::to_string(m) + " and " + std::to_string(e) +
-               ": use the memory loaded from this store, or a memory with a new store");
-    if (!matched_ && keys_ > 0) check_same_memory(map);
+    if (m < held_.keys || e < held_.loops || checked < held_.bows || memory.sessions_.size() < held_.sessions)
+      db().fail("holds " + std::to_string(held_.keys) + " key images and " + std::to_string(held_.loops) +
+                " loop edges, the memory given " + std::to_string(m) + " and " + std::to_string(e) +
+                ": use the memory loaded from this store, or a memory with a new store");
+    if (!matched_ && held_.keys > 0) check_same_memory(map);
     matched_ = true;
   }
 
   /// The first sync into a store that holds key images: the memory must be the one it
   /// holds (its last stored key image is the memory's key image of that index).
   void check_same_memory(const VisualMap& map) {
-    auto q = db_.prepare("SELECT frame_index FROM key_images WHERE id = ?", "read the last key image");
-    q.bind(1, static_cast<std::int64_t>(keys_ - 1));
-    if (!q.step()) db_.fail("is corrupt: key image " + std::to_string(keys_ - 1) + " is missing");
+    auto q = db().prepare("SELECT frame_index FROM key_images WHERE id = ?", "read the last key image");
+    q.bind(1, static_cast<std::int64_t>(held_.keys - 1));
+    if (!q.step()) db().fail("is corrupt: key image " + std::to_string(held_.keys - 1) + " is missing");
     const auto stored = q.integer(0);
-    if (stored != static_cast<std::int64_t>(map.keys[keys_ - 1].frame_index))
-      db_.fail("holds another memory: its key image " + std::to_string(keys_ - 1) + " is frame " + std::to_string(stored) +
-               ", the memory's is frame " + std::to_string(map.keys[keys_ - 1].frame_index));
-  }
-
-  void put(const char* name, std::string_view value) {
-    put_meta_->bind_text(1, name).bind_blob(2, value);
-    put_meta_->run();
+    if (stored != static_cast<std::int64_t>(map.keys[held_.keys - 1].frame_index))
+      db().fail("holds another memory: its key image " + std::to_string(held_.keys - 1) + " is frame " +
+                std::to_string(stored) + ", the memory's is frame " +
+                std::to_string(map.keys[held_.keys - 1].frame_index));
   }
 
   [[nodiscard]] std::string meta(const char* name) {
-    auto q = db_.prepare("SELECT value FROM meta WHERE name = ?", "read the state");
+    auto q = db().prepare("SELECT value FROM meta WHERE name = ?", "read the state");
     q.bind_text(1, name);
-    if (!q.step()) db_.fail(std::string("holds no '") + name + "' state (an empty store, or not synced)");
+    if (!q.step()) db().fail(std::string("holds no '") + name + "' state (an empty store, or not synced)");
     return std::string(q.blob(0));
   }
 
   void expect_index(std::int64_t got, std::size_t want, const char* what) const {
     if (got != static_cast<std::int64_t>(want))
-      db_.fail("is corrupt: " + std::string(what) + " " + std::to_string(got) + " where " + std::to_string(want) +
-               " was expected");
+      db().fail("is corrupt: " + std::string(what) + " " + std::to_string(got) + " where " + std::to_string(want) +
+                " was expected");
   }
 
   /// Reads past what a key image's record holds before its features: frame index, time
@@ -557,7 +793,7 @@ class MemoryStore {
   /// A key image's record with its features replaced by none of the same norm and image
   /// size (the record's other fields as they are): what a bounded load keeps in RAM.
   std::string without_features(std::string_view record, std::size_t key) const {
-    detail::BinaryReader r(record, db_.what() + " key image " + std::to_string(key));
+    detail::BinaryReader r(record, db().what() + " key image " + std::to_string(key));
     skip_to_features(r);
     const std::size_t head = r.offset();
     const Features f = detail::read_features(r);
@@ -575,16 +811,20 @@ class MemoryStore {
     return std::move(w).take();
   }
 
+  /// What the store holds, counted: each table's rows and the state last written.
+  struct Held {
+    std::size_t keys = 0, loops = 0, bows = 0, sessions = 0;
+    bool synced = false;                       ///< the store holds a memory (a sync happened)
+    std::optional<bool> vocabulary_written;    ///< whether the stored vocabulary is a learned one
+    std::optional<std::uint64_t> gcs_written;  ///< the memory's GCS generation stored
+  };
+
   std::filesystem::path path_;
-  sqlite::Database db_;
-  // Prepared once for a writer (absent for a reader).
-  std::optional<sqlite::Statement> insert_key_, insert_link_, update_bow_, insert_loop_, put_meta_, insert_session_;
-  std::size_t keys_ = 0, loops_ = 0, bows_ = 0, sessions_ = 0;  ///< rows in the store
-  std::int64_t version_ = memory_store_version;                 ///< the file's schema version
+  std::unique_ptr<detail::MemoryStoreConnection> connection_;
+  Held held_;       ///< with the sync in flight committed: where the next sync goes on from
+  Held committed_;  ///< without it: what a failure of the sync in flight leaves
+  std::int64_t version_ = memory_store_version;  ///< the file's schema version
   bool matched_ = false;                         ///< the synced memory was checked against the stored one
-  bool synced_ = false;                          ///< the store holds a memory (a sync happened)
-  std::optional<bool> vocabulary_written_;       ///< whether the stored vocabulary is a learned one
-  std::optional<std::uint64_t> gcs_written_;     ///< the memory's GCS generation stored
 };
 
 }  // namespace vmap

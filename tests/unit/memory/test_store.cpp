@@ -1,6 +1,7 @@
 // MemoryStore: a memory synced frame by frame into an SQLite file loads back as the same
 // memory (the same file bytes), resumes exactly, refuses a second writer, serves readers
-// while it is written, and turns bad files into Errors naming the memory.
+// while it is written, turns bad files into Errors naming the memory, and reports a
+// transaction that failed in its writer thread at the next sync or flush.
 #include "support/errors.hpp"
 #include "support/raw_sql.hpp"
 #include "support/sample_memory.hpp"
@@ -23,6 +24,7 @@ namespace {
 
 using vmap::test::error_of;
 using vmap::test::raw_sql;
+using vmap::test::sql_integer;
 namespace fs = std::filesystem;
 
 using vmap::test::memory_estimator;
@@ -76,6 +78,98 @@ TEST_CASE("store: a memory synced at every frame loads back as the same memory, 
                   static_cast<double>(back.map().keys[k].image.total()) < 3.0);
     }
   }
+}
+
+// sync() hands its rows to the store's writer thread and returns before they are
+// committed, while the memory goes on at once. Whatever the timing, every sync is stored:
+// another connection sees all of them after flush(), and the store loads as the memory,
+// also when the store object was moved with a sync in flight.
+TEST_CASE("store: syncs committed in the writer thread: after each flush a reader sees every sync") {
+  const fs::path file = fresh("async.vmdb");
+  std::optional<vmap::MemoryStore> store;
+  store.emplace(vmap::MemoryStore::create(file));
+  auto reader = vmap::MemoryStore::open(file, vmap::sqlite::Access::read);
+  auto memory = make(options(vmap::ImageStorage::png));
+  std::size_t flushes = 0;
+  for (std::size_t i = 0; i < frames().size(); ++i) {
+    memory.push(frames()[i]);
+    store->sync(memory);
+    if (i == 25) {
+      vmap::MemoryStore moved = std::move(*store);
+      store.emplace(std::move(moved));
+    }
+    if (i % 15 == 14) {
+      store->flush();
+      ++flushes;
+      CHECK(sql_integer(file, "SELECT count(*) FROM key_images") == static_cast<std::int64_t>(memory.key_images()));
+      CHECK(sql_integer(file, "SELECT count(*) FROM loops") == static_cast<std::int64_t>(memory.loops().size()));
+      CHECK(sql_integer(file, "SELECT count(bow) FROM key_images") ==
+            static_cast<std::int64_t>(memory.database().size()));
+      CHECK(load(reader).serialize() == memory.serialize());
+    }
+  }
+  CHECK(flushes == 4);
+  REQUIRE(memory.loops().size() > 0);
+  store->flush();
+  CHECK(load(reader).serialize() == memory.serialize());
+  CHECK(load(*store).serialize() == memory.serialize());
+}
+
+// A transaction that fails in the writer thread (here: a row another program inserted
+// where the next key image goes) is not lost: the next sync() or flush() throws it as a
+// vmap::Error naming the store. It stored nothing, the destructor waits for it without
+// throwing, and once the cause is gone the next sync writes its rows again.
+TEST_CASE("store: a sync that fails in the writer thread is an Error at the next sync or flush, then written again") {
+  const auto o = options(vmap::ImageStorage::none);
+  auto whole = make(o);
+  for (const auto& f : frames()) whole.push(f);
+
+  const fs::path file = fresh("failed.vmdb");
+  std::optional<vmap::MemoryStore> store;
+  store.emplace(vmap::MemoryStore::create(file));
+  auto memory = make(o);
+  std::size_t i = 0;
+  for (; i < 20; ++i) {
+    memory.push(frames()[i]);
+    store->sync(memory);
+  }
+  store->flush();
+  const std::size_t m = memory.key_images();
+  REQUIRE(m >= 2);
+  raw_sql(file, "INSERT INTO key_images(id, frame_index, timestamp, name, keypoints, record, detections) VALUES(" +
+                    std::to_string(m) + ", 0, 0, 'intruder', 0, x'', x'')");
+  // Pushed and synced up to the frame that makes key image m: the sync that writes it
+  // returns, and fails in the writer thread.
+  while (memory.key_images() == m) {
+    REQUIRE(i < frames().size());
+    memory.push(frames()[i++]);
+    store->sync(memory);
+  }
+  const std::string failed = error_of([&] { store->sync(memory); });
+  CHECK(failed.find("memory '" + file.string() + "' insert a key image: UNIQUE constraint failed: key_images.id") == 0);
+  CHECK(failed.find("the next sync writes its rows again") != std::string::npos);
+  // It stored nothing: the key images before it and the intruder, no link to key image m.
+  CHECK(store->key_images() == m);
+  CHECK(sql_integer(file, "SELECT count(*) FROM key_images") == static_cast<std::int64_t>(m + 1));
+  CHECK(sql_integer(file, "SELECT count(*) FROM links") == static_cast<std::int64_t>(m - 1));
+  // While the cause remains, each sync fails again; flush() reports it as well.
+  store->sync(memory);
+  CHECK(error_of([&] { store->flush(); }) == failed);
+  CHECK(error_of([&] { store->flush(); }) == "no error");  // reported once
+  // The destructor waits for a failing sync and does not throw.
+  store->sync(memory);
+  store.reset();
+  CHECK(sql_integer(file, "SELECT count(*) FROM key_images") == static_cast<std::int64_t>(m + 1));
+
+  raw_sql(file, "DELETE FROM key_images WHERE name = 'intruder'");
+  store.emplace(vmap::MemoryStore::open(file));
+  for (; i < frames().size(); ++i) {
+    memory.push(frames()[i]);
+    store->sync(memory);
+  }
+  store->flush();
+  CHECK(memory.serialize() == whole.serialize());
+  CHECK(load(*store).serialize() == whole.serialize());
 }
 
 // The key images' pixels are counted from their recorded sizes before any is decoded:
@@ -214,8 +308,15 @@ TEST_CASE("store: a working memory of 3 key images answers as a memory that hold
     CHECK(back.keypoints.front().pt == original.keypoints.front().pt);
     CHECK(cv::norm(back.descriptors, original.descriptors, cv::NORM_HAMMING) == 0.0);
   }
-  // The same loops (features read from the store for the candidates), the same file,
-  // the same localizations.
+  // The same loops (features read from the store for the candidates, while the syncs
+  // commit in the writer thread), the same file, the same localizations.
+  REQUIRE(whole.loops().size() > 0);
+  REQUIRE(bounded.loops().size() == whole.loops().size());
+  for (std::size_t i = 0; i < whole.loops().size(); ++i) {
+    CHECK(bounded.loops()[i].from == whole.loops()[i].from);
+    CHECK(bounded.loops()[i].link.key == whole.loops()[i].link.key);
+    CHECK(bounded.loops()[i].link.inliers == whole.loops()[i].link.inliers);
+  }
   CHECK(bounded.serialize() == whole.serialize());
   std::size_t answered = 0;
   for (const auto& f : later) {
@@ -271,6 +372,7 @@ TEST_CASE("store: one writer at a time; readers load the last sync while the wri
   auto memory = make(options(vmap::ImageStorage::none));
   for (std::size_t i = 0; i < 30; ++i) memory.push(frames()[i]);
   writer.sync(memory);
+  writer.flush();  // sync() returns before its commit; a reader sees committed syncs
   const std::size_t first = memory.key_images();
 
   const std::string second = error_of([&] { (void)vmap::MemoryStore::open(file); });
@@ -281,6 +383,7 @@ TEST_CASE("store: one writer at a time; readers load the last sync while the wri
   for (std::size_t i = 30; i < frames().size(); ++i) memory.push(frames()[i]);
   REQUIRE(memory.key_images() > first);
   writer.sync(memory);
+  writer.flush();
   // The reader's next load sees the writer's new sync; a reader cannot write.
   CHECK(load(reader).serialize() == memory.serialize());
   CHECK(error_of([&] { reader.sync(memory); }).find("is open read-only") != std::string::npos);
