@@ -491,7 +491,9 @@ struct StreamResult {
   std::size_t pushed = 0;       ///< frames pushed in this run
   std::size_t saves = 0;        ///< syncs into the store (one transaction each)
   double seconds = 0.0;         ///< pushing (without the syncs)
-  double save_seconds = 0.0;    ///< the syncs
+  /// The pushing thread's time in the syncs: collecting the rows and waiting for the
+  /// previous commit (the commit itself runs in the store's writer thread).
+  double save_seconds = 0.0;
   std::vector<LoopEdge> loops;  ///< loop edges found in this run
 };
 
