@@ -14,6 +14,7 @@
 
 #include <array>
 #include <bit>
+#include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <limits>
@@ -26,6 +27,23 @@ namespace vmap::detail {
 static_assert(sizeof(float) == 4 && sizeof(double) == 8 && std::numeric_limits<float>::is_iec559 &&
                   std::numeric_limits<double>::is_iec559,
               "vmap's binary files store IEEE-754 binary32 / binary64 values");
+
+/// Converts to any type, in unevaluated contexts only: field_count's probe.
+struct AnyField {
+  template <class T>
+  operator T() const;  // NOLINT(google-explicit-constructor): the probe must convert implicitly
+};
+
+/// The number of fields of the aggregate T: how many initialisers T{...} accepts. An
+/// options codec asserts it, so that a field added to the options fails to compile
+/// until the codec writes and reads it (a saved memory cannot silently drop an option).
+template <class T, class... Fields>
+consteval std::size_t field_count() {
+  if constexpr (requires { T{Fields{}..., AnyField{}}; })
+    return field_count<T, Fields..., AnyField>();
+  else
+    return sizeof...(Fields);
+}
 
 inline constexpr std::array<std::uint32_t, 256> crc32_table = [] {
   std::array<std::uint32_t, 256> t{};

@@ -44,6 +44,7 @@
 #include <vmap/io/files.hpp>
 #include <vmap/io/image.hpp>
 #include <vmap/keyframe/front_end.hpp>
+#include <vmap/keyframe/selector.hpp>
 #include <vmap/keyframe/visual_map.hpp>
 
 #include <opencv2/core.hpp>
@@ -131,7 +132,8 @@ inline KeyPair read_key_pair(BinaryReader& r, std::string_view status_what) {
 
 /// The selector's score of its frame I_{j-1} against the key image (SelectorState::
 /// previous_score): what the link to the next key image is made of (selector.hpp's
-/// add_key). The inlier mask is not needed and not written.
+/// add_key). The inlier mask is not written (write_previous_score adds it where a
+/// deferred degeneracy test needs it).
 inline void write_pair_score(BinaryWriter& w, const PairScore& p) {
   w.i32(p.raw_matches);
   w.f64(p.upper_bound);
@@ -165,6 +167,45 @@ inline PairScore read_pair_score(BinaryReader& r) {
       !std::isfinite(p.upper_bound) || !(p.similarity >= 0.0 && p.similarity <= 1.0))
     r.corrupt("invalid score");
   return p;
+}
+
+/// The selector's score of I_{j-1} (SelectorState::previous_score): u8 0 (none) | 1 (a
+/// complete score) | 2 (a verified score whose homography degeneracy test is deferred,
+/// SelectorState::degeneracy_deferred), then the score, then for 2 the F-matrix's inlier
+/// mask that completes it (u32 n = matches, n x u8).
+template <class Item>
+void write_previous_score(BinaryWriter& w, const SelectorState<Item>& s) {
+  w.u8(!s.previous_score ? 0 : s.degeneracy_deferred ? 2 : 1);
+  if (!s.previous_score) return;
+  write_pair_score(w, *s.previous_score);
+  if (!s.degeneracy_deferred) return;
+  const Verification& v = s.previous_score->verification;
+  w.u32(static_cast<std::uint32_t>(v.inlier_mask.size()));
+  for (const std::uint8_t b : v.inlier_mask) w.u8(b);
+}
+
+/// Reads write_previous_score()'s bytes into `s`, whose I_{j-1} (`s.previous`) is read.
+template <class Item>
+void read_previous_score(BinaryReader& r, SelectorState<Item>& s) {
+  const std::uint8_t flag = r.u8("previous score flag");
+  if (flag > 2 || (flag != 0 && !s.previous)) r.corrupt("invalid previous score flag");
+  if (flag == 0) return;
+  s.previous_score = read_pair_score(r);
+  if (flag == 1) return;
+  Verification& v = s.previous_score->verification;
+  if (!v.ok() || v.degeneracy != Degeneracy::none || v.homography_inliers != 0)
+    r.corrupt("a deferred degeneracy on a score that is not verified or already has one");
+  const std::uint32_t n = r.u32("inlier mask length");
+  if (n != static_cast<std::uint32_t>(v.matches)) r.corrupt("the inlier mask's length is not the score's matches");
+  v.inlier_mask.resize(n);
+  int inliers = 0;
+  for (std::uint8_t& b : v.inlier_mask) {
+    b = r.u8("inlier mask");
+    if (b > 1) r.corrupt("an inlier mask byte is not 0 or 1");
+    inliers += b;
+  }
+  if (inliers != v.inliers) r.corrupt("the inlier mask does not hold the score's inliers");
+  s.degeneracy_deferred = true;
 }
 
 inline bool valid_image_type(int type) {

@@ -14,6 +14,7 @@
 #include <vmap/geometry/fundamental.hpp>
 #include <vmap/geometry/similarity.hpp>
 #include <vmap/hooks/pair_matcher.hpp>
+#include <vmap/io/binary.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/keyframe/front_end.hpp>
 #include <vmap/keyframe/visual_map.hpp>
@@ -49,6 +50,32 @@ struct SelectorOptions {
   /// Keep each key image's pixels in the VisualMap (for contact sheets and map files).
   bool keep_images = false;
 };
+
+namespace detail {
+
+/// SelectorOptions as a saved memory keeps them: tau, the rule and the fast path.
+/// keep_images is not written: the memory sets it from its image storage.
+inline void write_selector_options(BinaryWriter& w, const SelectorOptions& o) {
+  static_assert(field_count<SelectorOptions>() == 4, "a new SelectorOptions field must be written and read here");
+  w.f64(o.tau);
+  w.u8(static_cast<std::uint8_t>(o.rule));
+  w.u8(o.skip_by_upper_bound ? 1 : 0);
+}
+
+inline SelectorOptions read_selector_options(BinaryReader& r) {
+  SelectorOptions o;
+  o.tau = r.f64("tau");
+  if (!(std::isfinite(o.tau) && o.tau > 0.0 && o.tau <= 1.0)) r.corrupt("tau outside (0, 1]");
+  const std::uint8_t rule = r.u8("key rule");
+  if (rule > static_cast<std::uint8_t>(KeyRule::current_frame)) r.corrupt("unknown key rule " + std::to_string(rule));
+  o.rule = static_cast<KeyRule>(rule);
+  const std::uint8_t skip = r.u8("skip flag");
+  if (skip > 1) r.corrupt("skip flag is not 0 or 1");
+  o.skip_by_upper_bound = skip == 1;
+  return o;
+}
+
+}  // namespace detail
 
 /// Why a frame did or did not produce a key image.
 enum class KeyReason : std::uint8_t {
@@ -103,6 +130,10 @@ struct SelectorState {
   VisualMap map;
   std::optional<PreparedFrame<Item>> previous;  ///< I_{j-1} when it is not the key image
   std::optional<PairScore> previous_score;      ///< S(key, previous), when it was scored
+  /// previous_score's homography degeneracy test was deferred (deferred_state()): its
+  /// degeneracy and homography_inliers are zero and its inlier mask is kept, so that
+  /// the selector restored from it computes them when its state() is read.
+  bool degeneracy_deferred = false;
 };
 
 /// Algorithm 1 over any front end. Streaming: push() one frame at a time; map() can be
@@ -303,6 +334,23 @@ class BasicKeyframeSelector {
     return s;
   }
 
+  /// pending_state() with the score's degeneracy test left deferred (see
+  /// SelectorState::degeneracy_deferred): the homography fit push() saved is not paid
+  /// for a state that is written at every frame and read rarely. The deferred fields are
+  /// zeroed, so equal runs give equal states.
+  [[nodiscard]] SelectorState<Item> deferred_state() const {
+    SelectorState<Item> s{{}, prev_, std::nullopt};
+    if (prev_scored_) {
+      s.previous_score = prev_score_;
+      if (prev_degeneracy_pending_) {
+        s.previous_score->verification.degeneracy = Degeneracy::none;
+        s.previous_score->verification.homography_inliers = 0;
+        s.degeneracy_deferred = true;
+      }
+    }
+    return s;
+  }
+
   /// Continues from a saved state: the next push() behaves as it would have in the run
   /// the state was taken from. The current key's item is its features in the map, so
   /// this needs a front end whose Item is Features (the feature stack).
@@ -317,6 +365,10 @@ class BasicKeyframeSelector {
     detail::check(m.keys.empty() || m.frames >= m.keys.size(),
                   "KeyframeSelector::restore: fewer frames than key images");
     detail::check(!s.previous_score || s.previous, "KeyframeSelector::restore: a previous score without a previous frame");
+    detail::check(!s.degeneracy_deferred || (s.previous_score && s.previous_score->verification.ok() &&
+                                             s.previous_score->verification.inlier_mask.size() ==
+                                                 static_cast<std::size_t>(s.previous_score->verification.matches)),
+                  "KeyframeSelector::restore: a deferred degeneracy without a verified score and its inlier mask");
     detail::check(!s.previous || !m.keys.empty(), "KeyframeSelector::restore: a previous frame without a key image");
     detail::check(!s.previous || s.previous->index > m.keys.back().frame_index,
                   "KeyframeSelector::restore: the previous frame is not after the current key image");
@@ -328,7 +380,7 @@ class BasicKeyframeSelector {
     }
     prev_ = std::move(s.previous);
     prev_scored_ = s.previous_score.has_value();
-    prev_degeneracy_pending_ = false;  // a saved score is complete
+    prev_degeneracy_pending_ = s.degeneracy_deferred;
     if (prev_scored_) prev_score_ = std::move(*s.previous_score);
   }
 

@@ -235,6 +235,28 @@ namespace detail {
 
 /// The place decision's options of `o` (temporal consistency, BoW floor, revisit rule,
 /// PlaceDecisionOptions), as the memory's section "dcsn" begins.
+// A memory saves every LoopOptions field: write_loop_search_options (the window, the top
+// k and the inlier floor) in its options, write_decision_options (the rest of the
+// decision, the temporal and revisit rules) beside the engine's state, and MemoryLabels
+// (eq. 3's threshold, the candidate source, m) with the label tree.
+static_assert(field_count<LoopOptions>() == 10 && field_count<PlaceDecisionOptions>() == 7 &&
+                  field_count<LabelVectorOptions>() == 1,
+              "a new loop or decision option must be written and read by one of the codecs that save them");
+
+/// The loop options a memory keeps with its own: the window, the top k and the inlier
+/// floor; the caller checks the options whole (LoopEngine::check_options).
+inline void write_loop_search_options(BinaryWriter& w, const LoopOptions& o) {
+  w.u64(o.window);
+  w.u64(o.top_k);
+  w.i32(o.decision.min_inliers);
+}
+
+inline void read_loop_search_options(BinaryReader& r, LoopOptions& o) {
+  o.window = static_cast<std::size_t>(r.u64("window"));
+  o.top_k = static_cast<std::size_t>(r.u64("top k"));
+  o.decision.min_inliers = r.i32("min_loop_inliers");
+}
+
 inline void write_decision_options(BinaryWriter& w, const LoopOptions& o) {
   w.u64(o.temporal_consistency);
   w.u64(o.temporal_tolerance);

@@ -35,6 +35,8 @@ struct MemoryLabels {
   /// loop engine's score threshold, candidate source and m), whether the frames are
   /// labelled, the schema.
   [[nodiscard]] std::string head_bytes(const MemoryOptions& options) const {
+    static_assert(detail::field_count<MemoryLabelOptions>() == 3 && detail::field_count<InfluenceOptions>() == 2,
+                  "a new label option must be written here and read by read()");
     const MemoryLabelOptions& o = options.labels;
     detail::BinaryWriter w;
     w.f32(options.loops.labels.min_score);

@@ -52,26 +52,12 @@
 // checkpoint(), key_image_bytes(), features(), bound()) waits for that sync first
 // (flush()), so the connection is used by one thread at a time.
 //
-// Schema (version 2; PRAGMA application_id 0x564D4150 "VMAP", PRAGMA user_version 2),
-// documented for readers without vmap in examples/memory.md:
-//   meta(name TEXT PRIMARY KEY, value BLOB): "options", "policies", "labels",
-//        "previous_detections", "selector", "vocabulary", "database", "gcs", "decision"
-//        (each the bytes of the memory file's section of that content), "frames" (frames
-//        pushed, an integer)
-//   key_images(id INTEGER PRIMARY KEY: the key image's index, from 0; frame_index,
-//        timestamp (s), name, keypoints; record BLOB: the key image and its pose as the
-//        file's "keys" holds one; detections BLOB; bow BLOB: its bag of words as the place
-//        database file holds one, NULL until it is checked for loops)
-//   links(key INTEGER PRIMARY KEY: the link from key image key - 1 to key; matches,
-//        inliers, similarity; record BLOB as the file's "link" holds one)
-//   loops(id INTEGER PRIMARY KEY: the edge's index; from_key (newer), to_key (older),
-//        inliers, confidence; record BLOB as the file's "loop" holds one)
-//   notes(name TEXT PRIMARY KEY, value TEXT): what the program that writes the memory
-//        records about it (vmap's command line: the input each session was built from)
-//   sessions(id INTEGER PRIMARY KEY: the session's index, from 0; first_key, first_frame:
-//        its first key image and the frames pushed before it)
-// Version 1 had no sessions table (one session): a reader reads such a store as it is, a
-// writer adds the table when it opens one.
+// Schema version 3 (PRAGMA application_id 0x564D4150 "VMAP", PRAGMA user_version 3):
+// the tables meta, key_images, links, loops, notes and sessions, whose columns and blobs
+// (each the bytes of the .vmem section of that content) are documented for readers
+// without vmap in examples/memory.md, "The memory store". A reader reads a store of
+// version 1 (no sessions table: one session) or 2 (no deferred degeneracy in the
+// selector's blob) as it is; a writer brings it to version 3 when it opens it.
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/binary.hpp>
@@ -99,7 +85,7 @@
 namespace vmap {
 
 /// The store's schema version (PRAGMA user_version).
-inline constexpr std::int64_t memory_store_version = 2;
+inline constexpr std::int64_t memory_store_version = 3;
 /// PRAGMA application_id of a memory store: "VMAP".
 inline constexpr std::int64_t memory_store_application_id = 0x564D4150;
 
@@ -651,7 +637,7 @@ class MemoryStore {
     meta.emplace_back("policies", memory.policies_bytes());
     meta.emplace_back("labels", memory.labels_head_bytes());
     meta.emplace_back("previous_detections", memory.previous_detections_bytes());
-    meta.emplace_back("selector", memory.selector_bytes(storage));
+    meta.emplace_back("selector", memory.selector_bytes(storage, detail::ScoreDegeneracy::deferred));
     meta.emplace_back("decision", memory.decision_head_bytes());
     detail::BinaryWriter head;
     head.u8(static_cast<std::uint8_t>(memory.options_.scoring));
@@ -704,8 +690,9 @@ class MemoryStore {
     return q.integer(0);
   }
 
-  /// Checks the application id and version; a writer brings a version-1 store (one
-  /// session, no sessions table) to version 2 in one transaction, a reader reads it as is.
+  /// Checks the application id and version; a writer brings an older store to version 3
+  /// in one transaction (version 1: one session, no sessions table; version 2: the
+  /// selector blob never defers a degeneracy), a reader reads it as is.
   void check_schema(sqlite::Access access) {
     if (pragma("application_id") != memory_store_application_id)
       db().fail("is not a vmap memory store (an SQLite file without vmap's application id)");
@@ -714,11 +701,13 @@ class MemoryStore {
       db().fail("has store version " + std::to_string(version) + "; this build reads versions 1 to " +
                 std::to_string(memory_store_version));
     version_ = version;
-    if (version == 1 && access == sqlite::Access::write) {
-      sqlite::Transaction t(db(), "add the sessions table");
-      db().exec(sessions_sql() + "INSERT INTO sessions SELECT 0, 0, 0 WHERE EXISTS(SELECT 1 FROM key_images);" +
+    if (version < memory_store_version && access == sqlite::Access::write) {
+      sqlite::Transaction t(db(), "bring the store to version " + std::to_string(memory_store_version));
+      db().exec((version == 1 ? sessions_sql() +
+                                    "INSERT INTO sessions SELECT 0, 0, 0 WHERE EXISTS(SELECT 1 FROM key_images);"
+                              : std::string()) +
                     "PRAGMA user_version = " + std::to_string(memory_store_version) + ";",
-                "add the sessions table");
+                "bring the store to version " + std::to_string(memory_store_version));
       t.commit();
       version_ = memory_store_version;
     }

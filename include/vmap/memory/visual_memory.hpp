@@ -501,7 +501,7 @@ class VisualMemory {
     const ImageStorage storage = images.value_or(options_.images);
     check_pixels_read(storage, "VisualMemory::serialize");
     return file_bytes({options_bytes(storage), keys_bytes(storage), links_bytes(), loops_bytes(),
-                       selector_bytes(storage), vocabulary_bytes(),
+                       selector_bytes(storage, detail::ScoreDegeneracy::complete), vocabulary_bytes(),
                        database_section(engine_ ? database().serialize()
                                                 : PlaceDatabase<std::uint32_t>(vocabulary_->size(), options_.scoring)
                                                       .serialize()),
@@ -597,9 +597,7 @@ class VisualMemory {
       state.previous = std::move(prev);
       mem.previous_pose_ = detail::memory_read_pose(sel);
     }
-    const std::uint8_t has_score = sel.u8("previous score flag");
-    if (has_score > 1 || (has_score == 1 && has_prev == 0)) sel.corrupt("invalid previous score flag");
-    if (has_score == 1) state.previous_score = detail::read_pair_score(sel);
+    detail::read_previous_score(sel, state);
     const std::uint8_t has_last = sel.u8("last frame flag");
     if (has_last > 1 || (has_last == 0 && m > 0)) sel.corrupt("invalid last frame flag");
     if (has_last == 1) {
@@ -922,59 +920,43 @@ class VisualMemory {
   }
 
   std::string options_bytes(ImageStorage storage) const {
+    static_assert(detail::field_count<MemoryOptions>() == 9,
+                  "a new MemoryOptions field must be written here (or by its part's codec) and read by read_options");
     const MemoryOptions& o = options_;
     detail::BinaryWriter w;
-    w.f64(o.selector.tau);
-    w.u8(static_cast<std::uint8_t>(o.selector.rule));
-    w.u8(o.selector.skip_by_upper_bound ? 1 : 0);
+    detail::write_selector_options(w, o.selector);
     w.u8(static_cast<std::uint8_t>(storage));
     w.i32(o.jpeg_quality);
     w.u64(o.vocabulary_after);
-    w.i32(o.vocabulary.branching);
-    w.i32(o.vocabulary.depth);
-    w.i32(o.vocabulary.iterations);
-    w.u64(o.vocabulary.max_descriptors);
-    w.u64(o.vocabulary.seed);
+    detail::write_vocabulary_tree_options(w, o.vocabulary);
     w.u8(static_cast<std::uint8_t>(o.scoring));
-    w.u64(o.loops.window);
-    w.u64(o.loops.top_k);
-    w.i32(o.loops.decision.min_inliers);
+    detail::write_loop_search_options(w, o.loops);
     w.u64(o.localize_candidates);
-    w.i32(o.loops.decision.min_inliers);
+    w.i32(o.loops.decision.min_inliers);  // where version 2 kept a second floor
     return std::move(w).take();
   }
 
+  /// "opts": the selector's, the vocabulary's and the loop search's options by their
+  /// parts' codecs, with the memory's own; the decision's are in "dcsn" and the labels'
+  /// in "labl".
   static MemoryOptions read_options(detail::BinaryReader& r, std::uint32_t version) {
     MemoryOptions o;
-    o.selector.tau = r.f64("tau");
-    const std::uint8_t rule = r.u8("key rule");
-    if (rule > 1) r.corrupt("unknown key rule " + std::to_string(rule));
-    o.selector.rule = static_cast<KeyRule>(rule);
-    const std::uint8_t skip = r.u8("skip flag");
-    if (skip > 1) r.corrupt("skip flag is not 0 or 1");
-    o.selector.skip_by_upper_bound = skip == 1;
+    o.selector = detail::read_selector_options(r);
     const std::uint8_t images = r.u8("image storage");
     if (images > 2) r.corrupt("unknown image storage " + std::to_string(images));
     o.images = static_cast<ImageStorage>(images);
     o.jpeg_quality = r.i32("jpeg quality");
     o.vocabulary_after = static_cast<std::size_t>(r.u64("vocabulary_after"));
-    o.vocabulary.branching = r.i32("branching");
-    o.vocabulary.depth = r.i32("depth");
-    o.vocabulary.iterations = r.i32("iterations");
-    o.vocabulary.max_descriptors = static_cast<std::size_t>(r.u64("max_descriptors"));
-    o.vocabulary.seed = r.u64("seed");
+    o.vocabulary = detail::read_vocabulary_tree_options(r);
     const std::uint8_t scoring = r.u8("scoring");
     if (scoring > 2) r.corrupt("unknown scoring " + std::to_string(scoring));
     o.scoring = static_cast<BowScoring>(scoring);
-    o.loops.window = static_cast<std::size_t>(r.u64("window"));
-    o.loops.top_k = static_cast<std::size_t>(r.u64("top k"));
-    o.loops.decision.min_inliers = r.i32("min_loop_inliers");
+    detail::read_loop_search_options(r, o.loops);
     o.localize_candidates = static_cast<std::size_t>(r.u64("localize_candidates"));
     // Version 2 had a separate floor for localization; version 3 one floor for both.
     if (const int again = r.i32("min_localize_inliers"); version >= 3 && again != o.loops.decision.min_inliers)
       r.corrupt("the two inlier floors differ");
     r.expect_end("the options");
-    if (!(std::isfinite(o.selector.tau) && o.selector.tau > 0.0 && o.selector.tau <= 1.0)) r.corrupt("tau outside (0, 1]");
     try {
       return checked(o);
     } catch (const Error& e) {
@@ -1064,8 +1046,12 @@ class VisualMemory {
     return std::move(w).take();
   }
 
-  std::string selector_bytes(ImageStorage storage) const {
-    const SelectorState<Features> s = selector_.pending_state();
+  /// "selc". The store writes it at every sync with the score's degeneracy test left
+  /// deferred (flag 2, with the inlier mask that completes it); a file saved whole
+  /// completes it (flag 1).
+  std::string selector_bytes(ImageStorage storage, detail::ScoreDegeneracy degeneracy) const {
+    const SelectorState<Features> s =
+        degeneracy == detail::ScoreDegeneracy::deferred ? selector_.deferred_state() : selector_.pending_state();
     detail::BinaryWriter w;
     w.u8(s.previous ? 1 : 0);
     if (s.previous) {
@@ -1073,8 +1059,7 @@ class VisualMemory {
       write_key(w, p.index, p.timestamp, p.name, p.item, p.image, storage);
       detail::memory_write_pose(w, previous_pose_);
     }
-    w.u8(s.previous_score ? 1 : 0);
-    if (s.previous_score) detail::write_pair_score(w, *s.previous_score);
+    detail::write_previous_score(w, s);
     w.u8(last_index_ ? 1 : 0);
     if (last_index_) w.u64(*last_index_);
     return std::move(w).take();

@@ -165,6 +165,32 @@ struct VocabularyTreeOptions {
   std::uint64_t seed = 1;               ///< the sample and the k-means++ seeding
 };
 
+namespace detail {
+
+/// VocabularyTreeOptions as a memory that learns its vocabulary keeps them (checked when
+/// the vocabulary is learned).
+inline void write_vocabulary_tree_options(BinaryWriter& w, const VocabularyTreeOptions& o) {
+  static_assert(field_count<VocabularyTreeOptions>() == 5,
+                "a new VocabularyTreeOptions field must be written and read here");
+  w.i32(o.branching);
+  w.i32(o.depth);
+  w.i32(o.iterations);
+  w.u64(o.max_descriptors);
+  w.u64(o.seed);
+}
+
+inline VocabularyTreeOptions read_vocabulary_tree_options(BinaryReader& r) {
+  VocabularyTreeOptions o;
+  o.branching = r.i32("branching");
+  o.depth = r.i32("depth");
+  o.iterations = r.i32("iterations");
+  o.max_descriptors = static_cast<std::size_t>(r.u64("max_descriptors"));
+  o.seed = r.u64("seed");
+  return o;
+}
+
+}  // namespace detail
+
 /// A vocabulary tree over descriptors of `Traits` (HammingTraits or L2Traits).
 ///
 /// Words are the leaves. A node whose share of the training sample is smaller than

@@ -10,6 +10,7 @@
 
 #include <cstddef>
 #include <filesystem>
+#include <optional>
 #include <vector>
 
 namespace {
@@ -149,4 +150,67 @@ TEST_CASE("hot path: the selector with reused buffers keeps the same key images,
     CHECK(fast.map().pairs[k].similarity == plain.map().pairs[k].similarity);
   }
   for (std::size_t k = 0; k < fast.map().keys.size(); ++k) CHECK(fast.map().keys[k].name == plain.map().keys[k].name);
+}
+
+// A store rewrites the selector's state at every frame without paying the homography
+// fit push() deferred: deferred_state() keeps the F-matrix's inlier mask instead, and a
+// selector restored from it completes the fit when its state() is read, to the value
+// the uninterrupted selector reports; the restored selector then goes on identically.
+TEST_CASE("hot path: a state with its degeneracy deferred restores to the same state and the same key images") {
+  const auto frames = sample_frames(30);
+  const vmap::SelectorOptions o{.tau = 0.35};
+  const auto make = [&] {
+    return vmap::OrbMagsacSelector(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, vmap::FundamentalEstimator{},
+                                   vmap::InlierRatio{}, o);
+  };
+  auto run = make();
+  int deferred = 0, with_homography = 0;
+  std::optional<vmap::SelectorState<vmap::Features>> a_deferred;
+  for (std::size_t j = 0; j < frames.size(); ++j) {
+    (void)run.push(frames[j]);
+    auto d = run.deferred_state();
+    if (d.degeneracy_deferred) {
+      ++deferred;
+      REQUIRE(d.previous_score.has_value());
+      CHECK(d.previous_score->verification.degeneracy == vmap::Degeneracy::none);
+      CHECK(d.previous_score->verification.homography_inliers == 0);
+      CHECK(d.previous_score->verification.inlier_mask.size() ==
+            static_cast<std::size_t>(d.previous_score->verification.matches));
+    }
+    d.map = run.map();
+    if (d.degeneracy_deferred) a_deferred = d;
+    auto resumed = make();
+    resumed.restore(std::move(d));
+    const auto want = run.state();
+    const auto got = resumed.state();
+    REQUIRE(got.previous_score.has_value() == want.previous_score.has_value());
+    if (want.previous_score) {
+      check_same(got.previous_score->verification, want.previous_score->verification);
+      if (want.previous_score->verification.homography_inliers > 0) ++with_homography;
+    }
+    // The rest of the sequence from the restored selector: the same key images.
+    if (j % 7 == 3) {
+      auto rest = make();
+      auto again = run.deferred_state();
+      again.map = run.map();
+      rest.restore(std::move(again));
+      auto ref = make();
+      for (std::size_t i = 0; i <= j; ++i) (void)ref.push(frames[i]);
+      for (std::size_t i = j + 1; i < frames.size(); ++i) {
+        const auto a = rest.push(frames[i]);
+        const auto b = ref.push(frames[i]);
+        CHECK(a.key_frame == b.key_frame);
+        CHECK(a.similarity == b.similarity);
+      }
+      CHECK(rest.map().key_indices() == ref.map().key_indices());
+    }
+  }
+  CHECK(deferred > 5);
+  CHECK(with_homography > 5);
+
+  // A deferred state without the mask that completes it is refused.
+  REQUIRE(a_deferred.has_value());
+  a_deferred->previous_score->verification.inlier_mask.pop_back();
+  auto r = make();
+  CHECK_THROWS_WITH_AS(r.restore(std::move(*a_deferred)), doctest::Contains("deferred degeneracy"), vmap::Error);
 }

@@ -228,7 +228,7 @@ TEST_CASE("sessions: the store's sessions table, read without vmap; a version-1 
   CHECK(sql_integer(p, "SELECT first_frame FROM sessions WHERE id = 1") == 40);
   CHECK(sql_integer(p, "SELECT count(*) FROM key_images WHERE id >= (SELECT first_key FROM sessions WHERE id = 1)") ==
         static_cast<std::int64_t>(whole.key_images() - whole.sessions()[1].first_key));
-  CHECK(sql_integer(p, "PRAGMA user_version") == 2);
+  CHECK(sql_integer(p, "PRAGMA user_version") == 3);
 
   // A store of the version 1 schema (one session, no sessions table).
   auto one = make_small_memory(o);
@@ -244,10 +244,10 @@ TEST_CASE("sessions: the store's sessions table, read without vmap; a version-1 
     CHECK(load(reader).serialize() == one.serialize());
     CHECK(sql_integer(v1, "PRAGMA user_version") == 1);  // a reader changes nothing
   }
-  // A writer brings it to version 2 and continues it with a second session.
+  // A writer brings it to version 3 and continues it with a second session.
   {
     auto store = vmap::MemoryStore::open(v1);
-    CHECK(sql_integer(v1, "PRAGMA user_version") == 2);
+    CHECK(sql_integer(v1, "PRAGMA user_version") == 3);
     auto mem = load(store);
     CHECK(mem.serialize() == one.serialize());
     mem.start_session();

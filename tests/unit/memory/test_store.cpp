@@ -468,10 +468,10 @@ TEST_CASE("store: files that are not stores, other versions and damaged rows are
     auto store = vmap::MemoryStore::create(file);
     store.sync(memory);
   }
-  raw_sql(file, "PRAGMA user_version = 3");
+  raw_sql(file, "PRAGMA user_version = 4");
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(file); })
-            .find("has store version 3; this build reads versions 1 to 2") != std::string::npos);
-  raw_sql(file, "PRAGMA user_version = 2");
+            .find("has store version 4; this build reads versions 1 to 3") != std::string::npos);
+  raw_sql(file, "PRAGMA user_version = 3");
 
   // A key image's record cut short, a missing key image, a descriptor blob of another
   // width: each an Error from the memory's own checks, naming the store.
