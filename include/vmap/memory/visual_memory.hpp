@@ -46,7 +46,8 @@
 // memory frames the sections; the parts encode their own state in them: the GCS
 // (memory/gcs.hpp), the object labels (memory/labels.hpp), the loop engine's state and
 // decision options (lcd/loop_engine.hpp), the selector's links and score
-// (keyframe/map_io.hpp), the vocabulary (place/vocabulary.hpp) and the place database.
+// (keyframe/map_io.hpp), the vocabulary (place/vocabulary.hpp) and the place database;
+// the options by codecs beside their structs, each asserting its struct's field count.
 //
 // Bytes per key image (ORB 1000, 32-byte descriptors): 28 per keypoint + 32 per
 // descriptor, about 60 KB of features in the file and in memory (measured by
