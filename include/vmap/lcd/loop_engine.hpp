@@ -233,8 +233,6 @@ struct LoopEngineState {
 
 namespace detail {
 
-/// The place decision's options of `o` (temporal consistency, BoW floor, revisit rule,
-/// PlaceDecisionOptions), as the memory's section "dcsn" begins.
 // A memory saves every LoopOptions field: write_loop_search_options (the window, the top
 // k and the inlier floor) in its options, write_decision_options (the rest of the
 // decision, the temporal and revisit rules) beside the engine's state, and MemoryLabels
@@ -257,6 +255,8 @@ inline void read_loop_search_options(BinaryReader& r, LoopOptions& o) {
   o.decision.min_inliers = r.i32("min_loop_inliers");
 }
 
+/// The place decision's options of `o` (temporal consistency, BoW floor, revisit rule,
+/// PlaceDecisionOptions), as the memory's section "dcsn" begins.
 inline void write_decision_options(BinaryWriter& w, const LoopOptions& o) {
   w.u64(o.temporal_consistency);
   w.u64(o.temporal_tolerance);

@@ -237,3 +237,28 @@ TEST_CASE("binary: crc32 is the zlib / PNG CRC-32") {
   CHECK(vmap::detail::crc32("") == 0U);
   CHECK(vmap::detail::crc32("The quick brown fox jumps over the lazy dog") == 0x414FA339U);
 }
+
+namespace {
+struct Inner {
+  int a = 0;
+  double b = 0.0;
+};
+enum class Mode : std::uint8_t { x, y };
+struct Outer {
+  Inner inner{};  // a nested aggregate counts as one field
+  Mode mode = Mode::x;
+  std::vector<int> list{};
+  std::string name;
+  bool flag = false;
+};
+struct Empty {};
+}  // namespace
+
+// The options codecs assert their structs' field counts; the count must be exact for
+// nested aggregates, enums and library types alike, or a new field could pass unnoticed.
+TEST_CASE("binary: field_count counts an aggregate's fields") {
+  static_assert(vmap::detail::field_count<Inner>() == 2);
+  static_assert(vmap::detail::field_count<Outer>() == 5);
+  static_assert(vmap::detail::field_count<Empty>() == 0);
+  CHECK(vmap::detail::field_count<Outer>() == 5);
+}

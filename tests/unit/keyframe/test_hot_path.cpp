@@ -4,6 +4,7 @@
 #include "support/shared_data.hpp"
 
 #include <vmap/io/frame_source.hpp>
+#include <vmap/keyframe/map_io.hpp>
 #include <vmap/keyframe/selector.hpp>
 
 #include <doctest/doctest.h>
@@ -11,6 +12,7 @@
 #include <cstddef>
 #include <filesystem>
 #include <optional>
+#include <string>
 #include <vector>
 
 namespace {
@@ -210,6 +212,35 @@ TEST_CASE("hot path: a state with its degeneracy deferred restores to the same s
 
   // A deferred state without the mask that completes it is refused.
   REQUIRE(a_deferred.has_value());
+
+  // As a memory file or store holds it (flag 2, the score, the inlier mask): read back
+  // equal, and a damaged mask or flag is an Error naming what is wrong.
+  vmap::detail::BinaryWriter w;
+  vmap::detail::write_previous_score(w, *a_deferred);
+  const std::string bytes = std::move(w).take();
+  const auto read = [&](const std::string& b) {
+    vmap::SelectorState<vmap::Features> s;
+    s.previous = a_deferred->previous;
+    vmap::detail::BinaryReader r(b, "selector state");
+    vmap::detail::read_previous_score(r, s);
+    r.expect_end("the score");
+    return s;
+  };
+  const auto back = read(bytes);
+  CHECK(back.degeneracy_deferred);
+  REQUIRE(back.previous_score.has_value());
+  check_same(back.previous_score->verification, a_deferred->previous_score->verification);
+  CHECK(bytes[0] == 2);
+  std::string bad_flag = bytes, bad_mask = bytes, short_mask = bytes;
+  bad_flag[0] = 3;
+  CHECK_THROWS_WITH_AS(read(bad_flag), doctest::Contains("invalid previous score flag"), vmap::Error);
+  bad_mask.back() = 2;
+  CHECK_THROWS_WITH_AS(read(bad_mask), doctest::Contains("inlier mask byte is not 0 or 1"), vmap::Error);
+  bad_mask.back() = static_cast<char>(1 - bytes.back());
+  CHECK_THROWS_WITH_AS(read(bad_mask), doctest::Contains("does not hold the score's inliers"), vmap::Error);
+  short_mask.pop_back();
+  CHECK_THROWS_AS(read(short_mask), vmap::Error);
+
   a_deferred->previous_score->verification.inlier_mask.pop_back();
   auto r = make();
   CHECK_THROWS_WITH_AS(r.restore(std::move(*a_deferred)), doctest::Contains("deferred degeneracy"), vmap::Error);

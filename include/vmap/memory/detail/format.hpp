@@ -40,11 +40,10 @@ inline constexpr std::uint32_t memory_sections_v1 = 7;
 inline constexpr std::uint32_t memory_sections_v2 = 10;
 inline constexpr std::uint32_t memory_sections_v3 = 11;
 inline constexpr std::uint32_t memory_sections = 12;
-/// Longest policy description a file may hold.
 /// How "selc" holds I_{j-1}'s score: complete (a file saved whole), or with its
 /// degeneracy test deferred (the store, which rewrites it at every sync).
 enum class ScoreDegeneracy : std::uint8_t { complete, deferred };
-
+/// Longest policy description a file may hold.
 inline constexpr std::uint32_t memory_max_policy = 4096;
 /// Most detections one key image may have in a file (a detector gives a few hundred).
 inline constexpr std::uint32_t memory_max_detections = 1U << 16;
