@@ -126,6 +126,31 @@ class Calibrated {
     return v;
   }
 
+  /// The wrapped FundamentalEstimator's buffers (verify_into).
+  using Scratch = FundamentalEstimator::Scratch;
+
+  /// verify() into `v` with the caller's buffers, so that a key-image selector whose
+  /// estimator is wrapped keeps its fast path. Without a camera it is the wrapped
+  /// estimator's verify_into, which defers its homography degeneracy test with
+  /// `defer_degeneracy` (true returned; complete_degeneracy fills it in). With a camera
+  /// it is verify(): nothing is deferred (false).
+  bool verify_into(const Features& a, const Features& b, const Matches& matches, Verification& v, Scratch& scratch,
+                   bool defer_degeneracy) const
+    requires std::same_as<E, FundamentalEstimator>
+  {
+    if (!camera_) return estimator_.verify_into(a, b, matches, v, scratch, defer_degeneracy);
+    v = verify(a, b, matches);
+    return false;
+  }
+
+  /// The test verify_into deferred, on the same inputs and its result (only without a
+  /// camera does verify_into defer it; with one this changes nothing).
+  void complete_degeneracy(const Features& a, const Features& b, const Matches& matches, Verification& v) const
+    requires std::same_as<E, FundamentalEstimator>
+  {
+    if (!camera_) estimator_.complete_degeneracy(a, b, matches, v);
+  }
+
   [[nodiscard]] const std::optional<Camera>& camera() const noexcept { return camera_; }
   [[nodiscard]] const E& estimator() const noexcept { return estimator_; }
 

@@ -5,6 +5,7 @@
 #include <vmap/geometry/camera.hpp>
 #include <vmap/geometry/essential.hpp>
 #include <vmap/geometry/fundamental.hpp>
+#include <vmap/keyframe/front_end.hpp>
 
 #include "support/errors.hpp"
 #include "support/lens_scene.hpp"
@@ -232,4 +233,44 @@ TEST_CASE("the degeneracy test follows the final inliers: a plane seen through a
   const auto vg = cf.verify(general.a, general.b, general.matches);
   REQUIRE(vg.ok());
   CHECK(vg.degeneracy == vmap::Degeneracy::none);
+}
+
+// The key-image selector's fast path (keyframe/front_end.hpp) needs verify_into; the
+// command line's memory wraps its estimator in Calibrated with or without a camera, so
+// the wrapper forwards it: without a camera the degeneracy test is deferred and then
+// completed to verify()'s value, with a camera verify_into is verify() and defers nothing.
+TEST_CASE("Calibrated verifies into reused buffers: deferred without a camera, verify() with one") {
+  static_assert(vmap::detail::VerifiesInto<vmap::Calibrated<vmap::FundamentalEstimator>>);
+  const auto cam = vmap::test::wide_fisheye_camera();
+  for (const bool planar : {true, false}) {
+    CAPTURE(planar);
+    const auto s = vmap::test::make_lens_scene(cam, {.planar = planar, .seed = 7});
+    const auto pinhole = vmap::test::make_lens_scene(cam, {.planar = planar, .seed = 7}, true);
+    const vmap::FundamentalEstimator f;
+    const vmap::Calibrated<vmap::FundamentalEstimator> bare(std::nullopt, f);
+    const vmap::Calibrated<vmap::FundamentalEstimator> lens(cam, f);
+    vmap::Calibrated<vmap::FundamentalEstimator>::Scratch scratch;
+
+    vmap::Verification v;
+    REQUIRE(bare.verify_into(pinhole.a, pinhole.b, pinhole.matches, v, scratch, true));
+    CHECK(v.homography_inliers == 0);
+    bare.complete_degeneracy(pinhole.a, pinhole.b, pinhole.matches, v);
+    const auto want = bare.verify(pinhole.a, pinhole.b, pinhole.matches);
+    CHECK(v.model == want.model);
+    CHECK(v.inlier_mask == want.inlier_mask);
+    CHECK(v.degeneracy == want.degeneracy);
+    CHECK(v.homography_inliers == want.homography_inliers);
+    CHECK(want.homography_inliers > 0);  // the test ran
+
+    vmap::Verification w;
+    CHECK_FALSE(lens.verify_into(s.a, s.b, s.matches, w, scratch, true));
+    const auto lens_want = lens.verify(s.a, s.b, s.matches);
+    CHECK(w.model == lens_want.model);
+    CHECK(w.inlier_mask == lens_want.inlier_mask);
+    CHECK(w.degeneracy == lens_want.degeneracy);
+    CHECK(w.homography_inliers == lens_want.homography_inliers);
+    REQUIRE(w.relative_pose.has_value());
+    lens.complete_degeneracy(s.a, s.b, s.matches, w);  // nothing was deferred: unchanged
+    CHECK(w.homography_inliers == lens_want.homography_inliers);
+  }
 }
