@@ -270,6 +270,49 @@ TEST_CASE("store: stopped and reopened every few frames, the memory goes on exac
   }
 }
 
+// The selector defers the homography degeneracy test of I_{j-1}'s score (the estimator
+// checks degeneracy by default); the store syncs that score deferred, with its inlier
+// mask, and a memory loaded from it completes the test when its state is read: equal to
+// the memory that was synced, and going on as it does.
+TEST_CASE("store: I_{j-1}'s score synced with its degeneracy test deferred loads complete and goes on exactly") {
+  const auto o = options(vmap::ImageStorage::none);
+  const vmap::FundamentalEstimator checking;  // check_degeneracy on
+  REQUIRE(checking.options().check_degeneracy);
+  const auto make_checking = [&] {
+    return vmap::OrbVisualMemory(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, checking, vmap::InlierRatio{}, o);
+  };
+  const auto load_checking = [&](vmap::MemoryStore& store) {
+    return store.load<vmap::OrbVisualMemory>(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, checking,
+                                             vmap::InlierRatio{});
+  };
+  auto whole = make_checking();
+  for (const auto& f : frames()) whole.push(f);
+  const fs::path file = fresh("deferred.vmdb");
+  std::optional<vmap::MemoryStore> store;
+  std::optional<vmap::OrbVisualMemory> memory;
+  store.emplace(vmap::MemoryStore::create(file));
+  memory.emplace(make_checking());
+  int deferred = 0, reopened_deferred = 0;
+  for (std::size_t i = 0; i < frames().size(); ++i) {
+    memory->push(frames()[i]);
+    store->sync(*memory);
+    const bool is_deferred = memory->selector().deferred_state().degeneracy_deferred;
+    deferred += is_deferred ? 1 : 0;
+    if (i % 4 == 3) {
+      CHECK(load_checking(*store).serialize() == memory->serialize());
+      // Stopped here and reopened: the rest of the run from the loaded memory.
+      memory.reset();
+      store.reset();
+      store.emplace(vmap::MemoryStore::open(file));
+      memory.emplace(load_checking(*store));
+      reopened_deferred += is_deferred ? 1 : 0;
+    }
+  }
+  CHECK(deferred > 10);
+  CHECK(reopened_deferred > 3);
+  CHECK(memory->serialize() == whole.serialize());
+}
+
 TEST_CASE("store: a working memory of 3 key images answers as a memory that holds every key image's features") {
   const auto o = options(vmap::ImageStorage::none);
   // The first 50 frames are mapped; the last 10 are localized, then mapped on.
