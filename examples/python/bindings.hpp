@@ -1,0 +1,69 @@
+#pragma once
+
+// What every part of the Python module shares: the registry of parts (each
+// part_*.cpp registers one layer's classes and functions, as each examples/vmap/*.cpp
+// registers one subcommand), vmap.Error, and NumPy arrays <-> cv::Mat without copies.
+//
+// Images: a C-contiguous (or row-strided) uint8 or uint16 array, H x W (grey) or
+// H x W x C (C = 1, 3 BGR or 4), is read in place: the cv::Mat the library sees points
+// at the array's buffer (image_address() shows it). An array whose pixels are not
+// contiguous within a row (a column slice, a transposed view) is copied once. Any other
+// dtype (float, int32, bool) or shape is refused with vmap.Error naming the argument:
+// converting it would be a guess about its range. Arrays returned by the module (images,
+// descriptors) own a reference to the cv::Mat they view, so they are not copied either.
+
+#include <vmap/core/error.hpp>
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <opencv2/core.hpp>
+
+#include <string>
+#include <vector>
+
+namespace vmap::python {
+
+namespace py = pybind11;
+
+/// One layer's bindings. Parts run in ascending `order`: a part whose signatures name
+/// another part's classes registers after it (so docstrings show Python names).
+struct Part {
+  int order = 0;
+  void (*bind)(py::module_&) = nullptr;
+};
+
+inline std::vector<Part>& parts() {
+  static std::vector<Part> all;
+  return all;
+}
+
+/// `static const vmap::python::RegisterPart part{order, &bind};` in a part's file.
+struct RegisterPart {
+  RegisterPart(int order, void (*bind)(py::module_&)) { parts().push_back({order, bind}); }
+};
+
+/// Order of the parts (frames and features first: the others' signatures use them).
+inline constexpr int order_core = 0;
+inline constexpr int order_keyframes = 10;
+inline constexpr int order_place = 20;
+inline constexpr int order_loops = 30;
+inline constexpr int order_memory = 40;
+
+/// vmap.Error (a RuntimeError): vmap::Error, the command line's usage errors (bad option
+/// values, which the module shares with it) and OpenCV's exceptions, with their message.
+void bind_errors(py::module_& m);
+
+/// Raises vmap.Error with `what` (for checks made by the bindings themselves).
+[[noreturn]] inline void fail(const std::string& what) { vmap::detail::fail(what); }
+
+/// A cv::Mat over `a`'s pixels (see the top of this file); `what` names the argument in
+/// errors ("image"). The array must outlive the Mat (the caller holds it for the call).
+cv::Mat image_view(const py::array& a, const std::string& what);
+
+/// An array viewing `m` without copying it: the array holds a reference to m's buffer.
+/// 2-D for one channel, 3-D (H x W x C) otherwise; uint8, uint16, int32, float32 or float64.
+py::array to_array(const cv::Mat& m);
+
+}  // namespace vmap::python

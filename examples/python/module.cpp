@@ -1,0 +1,98 @@
+// The extension module vmap._vmap: vmap.Error, then every registered part in its order,
+// and the conversions every part shares (bindings.hpp). The package's __init__.py
+// re-exports it as `vmap`.
+
+#include "bindings.hpp"
+
+#include "common/cli_support.hpp"
+
+#include <vmap/version.hpp>
+
+#include <algorithm>
+#include <string>
+
+namespace vmap::python {
+
+void bind_errors(py::module_& m) {
+  static py::exception<vmap::Error> error(m, "Error", PyExc_RuntimeError);
+  error.doc() = "A bad input (a file, an image, an option value) or a failed step, with vmap's message.";
+  // vmap::Error itself, the command line's usage errors (the module parses the same
+  // option values: a descriptor name, an estimator) and OpenCV's own exceptions.
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const vmap::Error& e) {
+      error(e.what());
+    } catch (const vmap::examples::UsageError& e) {
+      error(e.what());
+    } catch (const cv::Exception& e) {
+      error(("OpenCV: " + e.msg).c_str());
+    }
+  });
+}
+
+cv::Mat image_view(const py::array& a, const std::string& what) {
+  const auto dtype = a.dtype();
+  int depth = -1;
+  if (dtype.is(py::dtype::of<std::uint8_t>())) depth = CV_8U;
+  if (dtype.is(py::dtype::of<std::uint16_t>())) depth = CV_16U;
+  if (depth < 0)
+    fail(what + ": a " + std::string(py::str(py::handle(dtype))) +
+         " array; vmap reads uint8 or uint16 images (grey H x W, or H x W x C with C = 1, 3 or 4): convert it first, "
+         "e.g. (a * 255).clip(0, 255).astype(numpy.uint8) for floats in [0, 1]");
+  const auto nd = a.ndim();
+  const int channels = nd == 3 ? static_cast<int>(a.shape(2)) : 1;
+  if ((nd != 2 && nd != 3) || (nd == 3 && channels != 1 && channels != 3 && channels != 4))
+    fail(what + ": an array of shape " + std::string(py::str(a.attr("shape"))) + "; vmap reads H x W (grey) or H x W x C images with C = 1, 3 (BGR) or 4");
+  if (a.shape(0) == 0 || a.shape(1) == 0) fail(what + ": an empty image (" + std::to_string(a.shape(0)) + " x " +
+                                                std::to_string(a.shape(1)) + ")");
+  const auto item = static_cast<py::ssize_t>(a.itemsize());
+  // In place when each row's pixels are contiguous (cv::Mat has a row step, not a
+  // column step) and the rows do not overlap; copied once otherwise.
+  const bool rows_contiguous = (nd == 2 || a.strides(2) == item) && a.strides(1) == item * channels &&
+                               a.strides(0) >= item * channels * a.shape(1);
+  const int type = CV_MAKETYPE(depth, channels);
+  if (rows_contiguous)
+    return cv::Mat(static_cast<int>(a.shape(0)), static_cast<int>(a.shape(1)), type, const_cast<void*>(a.data()),
+                   static_cast<std::size_t>(a.strides(0)));
+  const py::array copy = py::array::ensure(a, py::array::c_style);
+  return cv::Mat(static_cast<int>(a.shape(0)), static_cast<int>(a.shape(1)), type, const_cast<void*>(copy.data()))
+      .clone();
+}
+
+py::array to_array(const cv::Mat& m) {
+  py::dtype dtype;
+  switch (m.depth()) {
+    case CV_8U: dtype = py::dtype::of<std::uint8_t>(); break;
+    case CV_16U: dtype = py::dtype::of<std::uint16_t>(); break;
+    case CV_32S: dtype = py::dtype::of<std::int32_t>(); break;
+    case CV_32F: dtype = py::dtype::of<float>(); break;
+    case CV_64F: dtype = py::dtype::of<double>(); break;
+    default: fail("to_array: unsupported cv::Mat depth " + std::to_string(m.depth()));
+  }
+  if (m.empty()) return py::array(dtype, std::vector<py::ssize_t>{0, m.cols > 0 ? m.cols : 0});
+  // The capsule owns a cv::Mat header sharing m's buffer (a reference count, no copy).
+  auto* held = new cv::Mat(m);
+  py::capsule owner(held, [](void* p) { delete static_cast<cv::Mat*>(p); });
+  const auto item = static_cast<py::ssize_t>(m.elemSize1());
+  std::vector<py::ssize_t> shape{m.rows, m.cols};
+  std::vector<py::ssize_t> strides{static_cast<py::ssize_t>(m.step[0]), static_cast<py::ssize_t>(m.elemSize())};
+  if (m.channels() > 1) {
+    shape.push_back(m.channels());
+    strides.push_back(item);
+  }
+  return py::array(dtype, shape, strides, held->data, owner);
+}
+
+}  // namespace vmap::python
+
+PYBIND11_MODULE(_vmap, m) {
+  namespace vp = vmap::python;
+  m.doc() = "vmap: a visual memory for robots (key images, loop closure, localization).";
+  m.attr("__version__") = std::to_string(VMAP_VERSION_MAJOR) + "." + std::to_string(VMAP_VERSION_MINOR) + "." +
+                          std::to_string(VMAP_VERSION_PATCH);
+  vp::bind_errors(m);
+  auto parts = vp::parts();
+  std::stable_sort(parts.begin(), parts.end(), [](const vp::Part& a, const vp::Part& b) { return a.order < b.order; });
+  for (const auto& p : parts) p.bind(m);
+}
