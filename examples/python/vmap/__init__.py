@@ -8,3 +8,12 @@ in __init__.pyi.
 
 from ._vmap import *  # noqa: F401,F403
 from ._vmap import __version__  # noqa: F401
+from . import _vmap
+
+# The classes are defined by the extension; they are used (and documented, printed in
+# tracebacks) as vmap.X.
+for _name in dir(_vmap):
+    _obj = getattr(_vmap, _name)
+    if isinstance(_obj, type) and getattr(_obj, "__module__", "") == "vmap._vmap":
+        _obj.__module__ = "vmap"
+del _name, _obj

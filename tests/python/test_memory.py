@@ -1,0 +1,232 @@
+"""vmap.VisualMemory: in RAM, in a memory store, sessions, resume, read-only, and the
+same answers as the command line's `vmap memory` on the same memory."""
+
+import json
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import vmap
+
+
+def cli_json(cli, *args):
+    out = subprocess.run([cli, *args, "--json"], check=True, capture_output=True, text=True).stdout
+    return json.loads(out)
+
+
+def key_frames(mem):
+    return [k["frame_index"] for k in mem.keys]
+
+
+def loop_pairs(loops):
+    return [(e.key_from, e.key_to, e.link.inliers) for e in loops]
+
+
+def test_push_frame_by_frame_equals_push_frames(sample_list, sample_frames):
+    a = vmap.VisualMemory(vocabulary_after=5)
+    steps = [a.push(img, timestamp=t, name=n) for img, t, n in sample_frames]
+    b = vmap.VisualMemory(vocabulary_after=5)
+    calls = []
+    summary = b.push_frames(sample_list, progress=calls.append, progress_every=7)
+    assert summary.pushed == 60 and summary.new_keys == b.key_images == a.key_images
+    assert calls == list(range(7, 61, 7))
+    assert key_frames(a) == key_frames(b)
+    assert [k["timestamp"] for k in a.keys] == [k["timestamp"] for k in b.keys]
+    assert [k["name"] for k in a.keys] == [k["name"] for k in b.keys]
+    assert loop_pairs(a.loops) == loop_pairs(b.loops)
+    # The steps tell which frames became key images: one new key per key image.
+    assert sum(s.new_key is not None for s in steps) == a.key_images
+    assert steps[0].new_key == 0 and steps[0].key_taken
+    assert all(0.0 <= s.similarity <= 1.0 for s in steps)
+    assert a.frames == 60 and a.last_frame_index == 59 and a.path is None
+    assert a.vocabulary_words > 0
+
+
+def test_store_round_trip_and_the_command_line_reads_it(tmp_path, sample_list, sample_frames, vmap_cli):
+    path = tmp_path / "run.vmdb"
+    with vmap.VisualMemory.create(str(path)) as mem:
+        for img, t, _ in sample_frames:
+            mem.push(img, timestamp=t)
+        keys = mem.keys
+        assert json.loads(mem.stack)["features"] == "orb"
+    info = cli_json(vmap_cli, "memory", "info", str(path))
+    assert info["frames"] == 60
+    assert [k["frame_index"] for k in info["key_images"]] == [k["frame_index"] for k in keys]
+    assert [k["name"] for k in info["key_images"]] == [k["name"] for k in keys]
+
+    # The command line's memory of the same frames is the Python one, key for key.
+    cli_store = tmp_path / "cli.vmdb"
+    subprocess.run([vmap_cli, "memory", "build", sample_list, "--memory", str(cli_store)], check=True,
+                   capture_output=True)
+    from_cli = vmap.VisualMemory.open(str(cli_store), read_only=True)
+    assert key_frames(from_cli) == [k["frame_index"] for k in keys]
+
+    # Localization answers equal `vmap memory localize`'s.
+    names = [sample_frames[i][2] for i in (3, 17, 31, 45)]
+    rgb = sample_list.rsplit("/", 1)[0] + "/rgb/"
+    images = [rgb + n for n in names]
+    answers = cli_json(vmap_cli, "memory", "localize", str(path), *images)["queries"]
+    reopened = vmap.VisualMemory.open(str(path), read_only=True)
+    for i, answer in zip((3, 17, 31, 45), answers):
+        got = reopened.localize(sample_frames[i][0])
+        assert got.status == answer["status"] and got.reason == answer["reason"]
+        assert got.key == answer["key"]
+        assert got.confidence == pytest.approx(answer["confidence"], abs=1e-12)
+        assert [m.key for m in got.matches] == [m["key"] for m in answer["matches"]]
+        assert [m.inliers for m in got.matches] == [m["inliers"] for m in answer["matches"]]
+        f = np.array(answer["matches"][0]["fundamental"]).reshape(3, 3)
+        assert np.allclose(got.matches[0].fundamental, f, atol=1e-12)
+
+
+def test_localize_answers_and_decisions(sample_frames):
+    mem = vmap.VisualMemory(vocabulary_after=5)
+    for img, t, _ in sample_frames[:40]:
+        mem.push(img, timestamp=t)
+    seen = mem.localize(sample_frames[20][0])
+    assert seen.ok and bool(seen) and seen.status == "accepted" and seen.key is not None
+    assert seen.matches[0].status == "verified" and seen.matches[0].inliers > 50
+    # The accepted key image is one of the key images nearest in time to frame 20.
+    assert abs(mem.keys[seen.key]["frame_index"] - 20) <= 5
+    assert seen.relative_pose is None  # no camera
+    # A raised threshold turns the same evidence into "unknown place".
+    strict = mem.localize(sample_frames[20][0], min_confidence=1.0)
+    assert strict.status in ("accepted", "unknown place")
+    # Noise is no place: never accepted.
+    noise = np.random.default_rng(1).integers(0, 256, (480, 640), dtype=np.uint8)
+    answer = mem.localize(noise)
+    assert not answer.ok and answer.status in ("unknown place", "too little evidence", "ambiguous") and answer.reason
+    # An empty memory has too little evidence.
+    empty = vmap.VisualMemory().localize(sample_frames[0][0])
+    assert empty.status == "too little evidence" and empty.key is None
+
+
+def test_resume_equals_the_uninterrupted_run(tmp_path, sample_frames):
+    whole = vmap.VisualMemory.create(str(tmp_path / "whole.vmdb"), vocabulary_after=5)
+    for img, t, _ in sample_frames:
+        whole.push(img, timestamp=t)
+    path = str(tmp_path / "parts.vmdb")
+    first = vmap.VisualMemory.create(path, vocabulary_after=5)
+    for img, t, _ in sample_frames[:30]:
+        first.push(img, timestamp=t)
+    first.close()
+    with pytest.raises(vmap.Error, match="closed"):
+        first.push(sample_frames[0][0])
+    second = vmap.VisualMemory.open(path)
+    assert second.frames == 30
+    for img, t, _ in sample_frames[30:]:
+        second.push(img, timestamp=t)
+    assert key_frames(second) == key_frames(whole)
+    assert loop_pairs(second.loops) == loop_pairs(whole.loops)
+
+
+def test_sessions_find_loops_into_the_earlier_run(tmp_path, sample_frames):
+    path = str(tmp_path / "two.vmdb")
+    with vmap.VisualMemory.create(path, vocabulary_after=5) as mem:
+        for img, t, _ in sample_frames:
+            mem.push(img, timestamp=t)
+        first_keys = mem.key_images
+    with vmap.VisualMemory.open(path, new_session=True) as mem:
+        assert mem.sessions == [{"first_key": 0, "first_frame": 0}, {"first_key": first_keys, "first_frame": 60}]
+        for img, t, _ in sample_frames[:30]:
+            mem.push(img, timestamp=t)
+        across = [e for e in mem.loops if e.key_from >= first_keys]
+        assert len(across) >= 5 and all(e.key_to < first_keys for e in across)
+        # The second run revisits the same frames: each loop joins key images of nearby frames.
+        for e in across:
+            assert abs(mem.keys[e.key_from]["frame_index"] - 60 - mem.keys[e.key_to]["frame_index"]) <= 60
+        assert (e.key_to, "loop") in mem.neighbours(e.key_from)
+    reader = vmap.VisualMemory.open(path, read_only=True)
+    assert len(reader.sessions) == 2 and loop_pairs(reader.loops) == loop_pairs(mem.loops)
+    assert [k["session"] for k in reader.keys].count(1) == reader.key_images - first_keys
+    with pytest.raises(vmap.Error, match="read-only"):
+        reader.push(sample_frames[0][0])
+
+
+def test_vmem_file_poses_images_and_export(tmp_path, sample_frames):
+    mem = vmap.VisualMemory(images="png", vocabulary_after=5)
+    for i, (img, t, _) in enumerate(sample_frames):
+        pose = (0.1 * i, 0.0, 0.01 * i) if i % 2 == 0 else np.hstack([np.eye(3), [[i], [0], [0]]])
+        mem.push(img, timestamp=t, pose=pose)
+    k = mem.keys[1]
+    i = k["frame_index"]
+    if i % 2 == 0:
+        assert k["pose"] == pytest.approx((0.1 * i, 0.0, 0.01 * i))
+    else:
+        assert np.allclose(k["pose"][:3, 3], [i, 0, 0])
+    pixels = mem.key_image(1)
+    assert np.array_equal(pixels, sample_frames[i][0])
+    feats = mem.key_features(1)
+    assert len(feats) > 100 and feats.descriptors.shape == (len(feats), 32)
+    mem.save(str(tmp_path / "m.vmem"))
+    again = vmap.VisualMemory.open(str(tmp_path / "m.vmem"))
+    assert key_frames(again) == key_frames(mem) and np.array_equal(again.key_image(1), pixels)
+    written = mem.export(str(tmp_path / "out"))
+    assert "key_images.txt" in written and "loops.txt" in written
+    rows = [l for l in (tmp_path / "out" / "key_images.txt").read_text().splitlines() if l and not l.startswith("#")]
+    assert len(rows) == mem.key_images
+
+
+def test_errors_name_the_input(tmp_path, sample_frames):
+    other = tmp_path / "notes.txt"
+    other.write_text("not a memory")
+    with pytest.raises(vmap.Error, match="not a vmap memory"):
+        vmap.VisualMemory.create(str(other))
+    with pytest.raises(vmap.Error, match="not a vmap memory"):
+        vmap.VisualMemory.open(str(other))
+    with pytest.raises(vmap.Error, match="does not exist"):
+        vmap.VisualMemory.open(str(tmp_path / "none.vmdb"))
+    path = str(tmp_path / "m.vmdb")
+    vmap.VisualMemory.create(path).close()
+    with pytest.raises(vmap.Error, match="exists"):
+        vmap.VisualMemory.create(path)
+    vmap.VisualMemory.create(path, force=True).close()
+    mem = vmap.VisualMemory()
+    with pytest.raises(vmap.Error, match=r"pose: an array of shape \(2,\)"):
+        mem.push(sample_frames[0][0], pose=(1.0, 2.0))
+    with pytest.raises(vmap.Error, match="unknown method 'best'"):
+        vmap.VisualMemory(estimator="best")
+    with pytest.raises(vmap.Error, match="no key image 3"):
+        mem.key_features(3)
+
+
+def test_push_releases_the_gil(sample_list):
+    mem = vmap.VisualMemory()
+    worker = threading.Thread(target=mem.push_frames, args=(sample_list,))
+    ticks = 0
+    worker.start()
+    while worker.is_alive():
+        ticks += 1
+        time.sleep(0.001)
+    worker.join()
+    assert mem.frames == 60
+    # Held for the whole run, the GIL would have let this loop turn once or twice.
+    assert ticks > 20
+
+
+def test_camera_memory_gives_the_command_lines_relative_poses(tmp_path, shared, repo, vmap_cli):
+    rgb = str(shared / "data" / "tum_fr1_rpy" / "rgb.txt")
+    camera = str(repo / "examples" / "data" / "tum_fr1_camera.yaml")
+    path = str(tmp_path / "cam.vmdb")
+    with vmap.VisualMemory.create(path, camera=camera) as mem:
+        mem.push_frames(rgb, end=120, stride=2)
+        assert json.loads(mem.stack)["camera"]["fx"] > 0
+    queries = [f for f in vmap.frames(rgb, grey=True, start=1, end=120, stride=12)]
+    folder = (shared / "data" / "tum_fr1_rpy").resolve()
+    answers = cli_json(vmap_cli, "memory", "localize", path, *[str(folder / "rgb" / n) for _, _, n in queries])["queries"]
+    reader = vmap.VisualMemory.open(path, read_only=True)
+    posed = 0
+    for (img, _, _), answer in zip(queries, answers):
+        got = reader.localize(img)
+        assert got.status == answer["status"] and got.key == answer["key"]
+        if answer["relative_pose"] is None:
+            assert got.relative_pose is None
+            continue
+        posed += 1
+        R = np.array(answer["relative_pose"]["rotation"]).reshape(3, 3)
+        assert np.allclose(got.relative_pose.rotation, R, atol=1e-12)
+        assert np.allclose(got.relative_pose.translation, answer["relative_pose"]["translation"], atol=1e-12)
+        assert got.relative_pose.rotation_degrees < 10
+    assert posed >= 5
