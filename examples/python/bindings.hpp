@@ -66,4 +66,24 @@ cv::Mat image_view(const py::array& a, const std::string& what);
 /// 2-D for one channel, 3-D (H x W x C) otherwise; uint8, uint16, int32, float32 or float64.
 py::array to_array(const cv::Mat& m);
 
+/// Calls `progress(done)` with the GIL held every `every` frames of a run that released
+/// it, and lets Ctrl-C (or any pending signal handler's exception) stop the run there.
+class ProgressHook {
+ public:
+  ProgressHook(const py::object& progress, std::size_t every) : progress_(progress), every_(every) {
+    if (every_ < 1) fail("progress_every: must be >= 1");
+  }
+
+  void operator()(std::size_t done) const {
+    if (done % every_ != 0) return;
+    const py::gil_scoped_acquire held;
+    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+    if (!progress_.is_none()) progress_(done);
+  }
+
+ private:
+  const py::object& progress_;
+  std::size_t every_;
+};
+
 }  // namespace vmap::python

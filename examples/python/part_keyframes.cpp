@@ -66,26 +66,6 @@ void set_range(ex::KeyframeArgs& a, const std::string& source, std::size_t start
   a.time_offset = time_offset;
 }
 
-/// Calls `progress(done)` with the GIL held every `every` frames of a run that released
-/// it, and lets Ctrl-C (or any pending signal handler's exception) stop the run there.
-class ProgressHook {
- public:
-  ProgressHook(const py::object& progress, std::size_t every) : progress_(progress), every_(every) {
-    if (every_ < 1) fail("progress_every: must be >= 1");
-  }
-
-  void operator()(std::size_t done) const {
-    if (done % every_ != 0) return;
-    const py::gil_scoped_acquire held;
-    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
-    if (!progress_.is_none()) progress_(done);
-  }
-
- private:
-  const py::object& progress_;
-  std::size_t every_;
-};
-
 /// A KeyframeSelector<D, M, E, S> of any policies behind the calls the module makes: the
 /// policies are chosen at run time by name, and the per-frame work stays statically
 /// dispatched inside (as with_descriptor does for the command line).

@@ -453,23 +453,20 @@ void bind(py::module_& m) {
             so.start = start;
             if (end) so.end = *end;
             so.stride = stride;
-            if (progress_every == 0) fail("push_frames: progress_every must be >= 1");
             auto src = FrameSource::open(source, so);
             std::optional<ex::FramePoses> frame_poses;
             if (poses) frame_poses.emplace(*poses, src);
-            const std::function<void(std::size_t)> on_frame = [&](std::size_t frames) {
-              if (progress.is_none() || frames % progress_every != 0) return;
-              py::gil_scoped_acquire locked;
-              progress(frames);
-            };
+            const ProgressHook hook(progress, progress_every);
+            const std::function<void(std::size_t)> on_frame = [&](std::size_t frames) { hook(frames); };
             py::gil_scoped_release unlocked;
             return self->push_frames(src, frame_poses, on_frame);
           },
           py::arg("source"), py::kw_only(), py::arg("grey") = true, py::arg("start") = 0, py::arg("end") = py::none(),
           py::arg("stride") = 1, py::arg("poses") = py::none(), py::arg("progress") = py::none(),
-          py::arg("progress_every") = 10,
+          py::arg("progress_every") = 50,
           "Pushes every frame of a source (as vmap.frames reads it) in C++, with the frame's pose from a TUM\n"
-          "or KITTI pose file when `poses` is given; progress(frames) is called every progress_every frames.\n"
+          "or KITTI pose file when `poses` is given; progress(frames) is called every progress_every frames\n"
+          "with the GIL held (Ctrl-C, or an exception it raises, stops the run there; what was pushed stays).\n"
           "Returns {pushed, new_keys, loops, seconds}.")
       .def(
           "localize",

@@ -1,5 +1,4 @@
 # Type stubs of examples/python/part_place.cpp: vocabularies, bags of words, the place database.
-from __future__ import annotations
 
 import os
 from typing import Iterator, Literal, Sequence, Union

@@ -1,0 +1,69 @@
+# Type stubs of examples/python/module.cpp and part_core.cpp: vmap.Error, frame sources,
+# images, descriptors, features and matches.
+
+from typing import Iterator, Literal, Optional
+
+import numpy
+import numpy.typing as npt
+
+__version__: str
+
+_Image = npt.NDArray[numpy.uint8] | npt.NDArray[numpy.uint16]
+
+class Error(RuntimeError):
+    """A bad input (a file, an image, an option value) or a failed step, with vmap's message."""
+
+class Frames:
+    """The frames of a source, as (image, timestamp, name) tuples (vmap.frames)."""
+
+    def __iter__(self) -> Frames: ...
+    def __next__(self) -> tuple[npt.NDArray[numpy.uint8], float, str]: ...
+    @property
+    def kind(self) -> Literal["video", "image_folder", "image_list", "tum_rgb", "live", "euroc"]: ...
+    @property
+    def total(self) -> Optional[int]: ...
+    @property
+    def delivered(self) -> int: ...
+    @property
+    def skipped(self) -> list[tuple[int, str, str]]: ...
+
+def frames(
+    source: str,
+    *,
+    grey: bool = False,
+    start: int = 0,
+    end: Optional[int] = None,
+    stride: int = 1,
+    resize: Optional[tuple[int, int]] = None,
+    time_offset: float = 0.0,
+) -> Frames: ...
+def image_address(image: _Image) -> int: ...
+
+class Features:
+    """Keypoints and their descriptors, as NumPy arrays."""
+
+    @property
+    def keypoints(self) -> npt.NDArray[numpy.float32]: ...
+    @property
+    def descriptors(self) -> npt.NDArray[numpy.uint8] | npt.NDArray[numpy.float32]: ...
+    @property
+    def norm(self) -> Literal["hamming", "l2"]: ...
+    @property
+    def image_size(self) -> tuple[int, int]: ...
+    def __len__(self) -> int: ...
+
+class Descriptor:
+    """A feature descriptor chosen by name: orb, akaze, sift, xfeat, xfeat-dense or xfeat-star."""
+
+    def __init__(
+        self, features: str = "orb", *, nfeatures: int = 1000, model: str = "", refine_model: str = ""
+    ) -> None: ...
+    def extract(self, image: _Image) -> Features: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def nfeatures(self) -> int: ...
+
+def match(
+    a: Features, b: Features, *, mode: Literal["mutual", "ratio"] = "mutual", ratio: float = 0.8
+) -> npt.NDArray[numpy.float32]: ...
