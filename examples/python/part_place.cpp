@@ -5,6 +5,8 @@
 
 #include "bindings.hpp"
 
+#include "common/vocabulary_files.hpp"
+
 #include <vmap/core/features.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/place/bow.hpp>
@@ -231,25 +233,6 @@ const char* weighting_name(BowWeighting w) {
 
 using VocabularyPtr = std::shared_ptr<AnyVocabulary>;
 
-/// The bytes of `v` in a written format: vmap's own, ORB-SLAM2's text or FBoW's binary
-/// (the last two hold binary vocabularies only), as `vmap vocabulary convert` writes them.
-std::string vocabulary_bytes(const AnyVocabulary& v, const std::string& format) {
-  if (format == "vmap") return v.serialize();
-  if (format != "orbslam_text" && format != "fbow")
-    fail("vocabulary format must be 'vmap', 'orbslam_text' or 'fbow', not '" + format + "'");
-  if (v.binary() == nullptr) fail("a float vocabulary cannot be written as " + format + ": that format holds binary ones");
-  return format == "fbow" ? fbow_bytes(*v.binary()) : orbslam_text(*v.binary());
-}
-
-/// The format `vmap vocabulary convert` picks from the output's name: .txt ORB-SLAM2
-/// text, .fbow FBoW, anything else vmap's.
-std::string format_of(const std::filesystem::path& path) {
-  const std::string ext = path.extension().string();
-  if (ext == ".txt") return "orbslam_text";
-  if (ext == ".fbow") return "fbow";
-  return "vmap";
-}
-
 /// A vocabulary from bytes of any format vmap reads from memory (a gzipped DBoW2 YAML is
 /// read by OpenCV from its file only).
 AnyVocabulary vocabulary_from_bytes(std::string_view bytes) {
@@ -434,12 +417,12 @@ void bind(py::module_& m) {
       .def(
           "save",
           [](const AnyVocabulary& v, const std::filesystem::path& path, std::optional<std::string> format) {
-            const std::string f = format.value_or(format_of(path));
+            const std::string f = format.value_or(examples::vocabulary_format_of(path));
             py::gil_scoped_release unlocked;
             if (f == "vmap")
               v.save(path);
             else
-              write_file_atomically(path, vocabulary_bytes(v, f));
+              write_file_atomically(path, examples::vocabulary_file_bytes(v, f, "the vocabulary"));
           },
           py::arg("path"), py::kw_only(), py::arg("format") = py::none(),
           "Writes the vocabulary to `path` atomically (a temporary file renamed over it): format 'vmap' (vmap's own),\n"
@@ -451,7 +434,7 @@ void bind(py::module_& m) {
             std::string bytes;
             {
               py::gil_scoped_release unlocked;
-              bytes = vocabulary_bytes(v, format);
+              bytes = examples::vocabulary_file_bytes(v, format, "the vocabulary");
             }
             return to_py_bytes(bytes);
           },

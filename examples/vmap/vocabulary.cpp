@@ -11,6 +11,7 @@
 // (sift, xfeat) a k-means tree on L2. Progress goes to stderr.
 #include "common/cli_support.hpp"
 #include "common/lcd_run.hpp"
+#include "common/vocabulary_files.hpp"
 #include "vmap/cli.hpp"
 
 #include <vmap/io/atomic_file.hpp>
@@ -39,18 +40,12 @@ int convert(const VocabularyArgs& a) {
   const vmap::AnyVocabulary v = vmap::AnyVocabulary::load(a.convert_in);
   const double load_s = vmap::examples::seconds_since(t0);
   const std::filesystem::path out = a.convert_out;
-  const std::string ext = out.extension().string();
-  const char* format = "vmap";
-  if (ext == ".txt" || ext == ".fbow") {
-    if (v.binary() == nullptr) throw vmap::examples::UsageError(a.convert_in + " is a float vocabulary; " + ext + " files hold binary ones");
-    vmap::write_file_atomically(out, ext == ".txt" ? vmap::orbslam_text(*v.binary()) : vmap::fbow_bytes(*v.binary()));
-    format = ext == ".txt" ? "ORB-SLAM2 text" : "FBoW binary";
-  } else {
-    v.save(out);
-  }
+  const std::string format = vmap::examples::vocabulary_format_of(out);
+  vmap::write_file_atomically(out, vmap::examples::vocabulary_file_bytes(v, format, a.convert_in));
   static const char* const weightings[] = {"tf_idf_l1", "tf_idf_l2", "idf_l1", "idf_l2", "fbow"};
   std::printf("%s: %zu words (branching %d, depth %d, weighting %s), %s, from %s (read in %.3f s)\n", a.convert_out.c_str(),
-              v.size(), v.branching(), v.depth(), weightings[static_cast<int>(v.weighting())], format,
+              v.size(), v.branching(), v.depth(), weightings[static_cast<int>(v.weighting())],
+              format == "vmap" ? "vmap" : format == "fbow" ? "FBoW binary" : "ORB-SLAM2 text",
               a.convert_in.c_str(), load_s);
   return 0;
 }

@@ -14,3 +14,17 @@ run(${CMAKE_COMMAND} -S "${CONSUMER_SOURCE_DIR}" -B "${WORK_DIR}/build" -G "${GE
     "-DCMAKE_PREFIX_PATH=${prefix}" -DCMAKE_BUILD_TYPE=Release)
 run(${CMAKE_COMMAND} --build "${WORK_DIR}/build")
 run("${WORK_DIR}/build/vmap_consumer" "${SAMPLE_FRAMES}" "${WORK_DIR}/map.vmap")
+# The Python package, when the build made one: installed beside the headers, it imports
+# from the prefix (the extension, its stubs and py.typed) and reads the sample frames.
+if(PYTHON_EXECUTABLE AND PYTHON_INSTALL_DIR)
+  foreach(_f __init__.py __init__.pyi py.typed)
+    if(NOT EXISTS "${prefix}/${PYTHON_INSTALL_DIR}/vmap/${_f}")
+      message(FATAL_ERROR "cmake --install did not put vmap/${_f} in ${prefix}/${PYTHON_INSTALL_DIR}")
+    endif()
+  endforeach()
+  # Newlines, not semicolons, between the statements: run() passes its arguments on as a
+  # CMake list, which a semicolon would split.
+  run(${CMAKE_COMMAND} -E env "PYTHONPATH=${prefix}/${PYTHON_INSTALL_DIR}" "${PYTHON_EXECUTABLE}" -c
+      "import sys, vmap\nm = vmap.VisualMemory()\nfor image, _, _ in vmap.frames(sys.argv[1], grey=True):\n    m.push(image)\nassert vmap.__file__.startswith(sys.argv[2]) and m.key_images > 5, m\nprint('installed module:', vmap.__file__, m)"
+      "${SAMPLE_FRAMES}" "${prefix}")
+endif()

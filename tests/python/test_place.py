@@ -110,7 +110,7 @@ def test_float_vocabulary_round_trips(float_descriptors, tmp_path):
     for d in float_descriptors:
         assert back.transform(d) == v.transform(d)
     assert pickle.loads(pickle.dumps(v)).to_bytes() == v.to_bytes()
-    with pytest.raises(vmap.Error, match="holds binary ones"):
+    with pytest.raises(vmap.Error, match="is a float vocabulary; ORB-SLAM2 text files hold binary ones"):
         v.save(tmp_path / "float.txt")
 
 
