@@ -121,7 +121,8 @@ void bind(py::module_& m) {
       .def_property_readonly("kind", [](const Frames& f) { return kind_name(f.source().kind()); },
                              "video, image_folder, image_list, tum_rgb, live or euroc")
       .def_property_readonly("total", [](const Frames& f) { return f.source().total(); },
-                             "frames the source will deliver when known (None for a camera)")
+                             "frames in the underlying sequence when known (lists, folders, videos that report\n"
+                             "a count), before start/end/stride; None for a camera")
       .def_property_readonly("delivered", [](const Frames& f) { return f.source().delivered(); },
                              "frames delivered so far")
       .def_property_readonly(

@@ -20,7 +20,7 @@ def test_frames_reads_the_sample_list(sample_list, sample_frames):
 
 def test_frames_options_and_properties(sample_list):
     frames = vmap.frames(sample_list, grey=True, start=10, end=20, stride=3, resize=(320, 240))
-    assert frames.kind == "tum_rgb"
+    assert frames.kind == "tum_rgb" and frames.total == 60  # the sequence's frames, before the range
     got = list(frames)
     assert [n for _, _, n in got] == [n for _, _, n in list(vmap.frames(sample_list, grey=True))[10:20:3]]
     assert all(img.shape == (240, 320) for img, _, _ in got)

@@ -67,6 +67,10 @@ def test_bow_loops_and_figures_equal_the_command_line(rtabmap, bow_run, vmap_cli
     assert e.recall_at_100_precision == cli["recall_at_100_precision"]
     assert e.threshold_at_100_precision == cli["threshold_at_100_precision"]
     assert e.threshold == cli["min_confidence"] == 0.5
+    assert bow_run.min_confidence == cli["min_confidence"] and bow_run.window == cli["options"]["window"] == 10
+    assert bow_run.skipped_frames == cli["skipped_frames"] == 0
+    assert [(l.query_time, l.match_time) for l in bow_run.loops] == [(l["query_time"], l["match_time"]) for l in cli["loops"]]
+    assert len(bow_run.times) == 84 and all(bow_run.times[l.query] == l.query_time for l in bow_run.loops)
 
 
 def test_labelled_tree_ranked_run_equals_the_command_line(repo, rtabmap, vmap_cli):
@@ -145,6 +149,7 @@ def test_incremental_detector_decides_as_the_batch_run(rtabmap, bow_run):
     # A vocabulary learned on the same features with the same seed: the batch run's.
     detector = vmap.LoopDetector(vocabulary=features)
     assert detector.rank == "bow"
+    assert detector.window == bow_run.window == 10 and detector.min_confidence == bow_run.min_confidence == 0.5
     decisions = [detector.add(f) for f in features]
     assert len(detector) == 84
     assert detector.verifications == bow_run.verifications
@@ -165,6 +170,13 @@ def test_decisions_describe_every_frame(bow_run):
     accepted = [x for x in d if x.loop]
     assert len(accepted) == len(bow_run.loops)
     assert all(x.status == "accepted" and x.confidence >= 0.5 for x in accepted)
+    # The runner-up of a decision is another candidate, no more confident than the best.
+    for x in d:
+        if x.second is not None:
+            assert x.second != x.best and x.second_confidence <= x.confidence
+        assert x.failed_verifications <= x.verifications and x.consistent_queries >= 0
+        assert x.labels == [] and min(x.rank_ms, x.verify_ms, x.decide_ms) >= 0.0
+    assert sum(x.verifications for x in d) == bow_run.verifications
     chosen = [c for c in accepted[0].considered if c[4] == "chosen"]
     assert chosen and chosen[0][0] == accepted[0].best
     scores = bow_run.scores

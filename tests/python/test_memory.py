@@ -77,6 +77,11 @@ def test_store_round_trip_and_the_command_line_reads_it(tmp_path, sample_list, s
         assert got.confidence == pytest.approx(answer["confidence"], abs=1e-12)
         assert [m.key for m in got.matches] == [m["key"] for m in answer["matches"]]
         assert [m.inliers for m in got.matches] == [m["inliers"] for m in answer["matches"]]
+        assert got.verified_candidates == answer["verified_candidates"]
+        ev = answer["evidence"]
+        assert (got.evidence.matches, got.evidence.inliers, got.evidence.model) == (ev["matches"], ev["inliers"], ev["model"])
+        for field in ("inlier_ratio", "significance", "spread", "bow_score"):
+            assert getattr(got.evidence, field) == pytest.approx(ev[field], abs=1e-12)
         f = np.array(answer["matches"][0]["fundamental"]).reshape(3, 3)
         assert np.allclose(got.matches[0].fundamental, f, atol=1e-12)
 
@@ -116,7 +121,11 @@ def test_resume_equals_the_uninterrupted_run(tmp_path, sample_frames):
         first.push(sample_frames[0][0])
     second = vmap.VisualMemory.open(path)
     assert second.frames == 30
-    for img, t, _ in sample_frames[30:]:
+    # sync() writes what the memory made since the last one: a reader then sees it.
+    second.push(sample_frames[30][0], timestamp=sample_frames[30][1])
+    second.sync()
+    assert vmap.VisualMemory.open(path, read_only=True).frames == 31
+    for img, t, _ in sample_frames[31:]:
         second.push(img, timestamp=t)
     assert key_frames(second) == key_frames(whole)
     assert loop_pairs(second.loops) == loop_pairs(whole.loops)
@@ -139,6 +148,7 @@ def test_sessions_find_loops_into_the_earlier_run(tmp_path, sample_frames):
             assert abs(mem.keys[e.key_from]["frame_index"] - 60 - mem.keys[e.key_to]["frame_index"]) <= 60
         assert (e.key_to, "loop") in mem.neighbours(e.key_from)
     reader = vmap.VisualMemory.open(path, read_only=True)
+    assert reader.read_only and not mem.read_only
     assert len(reader.sessions) == 2 and loop_pairs(reader.loops) == loop_pairs(mem.loops)
     assert [k["session"] for k in reader.keys].count(1) == reader.key_images - first_keys
     with pytest.raises(vmap.Error, match="read-only"):
@@ -229,4 +239,5 @@ def test_camera_memory_gives_the_command_lines_relative_poses(tmp_path, shared, 
         assert np.allclose(got.relative_pose.rotation, R, atol=1e-12)
         assert np.allclose(got.relative_pose.translation, answer["relative_pose"]["translation"], atol=1e-12)
         assert got.relative_pose.rotation_degrees < 10
+        assert got.relative_pose.points_in_front == answer["relative_pose"]["points_in_front"]
     assert posed >= 5
