@@ -126,7 +126,11 @@ class MemoryModel final : public MemoryHandle {
   [[nodiscard]] PlaceDecisionOptions decision() const override { return memory_.options().loops.decision; }
 
   void sync() override {
-    if (store_ && !read_only_) store_->sync(memory_);
+    if (!store_ || read_only_) return;
+    // Committed when sync() returns (a reader opened next sees it); push() leaves its
+    // syncs to the store's writer thread instead, so that mapping never waits for the disk.
+    store_->sync(memory_);
+    store_->flush();
   }
 
   void close() override {
@@ -481,7 +485,8 @@ void bind(py::module_& m) {
           "Where the image was taken: the place decision over the best key images by bag of words,\n"
           "verified by the F-matrix (Localization; status 'accepted' or why not).")
       .def("sync", [](PyMemory& self) { py::gil_scoped_release unlocked; self->sync(); },
-           "Writes what the memory made since the last sync into its store (a no-op in RAM).")
+           "Writes what the memory made since the last sync into its store and waits until it is committed\n"
+           "(a no-op in RAM). push() syncs at every key image and loop edge without waiting.")
       .def("close", [](PyMemory& self) { py::gil_scoped_release unlocked; self->close(); },
            "Syncs and closes the store; the memory is read-only afterwards.")
       .def("__enter__", [](PyMemory& self) -> PyMemory& { return self; })
