@@ -56,6 +56,7 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <variant>
 #include <vector>
 
 namespace vmap {
@@ -74,6 +75,17 @@ struct SkippedFrame {
   std::size_t index = 0;
   std::string name;
   std::string reason;
+};
+
+/// A frame taken from its sequence by FrameSource::claim() and not decoded yet: an
+/// image file (decoded by FrameSource::decode(), on any thread), or a video or camera
+/// frame already read (a video decodes in order).
+struct PendingFrame {
+  std::size_t index = 0;
+  std::string name;
+  double timestamp = 0.0;
+  std::filesystem::path path;  ///< the image file; empty for a video or camera frame
+  cv::Mat image;               ///< the video or camera frame as read
 };
 
 enum class SourceKind { video, image_folder, image_list, tum_rgb, live, euroc };
@@ -281,7 +293,8 @@ inline std::optional<std::vector<double>> times_from_names(const std::vector<std
 
 }  // namespace detail
 
-/// Reads frames one at a time. Not thread-safe; move-only.
+/// Reads frames one at a time. Not thread-safe (but see claim() / decode() below);
+/// move-only.
 ///
 /// Errors (vmap::Error naming the path): a missing input, a folder without images, an
 /// empty or unreadable list, a video that cannot be opened or has no frame, invalid
@@ -348,17 +361,73 @@ class FrameSource {
 
   /// The next frame, or nullopt at the end of the sequence (or at options.end).
   [[nodiscard]] std::optional<Frame> next() {
-    std::optional<Frame> f = kind_ == SourceKind::video || kind_ == SourceKind::live ? next_video() : next_image();
-    if (f) {
+    while (auto pending = claim()) {
+      auto decoded = decode(std::move(*pending));
+      record(decoded);
+      if (auto* f = std::get_if<Frame>(&decoded)) return std::move(*f);
+    }
+    finish();
+    return std::nullopt;
+  }
+
+  // next() in three steps, so that several threads can decode the image files of one
+  // sequence (run_selector's preparing threads do): claim() and record() are called by
+  // one thread at a time, record() in sequence order; decode() is const and may run on
+  // any number of threads at once. Everything next() reports (skipped frames, on_skip,
+  // delivered(), the error for a sequence without a readable frame) comes from
+  // record() and finish(), so both ways report the same.
+
+  /// The next frame of the sequence, in order, without decoding an image file (a video
+  /// or camera frame is read here); nullopt at the end (or at options.end).
+  [[nodiscard]] std::optional<PendingFrame> claim() {
+    return kind_ == SourceKind::video || kind_ == SourceKind::live ? claim_video() : claim_image();
+  }
+  /// The claimed frame decoded, converted and resized as the options say, or the reason
+  /// it is skipped.
+  [[nodiscard]] std::variant<Frame, SkippedFrame> decode(PendingFrame p) const {
+    Frame f;
+    f.index = p.index;
+    f.name = std::move(p.name);
+    f.timestamp = p.timestamp + options_.time_offset;
+    if (p.path.empty()) {  // a video or camera frame, checked when read
+      if (options_.grey && p.image.channels() != 1)
+        cv::cvtColor(p.image, f.image, p.image.channels() == 4 ? cv::COLOR_BGRA2GRAY : cv::COLOR_BGR2GRAY);
+      else
+        f.image = std::move(p.image);
+    } else {
+      std::string reason;
+      f.image = detail::try_read_image(
+          p.path, {.flags = options_.grey ? cv::IMREAD_GRAYSCALE : cv::IMREAD_UNCHANGED, .max_pixels = options_.max_pixels},
+          reason);
+      if (!f.image.empty() && (f.image.cols < options_.min_side || f.image.rows < options_.min_side)) {
+        reason = size_reason(f.image.size());
+        f.image.release();
+      }
+      if (f.image.empty()) {
+        if (reason == "does not exist") reason = "file does not exist";
+        return SkippedFrame{p.index, p.path.string(), std::move(reason)};
+      }
+    }
+    if (options_.resize.width > 0 && f.image.size() != options_.resize)
+      cv::resize(f.image, f.image, options_.resize, 0, 0, cv::INTER_AREA);
+    return f;
+  }
+  /// Counts a decoded frame, or reports (on_skip) and keeps a skipped one; called in
+  /// sequence order.
+  void record(const std::variant<Frame, SkippedFrame>& decoded) {
+    if (const auto* s = std::get_if<SkippedFrame>(&decoded)) {
+      if (options_.on_skip) options_.on_skip(*s);
+      skipped_.push_back(*s);
+    } else {
       ++delivered_;
-      f->timestamp += options_.time_offset;
-      if (options_.resize.width > 0 && f->image.size() != options_.resize)
-        cv::resize(f->image, f->image, options_.resize, 0, 0, cv::INTER_AREA);
-    } else if (delivered_ == 0 && !skipped_.empty()) {
+    }
+  }
+  /// At the end of the sequence, every claimed frame recorded: an Error when no frame at
+  /// all could be read.
+  void finish() const {
+    if (delivered_ == 0 && !skipped_.empty())
       detail::fail("frame source: no frame of '" + input_.string() + "' could be read (" +
                    std::to_string(skipped_.size()) + " unreadable, first: " + skipped_.front().name + ")");
-    }
-    return f;
   }
 
   [[nodiscard]] SourceKind kind() const noexcept { return kind_; }
@@ -522,12 +591,10 @@ class FrameSource {
   }
 
   void skip_video(std::size_t idx) {
-    SkippedFrame s{idx, input_.filename().string() + "#" + std::to_string(idx), "the video decoder could not read this frame"};
-    if (options_.on_skip) options_.on_skip(s);
-    skipped_.push_back(std::move(s));
+    record(SkippedFrame{idx, input_.filename().string() + "#" + std::to_string(idx), "the video decoder could not read this frame"});
   }
 
-  std::optional<Frame> next_video() {
+  std::optional<PendingFrame> claim_video() {
     while (next_index_ < options_.end) {
       cv::Mat img;
       if (!pending_.empty()) {
@@ -541,13 +608,11 @@ class FrameSource {
       if (img.cols < options_.min_side || img.rows < options_.min_side ||
           static_cast<std::uint64_t>(img.cols) * static_cast<std::uint64_t>(img.rows) > options_.max_pixels) {
         next_index_ = detail::saturating_add(idx, options_.stride);
-        SkippedFrame s{idx, input_.filename().string() + "#" + std::to_string(idx), size_reason(img.size())};
-        if (options_.on_skip) options_.on_skip(s);
-        skipped_.push_back(std::move(s));
+        record(SkippedFrame{idx, input_.filename().string() + "#" + std::to_string(idx), size_reason(img.size())});
         continue;
       }
       next_index_ = detail::saturating_add(idx, options_.stride);
-      Frame f;
+      PendingFrame f;
       f.index = idx;
       f.name = (kind_ == SourceKind::live ? input_.string() : input_.filename().string()) + "#" + std::to_string(idx);
       f.timestamp = capture_.get(cv::CAP_PROP_POS_MSEC) / 1000.0;
@@ -559,42 +624,18 @@ class FrameSource {
         if (!*live_capture_clock_)
           f.timestamp = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
       }
-      if (options_.grey && img.channels() != 1)
-        cv::cvtColor(img, f.image, img.channels() == 4 ? cv::COLOR_BGRA2GRAY : cv::COLOR_BGR2GRAY);
-      else
-        f.image = img;
+      f.image = std::move(img);
       return f;
     }
     return std::nullopt;
   }
 
-  std::optional<Frame> next_image() {
-    while (next_index_ < options_.end && next_index_ < entries_.size()) {
-      const std::size_t idx = next_index_;
-      next_index_ = detail::saturating_add(next_index_, options_.stride);
-      const auto& e = entries_[idx];
-      Frame f;
-      f.index = idx;
-      f.name = e.path.filename().string();
-      f.timestamp = e.timestamp;
-      std::string reason;
-      f.image = detail::try_read_image(
-          e.path, {.flags = options_.grey ? cv::IMREAD_GRAYSCALE : cv::IMREAD_UNCHANGED, .max_pixels = options_.max_pixels},
-          reason);
-      if (!f.image.empty() && (f.image.cols < options_.min_side || f.image.rows < options_.min_side)) {
-        reason = size_reason(f.image.size());
-        f.image.release();
-      }
-      if (f.image.empty()) {
-        if (reason == "does not exist") reason = "file does not exist";
-        SkippedFrame s{idx, e.path.string(), reason};
-        if (options_.on_skip) options_.on_skip(s);
-        skipped_.push_back(std::move(s));
-        continue;
-      }
-      return f;
-    }
-    return std::nullopt;
+  std::optional<PendingFrame> claim_image() {
+    if (next_index_ >= options_.end || next_index_ >= entries_.size()) return std::nullopt;
+    const std::size_t idx = next_index_;
+    next_index_ = detail::saturating_add(next_index_, options_.stride);
+    const auto& e = entries_[idx];
+    return PendingFrame{idx, e.path.filename().string(), e.timestamp, e.path, {}};
   }
 
   [[nodiscard]] std::string size_reason(cv::Size s) const {

@@ -1,10 +1,10 @@
 #pragma once
 
 // Feeding a FrameSource through a selector, optionally on several threads: preparing
-// threads decode frames (one at a time: the source is sequential) and extract their
-// features (in parallel, each thread with its own copy of the Descriptor), while the
-// calling thread scores frame j against the key image. Frames reach push() in order, so
-// the key images are the same as with one thread.
+// threads decode frames (image files in parallel; a video one frame at a time, as it is
+// sequential) and extract their features (in parallel, each thread with its own copy
+// of the Descriptor), while the calling thread scores frame j against the key image.
+// Frames reach push() in order, so the key images are the same as with one thread.
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/frame_source.hpp>
@@ -21,6 +21,7 @@
 #include <thread>
 #include <type_traits>
 #include <utility>
+#include <variant>
 #include <vector>
 
 namespace vmap {
@@ -108,34 +109,41 @@ class OrderedQueue {
 
 /// Decodes frames of `source` and prepares them on prepares.size() threads (thread k
 /// calls prepares[k](const Frame&) -> T), and consumes them in order on the calling
-/// thread (consume(T&&)). The source is read by one thread at a time. Exceptions of any
-/// thread are rethrown here after the frames before them were consumed; the threads are
-/// joined however this returns.
+/// thread (consume(T&&)). Frames are claimed from the source one thread at a time and
+/// decoded in parallel (image files; a video is read in order while claiming); the
+/// calling thread records each outcome in order, so skipped frames are reported as
+/// FrameSource::next() reports them. Exceptions of any thread are rethrown here after
+/// the frames before them were consumed; the threads are joined however this returns.
 template <class T, class Consume>
 void run_pipelined_on(FrameSource& source, std::size_t capacity,
                       std::vector<std::function<T(const Frame&)>>& prepares, Consume&& consume) {
   check(!prepares.empty(), "RunOptions.prepare_threads must be >= 1");
   check(capacity >= prepares.size(), "RunOptions.queue_capacity must be >= the number of preparing threads");
-  OrderedQueue<T> queue(capacity);
-  std::mutex source_mutex;
-  std::size_t read = 0;      // frames taken from the source so far
-  bool source_over = false;  // ended or failed: nobody reads further
+  // A prepared frame, or a skipped one (its image is not kept: only the outcome is recorded).
+  struct Item {
+    std::optional<T> value;
+    std::variant<Frame, SkippedFrame> outcome;
+  };
+  OrderedQueue<Item> queue(capacity);
+  std::mutex source_mutex;   // claim() and record() of the source
+  std::size_t read = 0;      // frames claimed from the source so far
+  bool source_over = false;  // ended or failed: nobody claims further
   auto produce = [&](std::function<T(const Frame&)>& prepare) {
     while (true) {
-      std::optional<Frame> frame;
+      std::optional<PendingFrame> pending;
       std::size_t seq = 0;
       {
         std::lock_guard lock(source_mutex);
         if (source_over) return;
         seq = read;
         try {
-          frame = source.next();
+          pending = source.claim();
         } catch (...) {
           source_over = true;
           queue.fail(seq, std::current_exception());
           return;
         }
-        if (!frame) {
+        if (!pending) {
           source_over = true;
           queue.end(seq);
           return;
@@ -143,7 +151,12 @@ void run_pipelined_on(FrameSource& source, std::size_t capacity,
         ++read;
       }
       try {
-        if (!queue.put(seq, prepare(*frame))) return;
+        Item item{std::nullopt, source.decode(std::move(*pending))};
+        if (auto* frame = std::get_if<Frame>(&item.outcome)) {
+          item.value.emplace(prepare(*frame));
+          frame->image.release();
+        }
+        if (!queue.put(seq, std::move(item))) return;
       } catch (...) {
         queue.fail(seq, std::current_exception());
         return;
@@ -152,7 +165,7 @@ void run_pipelined_on(FrameSource& source, std::size_t capacity,
   };
   std::vector<std::thread> threads;
   struct Joiner {
-    OrderedQueue<T>& q;
+    OrderedQueue<Item>& q;
     std::vector<std::thread>& t;
     ~Joiner() {
       q.stop();
@@ -160,7 +173,15 @@ void run_pipelined_on(FrameSource& source, std::size_t capacity,
     }
   } joiner{queue, threads};
   for (auto& p : prepares) threads.emplace_back(produce, std::ref(p));
-  while (auto item = queue.take()) consume(std::move(*item));
+  while (auto item = queue.take()) {
+    {
+      std::lock_guard lock(source_mutex);
+      source.record(item->outcome);
+    }
+    if (item->value) consume(std::move(*item->value));
+  }
+  std::lock_guard lock(source_mutex);
+  source.finish();
 }
 
 /// The same with one preparing thread.

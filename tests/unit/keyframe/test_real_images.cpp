@@ -14,7 +14,9 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <algorithm>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace {
@@ -149,28 +151,58 @@ TEST_CASE("pipeline: a failure while preparing frame k reaches the caller after 
   }
 }
 
-TEST_CASE("sample frames: a corrupt frame in the middle is skipped, the run goes on") {
+TEST_CASE("sample frames: corrupt and missing frames are skipped in order, the run goes on") {
   const auto dir = vmap::test::scratch_dir("keyframe_corrupt");
   const auto frames = vmap::FrameSource::open(sample_list()).paths();
   {
     std::ofstream bad(dir / "corrupt.jpg", std::ios::binary);
     bad << "this is not a JPEG";
   }
+  // Sequence positions 3 and 11 corrupt, 12 missing: the preparing threads decode them in
+  // parallel, the calling thread reports them in order.
   std::ofstream list(dir / "list.txt");
   for (std::size_t k = 0; k < 20; ++k) {
-    if (k == 10) list << (dir / "corrupt.jpg").string() << "\n";
+    if (k == 3 || k == 10) list << (dir / "corrupt.jpg").string() << "\n";
+    if (k == 10) list << (dir / "missing.jpg").string() << "\n";
     list << frames[k].string() << "\n";
   }
   list.close();
-  std::vector<vmap::SkippedFrame> skipped;
-  auto src = vmap::FrameSource::open(dir / "list.txt",
-                                     {.grey = true, .on_skip = [&](const vmap::SkippedFrame& s) { skipped.push_back(s); }});
-  auto sel = orb_selector({.tau = 0.3});
-  vmap::run_selector(src, sel, {.pipelined = true});
-  CHECK(sel.map().frames == 20);
-  REQUIRE(skipped.size() == 1);
-  CHECK(skipped[0].index == 10);
-  for (const auto& k : sel.map().keys) CHECK(k.frame_index != 10);
+  std::vector<std::string> expected;
+  {
+    auto plain = vmap::FrameSource::open(dir / "list.txt", {.grey = true});
+    while (plain.next()) {
+    }
+    for (const auto& s : plain.skipped()) expected.push_back(std::to_string(s.index) + " " + s.name + ": " + s.reason);
+    CHECK(plain.delivered() == 20);
+  }
+  REQUIRE(expected.size() == 3);
+  CHECK(expected[0].starts_with("3 "));
+  CHECK(expected[1].starts_with("11 "));
+  CHECK(expected[2].starts_with("12 "));
+  const auto single = select(dir / "list.txt", {.tau = 0.3}, {.pipelined = false}, 0, 100);
+  for (const std::size_t threads : {1, 2, 3}) {
+    CAPTURE(threads);
+    std::vector<std::string> reported;
+    bool on_calling_thread = true;
+    const auto caller = std::this_thread::get_id();
+    auto src = vmap::FrameSource::open(dir / "list.txt", {.grey = true, .on_skip = [&](const vmap::SkippedFrame& s) {
+                                                            reported.push_back(std::to_string(s.index) + " " + s.name + ": " + s.reason);
+                                                            on_calling_thread = on_calling_thread && std::this_thread::get_id() == caller;
+                                                          }});
+    auto sel = orb_selector({.tau = 0.3});
+    std::vector<std::size_t> order;
+    vmap::run_selector(src, sel, {.pipelined = true, .prepare_threads = threads},
+                       [&](const vmap::FrameResult& r) { order.push_back(r.frame_index); });
+    CHECK(reported == expected);
+    CHECK(on_calling_thread);
+    REQUIRE(src.skipped().size() == 3);
+    CHECK(src.skipped()[1].index == 11);
+    CHECK(src.delivered() == 20);
+    CHECK(sel.map().frames == 20);
+    CHECK(std::is_sorted(order.begin(), order.end()));
+    CHECK(std::find(order.begin(), order.end(), 11) == order.end());
+    CHECK(sel.map().key_indices() == single.key_indices());
+  }
 }
 
 TEST_CASE("bad inputs: missing path, empty video, unreadable sequence") {
@@ -179,7 +211,7 @@ TEST_CASE("bad inputs: missing path, empty video, unreadable sequence") {
   const auto dir = vmap::test::scratch_dir("keyframe_bad");
   { std::ofstream(dir / "empty.avi"); }
   CHECK_THROWS_AS(vmap::FrameSource::open(dir / "empty.avi"), vmap::Error);
-  // Every frame unreadable: the error surfaces through the pipeline thread.
+  // Every frame unreadable: the error reaches the caller of the pipelined run.
   {
     std::ofstream bad(dir / "bad.jpg", std::ios::binary);
     bad << "garbage";
