@@ -10,6 +10,7 @@
 #include <doctest/doctest.h>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
 
 #include <filesystem>
 #include <fstream>
@@ -202,6 +203,34 @@ TEST_CASE("sample frames: corrupt and missing frames are skipped in order, the r
     CHECK(std::is_sorted(order.begin(), order.end()));
     CHECK(std::find(order.begin(), order.end(), 11) == order.end());
     CHECK(sel.map().key_indices() == single.key_indices());
+  }
+}
+
+TEST_CASE("sample frames as a video: a pipelined run reads it in order and equals one thread") {
+  const auto dir = vmap::test::scratch_dir("keyframe_video");
+  const auto path = dir / "clip.avi";
+  {
+    auto src = vmap::FrameSource::open(sample_list(), {.end = 30});
+    cv::VideoWriter w(path.string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30.0, cv::Size(640, 480), true);
+    REQUIRE_MESSAGE(w.isOpened(), "OpenCV cannot write MJPG video here");
+    while (auto f = src.next()) w.write(f->image);
+  }
+  const auto single = select(path, {.tau = 0.3}, {.pipelined = false}, 0, 100);
+  CHECK(single.frames == 30);
+  for (const std::size_t threads : {1, 2}) {
+    CAPTURE(threads);
+    auto src = vmap::FrameSource::open(path, {.grey = true});
+    auto sel = orb_selector({.tau = 0.3});
+    std::vector<std::size_t> order;
+    vmap::run_selector(src, sel, {.pipelined = true, .prepare_threads = threads},
+                       [&](const vmap::FrameResult& r) { order.push_back(r.frame_index); });
+    REQUIRE(order.size() == 30);
+    for (std::size_t k = 0; k < order.size(); ++k) CHECK(order[k] == k);
+    CHECK(src.delivered() == 30);
+    const auto m = sel.take_map();
+    CHECK(m.key_indices() == single.key_indices());
+    REQUIRE(m.pairs.size() == single.pairs.size());
+    for (std::size_t k = 0; k < m.pairs.size(); ++k) CHECK(m.pairs[k].inliers == single.pairs[k].inliers);
   }
 }
 
