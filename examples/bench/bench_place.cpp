@@ -210,7 +210,7 @@ int main(int argc, char** argv) {
     const double base = theirs.empty() ? 0.0 : median(theirs);
     auto row = [&](const char* loader, const std::filesystem::path& p, const std::vector<double>& ms) {
       const double m = median(ms);
-      std::printf("| %s | %s | %s | %.1f | %.2f | %s |\n", voc.name, loader, p.filename().c_str(), mib(p), m,
+      std::printf("| %s | %s | %s | %.1f | %.3f | %s |\n", voc.name, loader, p.filename().c_str(), mib(p), m,
                   base > 0.0 ? (std::to_string(m / base).substr(0, 5) + "x").c_str() : "(FBoW not built)");
     };
     if (!theirs.empty()) row("FBoW readFromFile (baseline)", fbow_path, theirs);

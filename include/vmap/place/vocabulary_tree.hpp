@@ -569,13 +569,23 @@ class VocabularyTree {
     r.read(raw.data(), raw.size(), "child counts");
     v.nodes_.resize_for_overwrite(static_cast<std::size_t>(n));
     std::uint64_t leaves = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const unsigned char* p = raw.data() + i * count_bytes;
-      std::uint32_t c = p[0];
-      for (std::uint64_t b = 1; b < count_bytes; ++b) c |= static_cast<std::uint32_t>(p[b]) << (8 * b);
-      v.nodes_[i].count = c;
-      leaves += c == 0;
-    }
+    // One loop per width, so the little-endian counts are widened without a loop per node.
+    const auto widen = [&]<std::size_t W>() {
+      const unsigned char* p = raw.data();
+      for (std::size_t i = 0; i < n; ++i, p += W) {
+        std::uint32_t c = p[0];
+        if constexpr (W >= 2) c |= static_cast<std::uint32_t>(p[1]) << 8;
+        if constexpr (W == 4) c |= static_cast<std::uint32_t>(p[2]) << 16 | static_cast<std::uint32_t>(p[3]) << 24;
+        v.nodes_[i].count = c;
+        leaves += c == 0;
+      }
+    };
+    if (count_bytes == 1)
+      widen.template operator()<1>();
+    else if (count_bytes == 2)
+      widen.template operator()<2>();
+    else
+      widen.template operator()<4>();
     raw = {};
     v.centre_storage_.resize_for_overwrite(static_cast<std::size_t>(n * row_bytes));
     v.centres_ = cv::Mat(static_cast<int>(n), v.cols_, Traits::descriptor_type, v.centre_storage_.data());
@@ -606,8 +616,9 @@ class VocabularyTree {
       if (const std::string problem = v.renumber(ids); !problem.empty()) r.corrupt(problem);
     if constexpr (std::is_same_v<value_type, float>)
       if (!cv::checkRange(v.centres_)) r.corrupt("a centre value is not finite");
-    for (float f : v.idf_)
-      if (!(std::isfinite(f) && f >= 0.0f)) r.corrupt("an idf weight is negative or not finite");
+    bool bad_idf = false;  // no early exit: the loop vectorizes
+    for (float f : v.idf_) bad_idf |= !(f >= 0.0f && f <= std::numeric_limits<float>::max());
+    if (bad_idf) r.corrupt("an idf weight is negative or not finite");
     return v;
   }
 
@@ -819,30 +830,40 @@ class VocabularyTree {
     const std::size_t n = nodes_.size();
     if (n == 0 || nodes_[0].count == 0) return "the root has no children";
     const auto k = static_cast<std::uint32_t>(branching_);
-    std::uint64_t next = 1, level_end = 1;
-    int level = 0;
-    leaves_ = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      Node& node = nodes_[i];
-      if (i >= level_end) {
-        if (next <= i) return "node " + std::to_string(i) + " is nobody's child (the counts do not form a tree)";
-        level_end = next;
-        ++level;
+    // Level by level: in breadth-first order the children of the nodes [begin, end) are
+    // the nodes [end, next), so a level is linked by a running sum with no check inside
+    // the loop (a load links every node of the file); the counts are checked once per
+    // level, and only a level that fails is walked again to name its first bad node.
+    std::uint64_t next = 1;
+    std::size_t begin = 0, end = 1;
+    std::size_t leaves = 0;
+    for (int level = 0;; ++level) {
+      std::uint32_t widest = 0;
+      for (std::size_t i = begin; i < end; ++i) {
+        Node& node = nodes_[i];
+        const std::uint32_t c = node.count;
+        widest = std::max(widest, c);
+        node.first = static_cast<std::uint32_t>(c == 0 ? leaves++ : next);
+        next += c;
       }
-      const std::uint32_t c = node.count;
-      if (c == 0) {
-        node.first = leaves_++;
-        continue;
+      if (widest > k || next > n) {
+        std::uint64_t claimed = end;
+        for (std::size_t i = begin; i < end; ++i) {
+          const std::uint32_t c = nodes_[i].count;
+          if (c > k)
+            return "node " + std::to_string(i) + " has " + std::to_string(c) + " children, more than the branching " +
+                   std::to_string(branching_);
+          if (claimed + c > n) return "the child counts claim more nodes than the " + std::to_string(n) + " stored";
+          claimed += c;
+        }
       }
-      if (c > k)
-        return "node " + std::to_string(i) + " has " + std::to_string(c) + " children, more than the branching " +
-               std::to_string(branching_);
-      if (next + c > n) return "the child counts claim more nodes than the " + std::to_string(n) + " stored";
+      if (next == end) break;  // a level of leaves: the tree ends here
       if (level + 1 > depth_) return "the tree is deeper than its depth " + std::to_string(depth_);
-      node.first = static_cast<std::uint32_t>(next);
-      next += c;
+      begin = end;
+      end = static_cast<std::size_t>(next);
     }
-    if (next != n) return "the child counts claim " + std::to_string(next) + " nodes, " + std::to_string(n) + " are stored";
+    if (end < n) return "node " + std::to_string(end) + " is nobody's child (the counts do not form a tree)";
+    leaves_ = leaves;
     return {};
   }
 
