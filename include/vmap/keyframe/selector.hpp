@@ -326,10 +326,10 @@ class BasicKeyframeSelector {
   /// at every frame. A store that keeps the map's key images apart rewrites only this,
   /// without copying the map.
   [[nodiscard]] SelectorState<Item> pending_state() const {
-    SelectorState<Item> s{{}, prev_, std::nullopt};
-    if (prev_scored_) {
-      s.previous_score = prev_score_;
-      if (prev_degeneracy_pending_) complete_previous_score(*s.previous_score);
+    SelectorState<Item> s = deferred_state();
+    if (s.degeneracy_deferred) {
+      complete_previous_score(*s.previous_score);
+      s.degeneracy_deferred = false;
     }
     return s;
   }
