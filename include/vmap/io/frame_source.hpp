@@ -375,7 +375,8 @@ class FrameSource {
   // one thread at a time, record() in sequence order; decode() is const and may run on
   // any number of threads at once. Everything next() reports (skipped frames, on_skip,
   // delivered(), the error for a sequence without a readable frame) comes from
-  // record() and finish(), so both ways report the same.
+  // record() and finish(), so both ways report the same. A video is read by claim(),
+  // which records its unreadable frames itself, in order.
 
   /// The next frame of the sequence, in order, without decoding an image file (a video
   /// or camera frame is read here); nullopt at the end (or at options.end).

@@ -110,9 +110,9 @@ class OrderedQueue {
 /// Decodes frames of `source` and prepares them on prepares.size() threads (thread k
 /// calls prepares[k](const Frame&) -> T), and consumes them in order on the calling
 /// thread (consume(T&&)). Frames are claimed from the source one thread at a time and
-/// decoded in parallel (image files; a video is read in order while claiming); the
-/// calling thread records each outcome in order, so skipped frames are reported as
-/// FrameSource::next() reports them. Exceptions of any thread are rethrown here after
+/// decoded in parallel (image files; a video is read in order while claiming, and its
+/// unreadable frames recorded then); the calling thread records each outcome in order,
+/// so skipped frames are reported as FrameSource::next() reports them. Exceptions of any thread are rethrown here after
 /// the frames before them were consumed; the threads are joined however this returns.
 template <class T, class Consume>
 void run_pipelined_on(FrameSource& source, std::size_t capacity,
