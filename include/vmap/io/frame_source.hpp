@@ -397,9 +397,9 @@ class FrameSource {
         f.image = std::move(p.image);
     } else {
       std::string reason;
-      f.image = detail::try_read_image(
-          p.path, {.flags = options_.grey ? cv::IMREAD_GRAYSCALE : cv::IMREAD_UNCHANGED, .max_pixels = options_.max_pixels},
-          reason);
+      const ImageReadOptions how{.flags = options_.grey ? cv::IMREAD_GRAYSCALE : cv::IMREAD_UNCHANGED,
+                                 .max_pixels = options_.max_pixels};
+      f.image = detail::try_read_image(p.path, how, reason);
       if (!f.image.empty() && (f.image.cols < options_.min_side || f.image.rows < options_.min_side)) {
         reason = size_reason(f.image.size());
         f.image.release();
@@ -592,7 +592,8 @@ class FrameSource {
   }
 
   void skip_video(std::size_t idx) {
-    record(SkippedFrame{idx, input_.filename().string() + "#" + std::to_string(idx), "the video decoder could not read this frame"});
+    record(SkippedFrame{idx, input_.filename().string() + "#" + std::to_string(idx),
+                        "the video decoder could not read this frame"});
   }
 
   std::optional<PendingFrame> claim_video() {

@@ -112,14 +112,15 @@ class OrderedQueue {
 /// thread (consume(T&&)). Frames are claimed from the source one thread at a time and
 /// decoded in parallel (image files; a video is read in order while claiming, and its
 /// unreadable frames recorded then); the calling thread records each outcome in order,
-/// so skipped frames are reported as FrameSource::next() reports them. Exceptions of any thread are rethrown here after
-/// the frames before them were consumed; the threads are joined however this returns.
+/// so skipped frames are reported as FrameSource::next() reports them. Exceptions of
+/// any thread are rethrown here after the frames before them were consumed; the threads
+/// are joined however this returns.
 template <class T, class Consume>
 void run_pipelined_on(FrameSource& source, std::size_t capacity,
                       std::vector<std::function<T(const Frame&)>>& prepares, Consume&& consume) {
   check(!prepares.empty(), "RunOptions.prepare_threads must be >= 1");
   check(capacity >= prepares.size(), "RunOptions.queue_capacity must be >= the number of preparing threads");
-  // A prepared frame, or a skipped one (its image is not kept: only the outcome is recorded).
+  // A prepared frame (its image released: only the outcome is recorded), or a skipped one.
   struct Item {
     std::optional<T> value;
     std::variant<Frame, SkippedFrame> outcome;

@@ -616,7 +616,7 @@ class VocabularyTree {
       if (const std::string problem = v.renumber(ids); !problem.empty()) r.corrupt(problem);
     if constexpr (std::is_same_v<value_type, float>)
       if (!cv::checkRange(v.centres_)) r.corrupt("a centre value is not finite");
-    bool bad_idf = false;  // no early exit: the loop vectorizes
+    bool bad_idf = false;  // no early exit, so the compiler may vectorize the loop
     for (float f : v.idf_) bad_idf |= !(f >= 0.0f && f <= std::numeric_limits<float>::max());
     if (bad_idf) r.corrupt("an idf weight is negative or not finite");
     return v;
@@ -836,7 +836,7 @@ class VocabularyTree {
     // level, and only a level that fails is walked again to name its first bad node.
     std::uint64_t next = 1;
     std::size_t begin = 0, end = 1;
-    std::size_t leaves = 0;
+    std::uint32_t leaves = 0;
     for (int level = 0;; ++level) {
       std::uint32_t widest = 0;
       for (std::size_t i = begin; i < end; ++i) {
