@@ -68,6 +68,9 @@ struct Frame {
   std::size_t index = 0;
   std::string name;        ///< file name, or "<video>#<index>"
   double timestamp = 0.0;  ///< seconds, see the top of this file (+ FrameSourceOptions::time_offset)
+  /// The same time in whole nanoseconds (io/timestamps.hpp): exact where the source
+  /// states nanoseconds or decimal seconds, else `timestamp` rounded.
+  std::int64_t time_ns = 0;
 };
 
 /// A frame that could not be decoded and was skipped.
@@ -84,6 +87,7 @@ struct PendingFrame {
   std::size_t index = 0;
   std::string name;
   double timestamp = 0.0;
+  std::int64_t time_ns = 0;    ///< Frame::time_ns, before the time offset
   std::filesystem::path path;  ///< the image file; empty for a video or camera frame
   cv::Mat image;               ///< the video or camera frame as read
 };
@@ -175,18 +179,21 @@ inline bool is_live_source(const std::string& s) {
 struct ListEntry {
   std::filesystem::path path;
   double timestamp = 0.0;
+  std::int64_t time_ns = 0;
 };
 
 /// Largest list file (one path a line) read; a million frames take ~50 MB.
 inline constexpr std::uintmax_t max_list_file_bytes = std::uintmax_t{64} << 20;
 
 /// "<timestamp> <path>" with a finite number first and one path token after: a TUM line.
-inline bool parse_tum_line(const std::string& line, double& t, std::string& path) {
+/// `ns` is the time in nanoseconds, exact for a plain decimal number.
+inline bool parse_tum_line(const std::string& line, double& t, std::string& path, std::int64_t* ns = nullptr) {
   const auto sp = line.find_first_of(" \t");
   if (sp == std::string::npos) return false;
   const auto [ptr, ec] = std::from_chars(line.data(), line.data() + sp, t);
   if (ec != std::errc() || ptr != line.data() + sp || !std::isfinite(t)) return false;
   path = trim(line.substr(sp));
+  if (ns) *ns = nanoseconds_from_decimal(std::string_view(line.data(), sp)).value_or(nanoseconds_from_seconds(t));
   return !path.empty() && path.find_first_of(" \t") == std::string::npos;
 }
 
@@ -214,11 +221,12 @@ inline std::vector<ListEntry> read_list(const std::filesystem::path& file, Sourc
     ListEntry e;
     std::string p = lines[k].first;
     if (tum) {
-      if (!parse_tum_line(lines[k].first, e.timestamp, p))
+      if (!parse_tum_line(lines[k].first, e.timestamp, p, &e.time_ns))
         fail("frame source: " + file.string() + ":" + std::to_string(lines[k].second) + ": '" + lines[k].first +
              "' is not '<timestamp> <path>' like the lines before it (TUM rgb.txt)");
     } else {
       e.timestamp = static_cast<double>(k);
+      e.time_ns = nanoseconds_from_seconds(e.timestamp);
     }
     std::filesystem::path path(p);
     e.path = path.is_absolute() ? path : base / path;
@@ -245,16 +253,24 @@ inline std::vector<ListEntry> read_euroc_csv(const std::filesystem::path& file) 
     const std::string name = trim(line.substr(comma + 1));
     if (name.empty() || name.find(',') != std::string::npos)
       fail(where + "'" + line + "' is not '<timestamp [ns]>,<file name>' (EuRoC data.csv)");
-    out.push_back({images / name, seconds_from_nanoseconds(ns)});
+    if (ns > static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max()))
+      fail(where + "timestamp " + std::to_string(ns) + " ns is beyond the year 2262");
+    out.push_back({images / name, seconds_from_nanoseconds(ns), static_cast<std::int64_t>(ns)});
   });
   if (out.empty()) fail("frame source: EuRoC data.csv '" + file.string() + "' names no image");
   return out;
 }
 
 /// The times of image files named by numbers (see the top of this file), or nothing when
-/// one name is not a number.
-inline std::optional<std::vector<double>> times_from_names(const std::vector<std::string>& names) {
-  std::vector<double> values;
+/// one name is not a number: seconds, and the same in nanoseconds (exact from the digits).
+struct NameTimes {
+  std::vector<double> seconds;
+  std::vector<std::int64_t> ns;
+};
+
+inline std::optional<NameTimes> times_from_names(const std::vector<std::string>& names) {
+  NameTimes out;
+  std::vector<double>& values = out.seconds;
   bool fractional = false;
   for (const auto& n : names) {
     const std::string stem = std::filesystem::path(n).stem().string();
@@ -277,18 +293,29 @@ inline std::optional<std::vector<double>> times_from_names(const std::vector<std
       values.push_back(v);
     }
   }
-  if (values.empty() || fractional) return values;
+  if (values.empty()) return out;
+  if (fractional) {
+    for (std::size_t k = 0; k < names.size(); ++k)
+      out.ns.push_back(nanoseconds_from_decimal(std::filesystem::path(names[k]).stem().string())
+                           .value_or(nanoseconds_from_seconds(values[k])));
+    return out;
+  }
   const double largest = *std::max_element(values.begin(), values.end());
   // Whole numbers: the unit by magnitude; nanoseconds converted exactly from the digits.
   const double unit = largest >= 1e17 ? 1e-9 : largest >= 1e14 ? 1e-6 : largest >= 1e11 ? 1e-3 : 1.0;
+  const auto per_second = static_cast<std::uint64_t>(std::llround(1.0 / unit));
   for (std::size_t k = 0; k < names.size(); ++k) {
-    if (unit == 1.0) continue;
     const std::string stem = std::filesystem::path(names[k]).stem().string();
     std::uint64_t v = 0;
     (void)std::from_chars(stem.data(), stem.data() + stem.size(), v);
-    values[k] = seconds_from_count(v, static_cast<std::uint64_t>(std::llround(1.0 / unit)));
+    const std::uint64_t ns_per_unit = 1000000000ULL / per_second;
+    out.ns.push_back(v <= static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max()) / ns_per_unit
+                         ? static_cast<std::int64_t>(v * ns_per_unit)
+                         : nanoseconds_from_seconds(seconds_from_count(v, per_second)));
+    if (unit == 1.0) continue;
+    values[k] = seconds_from_count(v, per_second);
   }
-  return values;
+  return out;
 }
 
 }  // namespace detail
@@ -345,8 +372,10 @@ class FrameSource {
       if (names.empty()) fail_no_image(input);
       std::sort(names.begin(), names.end(), detail::natural_less);
       const auto times = detail::times_from_names(names);
-      for (std::size_t k = 0; k < names.size(); ++k)
-        s.entries_.push_back({input / names[k], times ? (*times)[k] : static_cast<double>(k)});
+      for (std::size_t k = 0; k < names.size(); ++k) {
+        const double t = times ? times->seconds[k] : static_cast<double>(k);
+        s.entries_.push_back({input / names[k], t, times ? times->ns[k] : nanoseconds_from_seconds(t)});
+      }
     } else if (input.extension() == ".csv") {
       s.kind_ = SourceKind::euroc;
       s.entries_ = detail::read_euroc_csv(input);
@@ -390,6 +419,7 @@ class FrameSource {
     f.index = p.index;
     f.name = std::move(p.name);
     f.timestamp = p.timestamp + options_.time_offset;
+    f.time_ns = p.time_ns + nanoseconds_from_seconds(options_.time_offset);
     if (p.path.empty()) {  // a video or camera frame, checked when read
       if (options_.grey && p.image.channels() != 1)
         cv::cvtColor(p.image, f.image, p.image.channels() == 4 ? cv::COLOR_BGRA2GRAY : cv::COLOR_BGR2GRAY);
@@ -457,6 +487,18 @@ class FrameSource {
     }
     out.reserve(entries_.size());
     for (const auto& e : entries_) out.push_back(e.timestamp + options_.time_offset);
+    return out;
+  }
+  /// timestamps() in whole nanoseconds (Frame::time_ns).
+  [[nodiscard]] std::vector<std::int64_t> times_ns() const {
+    std::vector<std::int64_t> out;
+    const std::int64_t offset = nanoseconds_from_seconds(options_.time_offset);
+    if (kind_ == SourceKind::video) {
+      for (double t : timestamps()) out.push_back(nanoseconds_from_seconds(t));
+      return out;
+    }
+    out.reserve(entries_.size());
+    for (const auto& e : entries_) out.push_back(e.time_ns + offset);
     return out;
   }
   /// Image paths of a list, folder, TUM or EuRoC source (empty for a video).
@@ -617,14 +659,19 @@ class FrameSource {
       PendingFrame f;
       f.index = idx;
       f.name = (kind_ == SourceKind::live ? input_.string() : input_.filename().string()) + "#" + std::to_string(idx);
-      f.timestamp = capture_.get(cv::CAP_PROP_POS_MSEC) / 1000.0;
+      const double msec = capture_.get(cv::CAP_PROP_POS_MSEC);
+      f.timestamp = msec / 1000.0;
+      f.time_ns = nanoseconds_from_seconds(msec / 1000.0);
       if (kind_ == SourceKind::live) {
         // The capture's clock when its first frame has one; otherwise (cameras without a
         // stream clock) the Unix time of each read, so that frames line up with ground
         // truth or odometry stamped by the system clock. Decided once: no mixed clocks.
         if (!live_capture_clock_) live_capture_clock_ = f.timestamp > 0.0;
-        if (!*live_capture_clock_)
-          f.timestamp = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+        if (!*live_capture_clock_) {
+          const auto now = std::chrono::system_clock::now().time_since_epoch();
+          f.timestamp = std::chrono::duration<double>(now).count();
+          f.time_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(now).count();
+        }
       }
       f.image = std::move(img);
       return f;
@@ -637,7 +684,7 @@ class FrameSource {
     const std::size_t idx = next_index_;
     next_index_ = detail::saturating_add(next_index_, options_.stride);
     const auto& e = entries_[idx];
-    return PendingFrame{idx, e.path.filename().string(), e.timestamp, e.path, {}};
+    return PendingFrame{idx, e.path.filename().string(), e.timestamp, e.time_ns, e.path, {}};
   }
 
   [[nodiscard]] std::string size_reason(cv::Size s) const {

@@ -1,11 +1,21 @@
 #pragma once
 
-// Timestamps in whole sub-second units (EuRoC's nanoseconds, microsecond and millisecond
-// file names) as seconds. A direct division of a 19-digit count would round it to a
-// double first; splitting whole seconds from the remainder keeps it exact to the unit at
-// Unix times.
+// Frame times. Frames carry their time twice: in seconds as a double, for arithmetic
+// (association with poses, rates), and in whole nanoseconds as an integer, exact where
+// the source states its times in nanoseconds or in decimal seconds (EuRoC's data.csv,
+// robot bags' header stamps, TUM's "1305031229.528748"). A double holds a Unix time only
+// to about 0.24 us, so exports and key-image records use the integer.
+//
+// Counts in whole sub-second units (EuRoC's nanoseconds, microsecond and millisecond
+// file names) as seconds: a direct division of a 19-digit count would round it to a
+// double first; splitting whole seconds from the remainder keeps the double as close as
+// it can be.
 
+#include <cmath>
 #include <cstdint>
+#include <limits>
+#include <optional>
+#include <string_view>
 
 namespace vmap {
 
@@ -18,6 +28,55 @@ namespace vmap {
 /// Seconds from a whole number of nanoseconds.
 [[nodiscard]] inline double seconds_from_nanoseconds(std::uint64_t ns) noexcept {
   return seconds_from_count(ns, 1000000000ULL);
+}
+
+/// The nearest whole nanosecond of `seconds`, saturated to the int64 range (about +-292
+/// years); 0 for NaN.
+[[nodiscard]] inline std::int64_t nanoseconds_from_seconds(double seconds) noexcept {
+  if (std::isnan(seconds)) return 0;
+  const double ns = std::round(seconds * 1e9);
+  if (ns >= 9.2e18) return std::numeric_limits<std::int64_t>::max();
+  if (ns <= -9.2e18) return std::numeric_limits<std::int64_t>::min();
+  return static_cast<std::int64_t>(ns);
+}
+
+/// Exact nanoseconds of a decimal number of seconds ("1305031229.528748", "-0.5", "12"):
+/// digits beyond the ninth decimal are rounded half up. nullopt when the text is not a
+/// plain decimal number (no exponent, no sign other than a leading '-') or is outside
+/// +-9.2e9 s.
+[[nodiscard]] inline std::optional<std::int64_t> nanoseconds_from_decimal(std::string_view text) noexcept {
+  bool negative = false;
+  if (!text.empty() && (text.front() == '-' || text.front() == '+')) {
+    negative = text.front() == '-';
+    text.remove_prefix(1);
+  }
+  const std::size_t dot = text.find('.');
+  const std::string_view whole = text.substr(0, dot);
+  const std::string_view frac = dot == std::string_view::npos ? std::string_view() : text.substr(dot + 1);
+  if (whole.empty() && frac.empty()) return std::nullopt;
+  if (whole.size() > 10) return std::nullopt;
+  std::int64_t ns = 0;
+  for (char c : whole) {
+    if (c < '0' || c > '9') return std::nullopt;
+    ns = ns * 10 + (c - '0');
+  }
+  if (ns > 9200000000LL) return std::nullopt;
+  ns *= 1000000000;
+  std::int64_t scale = 100000000;
+  bool round_up = false;
+  for (std::size_t i = 0; i < frac.size(); ++i) {
+    const char c = frac[i];
+    if (c < '0' || c > '9') return std::nullopt;
+    if (i < 9) {
+      ns += (c - '0') * scale;
+      scale /= 10;
+    } else if (i == 9) {
+      round_up = c >= '5';
+    }
+  }
+  if (round_up) ++ns;
+  if (ns > 9200000000000000000LL) return std::nullopt;
+  return negative ? -ns : ns;
 }
 
 }  // namespace vmap

@@ -202,6 +202,7 @@ class BasicKeyframeSelector {
     f.index = map_.frames;
     f.name = "frame#" + std::to_string(f.index);
     f.timestamp = static_cast<double>(f.index);
+    f.time_ns = nanoseconds_from_seconds(f.timestamp);
     return push(f);
   }
 

@@ -714,6 +714,7 @@ class VisualMemory {
     f.index = index;
     f.name = "frame#" + std::to_string(f.index);
     f.timestamp = timestamp.value_or(static_cast<double>(f.index));
+    f.time_ns = nanoseconds_from_seconds(f.timestamp);
     return f;
   }
 

@@ -192,3 +192,42 @@ TEST_CASE("whole sub-second counts are seconds exact to the unit at Unix times")
   CHECK(vmap::seconds_from_count(42, 1) == 42.0);
   CHECK(vmap::seconds_from_nanoseconds(0) == 0.0);
 }
+
+TEST_CASE("frames carry their time in whole nanoseconds, exact where the source states it") {
+  // Decimal seconds as text: exact, the tenth decimal rounded half up.
+  CHECK(vmap::nanoseconds_from_decimal("1305031229.528748") == 1305031229528748000LL);
+  CHECK(vmap::nanoseconds_from_decimal("1403636579.7635555845") == 1403636579763555585LL);
+  CHECK(vmap::nanoseconds_from_decimal("-0.5") == -500000000LL);
+  CHECK(vmap::nanoseconds_from_decimal("12") == 12000000000LL);
+  CHECK(vmap::nanoseconds_from_decimal(".25") == 250000000LL);
+  CHECK_FALSE(vmap::nanoseconds_from_decimal("1e9").has_value());
+  CHECK_FALSE(vmap::nanoseconds_from_decimal("").has_value());
+  CHECK_FALSE(vmap::nanoseconds_from_decimal("9999999999.0").has_value());  // beyond int64 nanoseconds
+  CHECK(vmap::nanoseconds_from_seconds(1.5) == 1500000000LL);
+  CHECK(vmap::nanoseconds_from_seconds(-2.25) == -2250000000LL);
+
+  // EuRoC's data.csv: the 19 digits as they are, shifted exactly by a time offset.
+  const fs::path cam0 = sample_layout() / "cam0";
+  auto src = vmap::FrameSource::open(cam0, {.grey = true});
+  const auto ns = src.times_ns();
+  REQUIRE(ns.size() == 20);
+  CHECK(ns.front() == 1305031229528748000LL);
+  CHECK(src.next()->time_ns == 1305031229528748000LL);
+  auto shifted = vmap::FrameSource::open(cam0, {.time_offset = -1305031229.0});
+  CHECK(shifted.times_ns().front() == 528748000LL);
+  CHECK(shifted.next()->time_ns == 528748000LL);
+
+  // Folders named by numbers: nanoseconds from the digits, whatever their unit.
+  const cv::Mat img = vmap::test::textured_image(3, {32, 32});
+  const auto folder = [&](const std::string& name, const std::vector<std::string>& files) {
+    const fs::path d = vmap::test::scratch_dir(name);
+    for (const auto& f : files) cv::imwrite((d / f).string(), img);
+    return vmap::FrameSource::open(d).times_ns();
+  };
+  CHECK(folder("ns_names_ns", {"1403636579763555584.png", "1403636579813555456.png"}) ==
+        std::vector<std::int64_t>{1403636579763555584LL, 1403636579813555456LL});
+  CHECK(folder("ns_names_us", {"1403636579763555.png"}) == std::vector<std::int64_t>{1403636579763555000LL});
+  CHECK(folder("ns_names_s", {"1305031229.528748.png"}) == std::vector<std::int64_t>{1305031229528748000LL});
+  CHECK(folder("ns_names_index", {"000000.png", "000001.png"}) == std::vector<std::int64_t>{0, 1000000000LL});
+  CHECK(folder("ns_names_words", {"frame7.png", "frame9.png"}) == std::vector<std::int64_t>{0, 1000000000LL});
+}

@@ -91,7 +91,9 @@ TEST_CASE("list files: plain paths relative to the list, and TUM rgb.txt") {
   f = tum.next();
   REQUIRE(f);
   CHECK(f->timestamp == 100.25);  // file order, not timestamp order
+  CHECK(f->time_ns == 100250000000LL);
   CHECK(f->image.at<std::uint8_t>(0, 0) == 1);
+  CHECK(tum.times_ns() == std::vector<std::int64_t>{100500000000LL, 100250000000LL, 101000000000LL});
 }
 
 TEST_CASE("a corrupt or missing frame inside a sequence is reported and skipped") {
