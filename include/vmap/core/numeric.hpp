@@ -82,4 +82,15 @@ inline void check_in_range(double value, double lo, double hi, const std::string
   return std::string(buf, r.ptr);
 }
 
+/// `text` in double quotes, with '"' and '\' escaped by a backslash: a path in a
+/// description (a policy's `describe()`) reads back exactly whatever characters it holds.
+[[nodiscard]] inline std::string quote_text(std::string_view text) {
+  std::string out = "\"";
+  for (char c : text) {
+    if (c == '"' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out + '"';
+}
+
 }  // namespace vmap

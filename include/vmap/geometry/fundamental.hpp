@@ -2,6 +2,7 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/core/names.hpp>
 #include <vmap/core/numeric.hpp>
 #include <vmap/geometry/detail/robust.hpp>
 
@@ -11,6 +12,7 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace vmap {
@@ -22,6 +24,15 @@ enum class RobustMethod {
   lmeds,        ///< least median of squares
   eight_point,  ///< plain 8-point (fundamental only), every match is an inlier
 };
+
+/// The names of the methods: magsac, ransac, lmeds, 8point (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(RobustMethod) noexcept {
+  return detail::NameTable<RobustMethod, 4>{{{{RobustMethod::magsac, "magsac"},
+                                              {RobustMethod::ransac, "ransac"},
+                                              {RobustMethod::lmeds, "lmeds"},
+                                              {RobustMethod::eight_point, "8point"}}}};
+}
+[[nodiscard]] constexpr std::string_view to_string(RobustMethod m) noexcept { return names_of(m).name(m); }
 
 struct FundamentalOptions {
   RobustMethod method = RobustMethod::magsac;

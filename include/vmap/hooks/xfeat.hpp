@@ -34,6 +34,7 @@
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
+#include <vmap/core/numeric.hpp>
 #include <vmap/hooks/detail/dnn.hpp>
 #include <vmap/hooks/detail/onnx_shape.hpp>
 
@@ -419,8 +420,17 @@ class XFeatDescriptor {
 
   [[nodiscard]] const XFeatOptions& options() const noexcept { return options_; }
 
-  /// 64 floats of unit length, L2. Not described (DescribesItself): the model file is
-  /// not recorded.
+  /// The name and every option, the model by its path (core/concepts.hpp,
+  /// DescribesItself): a memory records it, and is read with the model it names.
+  [[nodiscard]] std::string describe() const { return describe(options_); }
+  /// describe() of a descriptor with these options, without loading the model.
+  [[nodiscard]] static std::string describe(const XFeatOptions& o) {
+    return "XFeatDescriptor model=" + quote_text(o.model.string()) + " input_size=" + std::to_string(o.input_size.width) +
+           "x" + std::to_string(o.input_size.height) + " top_k=" + std::to_string(o.top_k) +
+           " detection_threshold=" + exact_text(o.detection_threshold) + " nms_radius=" + std::to_string(o.nms_radius);
+  }
+
+  /// 64 floats of unit length, L2.
   [[nodiscard]] static DescriptorLayout layout() noexcept { return {CV_32FC1, 64, cv::NORM_L2}; }
   /// Whether the model runs only at its declared size or at any multiple of 32.
   [[nodiscard]] XFeatModelKind model_kind() const noexcept { return net_.kind(); }

@@ -34,6 +34,7 @@
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
+#include <vmap/core/numeric.hpp>
 #include <vmap/hooks/pair_matcher.hpp>
 #include <vmap/hooks/xfeat.hpp>
 #include <vmap/hooks/xfeat_fine.hpp>
@@ -129,6 +130,14 @@ class XFeatDenseDescriptor {
   }
 
   [[nodiscard]] const XFeatDenseOptions& options() const noexcept { return options_; }
+  /// The name and every option, the model by its path (core/concepts.hpp, DescribesItself).
+  [[nodiscard]] std::string describe() const { return describe(options_); }
+  /// describe() of a descriptor with these options, without loading the model.
+  [[nodiscard]] static std::string describe(const XFeatDenseOptions& o) {
+    return "XFeatDenseDescriptor model=" + quote_text(o.model.string()) + " input_size=" +
+           std::to_string(o.input_size.width) + "x" + std::to_string(o.input_size.height) +
+           " grid=" + (o.grid == XFeatGrid::refinable ? "refinable" : "best_pixel");
+  }
   [[nodiscard]] XFeatModelKind model_kind() const noexcept { return net_.kind(); }
   /// The network input size for an image of this size; its cells are (W/8) x (H/8).
   [[nodiscard]] cv::Size network_size(cv::Size image) const { return net_.network_size(image); }
@@ -210,6 +219,10 @@ class DenseMutualMatcher {
   }
 
   [[nodiscard]] const DenseMutualOptions& options() const noexcept { return options_; }
+  /// The name and its option (core/concepts.hpp, DescribesItself).
+  [[nodiscard]] std::string describe() const {
+    return std::string("DenseMutualMatcher normalise=") + (options_.normalise ? "1" : "0");
+  }
 
  private:
   /// Continuous rows, of unit length when the options say to normalise.

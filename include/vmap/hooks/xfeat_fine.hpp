@@ -26,6 +26,7 @@
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
+#include <vmap/core/numeric.hpp>
 #include <vmap/hooks/detail/dnn.hpp>
 
 #include <opencv2/core.hpp>
@@ -241,10 +242,10 @@ inline void refine_matches(XFeatRefiner& refiner, const Features& a, const Featu
 template <Estimator E>
 class XFeatRefined {
  public:
-  XFeatRefined(std::optional<XFeatFineOptions> fine, E estimator) : estimator_(std::move(estimator)) {
+  XFeatRefined(std::optional<XFeatFineOptions> fine, E estimator) : estimator_(std::move(estimator)), fine_(fine) {
     if (fine) pool_ = std::make_shared<Pool>(XFeatRefiner(std::move(*fine)));
   }
-  XFeatRefined(const XFeatRefined& other) : estimator_(other.estimator_) {
+  XFeatRefined(const XFeatRefined& other) : estimator_(other.estimator_), fine_(other.fine_) {
     if (other.pool_) pool_ = std::make_shared<Pool>(other.pool_->prototype);
   }
   XFeatRefined& operator=(const XFeatRefined& other) {
@@ -288,6 +289,21 @@ class XFeatRefined {
   [[nodiscard]] bool refines() const noexcept { return pool_ != nullptr; }
   [[nodiscard]] const E& estimator() const noexcept { return estimator_; }
 
+  /// The refinement (model by its path, threshold) and the wrapped estimator
+  /// (core/concepts.hpp, DescribesItself); without a refinement model it verifies as the
+  /// wrapped estimator does, and describes itself as that.
+  [[nodiscard]] std::string describe() const
+    requires DescribesItself<E>
+  {
+    return describe(fine_, std::string(estimator_.describe()));
+  }
+  /// describe() of a refinement with these options around an estimator so described.
+  [[nodiscard]] static std::string describe(const std::optional<XFeatFineOptions>& fine, const std::string& estimator) {
+    if (!fine) return estimator;
+    return "XFeatRefined model=" + quote_text(fine->model.string()) + " min_confidence=" +
+           exact_text(fine->min_confidence) + " estimator=(" + estimator + ")";
+  }
+
  private:
   struct Pool {
     explicit Pool(XFeatRefiner p) : prototype(std::move(p)) {}
@@ -316,6 +332,7 @@ class XFeatRefined {
   };
 
   E estimator_;
+  std::optional<XFeatFineOptions> fine_;  ///< as constructed (describe())
   std::shared_ptr<Pool> pool_;
 };
 

@@ -1076,8 +1076,10 @@ class VisualMemory {
   void read_policies(detail::BinaryReader& r) const {
     static constexpr const char* roles[4] = {"descriptor", "matcher", "estimator", "similarity"};
     for (std::size_t i = 0; i < 4; ++i) {
+      // A policy that did not describe itself when the memory was made recorded nothing,
+      // so there is nothing to contradict the one given now.
       const std::string recorded = r.str("policy record", detail::memory_max_policy);
-      if (recorded != policies_[i])
+      if (!recorded.empty() && recorded != policies_[i])
         detail::fail(r.source() + ": the " + roles[i] + " given to load (" +
                      (policies_[i].empty() ? std::string("not recorded") : policies_[i]) +
                      ") is not the one the memory was built with (" +
