@@ -2,6 +2,8 @@
 
 #include <opencv2/core.hpp>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <optional>
 #include <string_view>
@@ -47,6 +49,12 @@ struct RelativePose {
   cv::Matx33d rotation = cv::Matx33d::eye();
   cv::Vec3d translation;
   int points_in_front = 0;  ///< inliers triangulated in front of both cameras (cheirality)
+
+  /// The rotation's angle in degrees (from its trace).
+  [[nodiscard]] double rotation_degrees() const {
+    const double c = std::clamp((cv::trace(rotation) - 1.0) / 2.0, -1.0, 1.0);
+    return std::acos(c) * 180.0 / CV_PI;
+  }
 };
 
 /// The result of geometric verification of a set of matches.

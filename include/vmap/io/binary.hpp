@@ -70,6 +70,7 @@ class BinaryWriter {
   void u64(std::uint64_t v) { little_endian(v, 8); }
   /// Two's complement, as the u32 of the same bits.
   void i32(std::int32_t v) { u32(static_cast<std::uint32_t>(v)); }
+  void i64(std::int64_t v) { u64(static_cast<std::uint64_t>(v)); }
   void f32(float v) { u32(std::bit_cast<std::uint32_t>(v)); }
   void f64(double v) { u64(std::bit_cast<std::uint64_t>(v)); }
   /// n f32 values (e.g. a float matrix's row): one copy on a little-endian host.
@@ -119,6 +120,7 @@ class BinaryReader {
   std::uint32_t u32(std::string_view field) { return static_cast<std::uint32_t>(little_endian(4, field)); }
   std::uint64_t u64(std::string_view field) { return little_endian(8, field); }
   std::int32_t i32(std::string_view field) { return static_cast<std::int32_t>(u32(field)); }
+  std::int64_t i64(std::string_view field) { return static_cast<std::int64_t>(u64(field)); }
   float f32(std::string_view field) { return std::bit_cast<float>(u32(field)); }
   double f64(std::string_view field) { return std::bit_cast<double>(u64(field)); }
 

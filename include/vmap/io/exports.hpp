@@ -15,10 +15,13 @@
 //
 // Numbers are printed in the shortest decimal form that reads back as the same double
 // (std::to_chars: "1305031229.528748", not "1305031229.528748035"), in fixed notation and
-// independent of the C locale.
+// independent of the C locale; frame times exactly, from their whole nanoseconds
+// (Frame::time_ns: "1403636579.763555584", "1305031229.528748"). Names are one token: white
+// space in a name is written as '_', an empty name as '-'.
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/poses.hpp>
+#include <vmap/io/timestamps.hpp>
 #include <vmap/keyframe/visual_map.hpp>
 
 #include <opencv2/core.hpp>
@@ -27,6 +30,7 @@
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <charconv>
 #include <system_error>
 #include <string>
@@ -78,6 +82,13 @@ inline std::string shortest(double v) {
   return r.ec == std::errc() ? std::string(buf, r.ptr) : std::string("nan");
 }
 
+/// A name as one token of a line: white space as '_', empty as '-'.
+inline std::string name_token(std::string s) {
+  for (char& c : s)
+    if (c == ' ' || c == '\t' || c == '\n' || c == '\r' || c == '\v' || c == '\f') c = '_';
+  return s.empty() ? std::string("-") : s;
+}
+
 // Appends " field". Written as two appends, not `" " + field`: GCC 12 at -O3 reports a
 // false -Wrestrict on operator+(const char*, string&&).
 inline void append_field(std::string& out, const std::string& field) {
@@ -88,12 +99,16 @@ inline void append_field(std::string& out, const std::string& field) {
 }  // namespace detail
 
 /// A TUM trajectory of `poses` (their timestamps, positions and rotations), with a '#'
-/// header line.
-[[nodiscard]] inline std::string tum_trajectory_text(const std::vector<CameraPose>& poses) {
+/// header line. `times_ns` (one per pose, when given) are the exact times printed instead
+/// of the poses' seconds.
+[[nodiscard]] inline std::string tum_trajectory_text(const std::vector<CameraPose>& poses,
+                                                     const std::vector<std::int64_t>* times_ns = nullptr) {
+  detail::check(!times_ns || times_ns->size() == poses.size(), "tum_trajectory_text: one time per pose");
   std::string out = "# timestamp tx ty tz qx qy qz qw\n";
-  for (const auto& p : poses) {
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    const CameraPose& p = poses[i];
     const auto q = quaternion_from_rotation(p.rotation);
-    out += detail::shortest(p.timestamp);
+    out += times_ns ? seconds_text((*times_ns)[i]) : detail::shortest(p.timestamp);
     for (double v : {p.position[0], p.position[1], p.position[2], q[0], q[1], q[2], q[3]}) detail::append_field(out, detail::shortest(v));
     out += "\n";
   }
@@ -101,13 +116,14 @@ inline void append_field(std::string& out, const std::string& field) {
 }
 
 /// "frame_index name timestamp" per key image, with a '#' header line: the frame each key
-/// image came from, its name (file name, "<video>#<index>") and its time in seconds.
+/// image came from, its name (file name, "<video>#<index>") and its time in seconds,
+/// exact to the nanosecond.
 [[nodiscard]] inline std::string key_images_text(const std::vector<KeyImage>& keys) {
   std::string out = "# frame_index name timestamp\n";
   for (const auto& k : keys) {
     out += std::to_string(k.frame_index);
-    detail::append_field(out, k.name);
-    detail::append_field(out, detail::shortest(k.timestamp));
+    detail::append_field(out, detail::name_token(k.name));
+    detail::append_field(out, seconds_text(k.time_ns));
     out += '\n';
   }
   return out;
@@ -117,25 +133,19 @@ inline void append_field(std::string& out, const std::string& field) {
 struct LoopPair {
   std::size_t from = 0;  ///< the newer key image (its index)
   std::size_t to = 0;    ///< the older key image it revisits
-  double from_time = 0.0, to_time = 0.0;
+  std::int64_t from_time_ns = 0, to_time_ns = 0;  ///< the two frames' times (Frame::time_ns)
   std::string from_name, to_name;
   int inliers = 0;
 };
 
-/// The loop edges as frame timestamps and names, with a '#' header line. Names hold no
-/// white space in this format: a space in a name is written as '_'.
+/// The loop edges as frame timestamps and names, with a '#' header line.
 [[nodiscard]] inline std::string loop_pairs_text(const std::vector<LoopPair>& loops) {
-  const auto token = [](std::string s) {
-    for (char& c : s)
-      if (c == ' ' || c == '\t' || c == '\n' || c == '\r') c = '_';
-    return s.empty() ? std::string("-") : s;
-  };
   std::string out = "# query_time match_time query_name match_name inliers\n";
   for (const auto& l : loops) {
-    out += detail::shortest(l.from_time);
-    detail::append_field(out, detail::shortest(l.to_time));
-    detail::append_field(out, token(l.from_name));
-    detail::append_field(out, token(l.to_name));
+    out += seconds_text(l.from_time_ns);
+    detail::append_field(out, seconds_text(l.to_time_ns));
+    detail::append_field(out, detail::name_token(l.from_name));
+    detail::append_field(out, detail::name_token(l.to_name));
     detail::append_field(out, std::to_string(l.inliers));
     out += '\n';
   }

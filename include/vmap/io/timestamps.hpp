@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <limits>
 #include <optional>
+#include <string>
 #include <string_view>
 
 namespace vmap {
@@ -77,6 +78,19 @@ namespace vmap {
   if (round_up) ++ns;
   if (ns > 9200000000000000000LL) return std::nullopt;
   return negative ? -ns : ns;
+}
+
+/// A time of `ns` nanoseconds as exact decimal seconds, trailing zeros dropped
+/// ("1305031229.528748", "12", "-0.5").
+[[nodiscard]] inline std::string seconds_text(std::int64_t ns) {
+  const bool negative = ns < 0;
+  const std::uint64_t magnitude = negative ? std::uint64_t{0} - static_cast<std::uint64_t>(ns) : static_cast<std::uint64_t>(ns);
+  std::string out = (negative ? "-" : "") + std::to_string(magnitude / 1000000000U);
+  std::string fraction = std::to_string(magnitude % 1000000000U);
+  fraction.insert(0, 9 - fraction.size(), '0');
+  while (!fraction.empty() && fraction.back() == '0') fraction.pop_back();
+  if (!fraction.empty()) out += "." + fraction;
+  return out;
 }
 
 }  // namespace vmap

@@ -43,6 +43,7 @@
 #include <vmap/io/binary.hpp>
 #include <vmap/io/files.hpp>
 #include <vmap/io/image.hpp>
+#include <vmap/io/timestamps.hpp>
 #include <vmap/keyframe/front_end.hpp>
 #include <vmap/keyframe/selector.hpp>
 #include <vmap/keyframe/visual_map.hpp>
@@ -243,7 +244,10 @@ inline void write_features(BinaryWriter& w, const Features& f) {
   }
 }
 
-inline Features read_features(BinaryReader& r) {
+/// Reads write_features()'s bytes. With `keep` false the keypoints and descriptors are
+/// checked for size and skipped, not allocated: Features with only the norm and image
+/// size (what a memory keeps in RAM of a key image outside its working memory).
+inline Features read_features(BinaryReader& r, bool keep = true) {
   Features f;
   f.norm = r.i32("norm");
   if (f.norm != cv::NORM_HAMMING && f.norm != cv::NORM_HAMMING2 && f.norm != cv::NORM_L1 && f.norm != cv::NORM_L2)
@@ -256,6 +260,18 @@ inline Features read_features(BinaryReader& r) {
   const std::uint32_t k = r.u32("keypoint count");
   constexpr std::uint64_t keypoint_bytes = 28;
   r.require_items(k, keypoint_bytes, "keypoint count");
+  if (!keep) {
+    (void)r.bytes(std::uint64_t{k} * keypoint_bytes, "keypoints");
+    const int type = r.i32("descriptor type");
+    const int rows = r.i32("descriptor rows");
+    const int cols = r.i32("descriptor cols");
+    if (type != CV_8UC1 && type != CV_32FC1) r.corrupt("descriptor type " + std::to_string(type) + " is not supported");
+    if ((rows != 0 && rows != static_cast<int>(k)) || cols < 0 || cols > map_max_descriptor_cols || (rows == 0) != (cols == 0))
+      r.corrupt("invalid descriptor size");
+    const auto values = static_cast<std::uint64_t>(rows) * static_cast<std::uint64_t>(cols);
+    (void)r.bytes(type == CV_8UC1 ? values : values * sizeof(float), "descriptors");
+    return f;
+  }
   f.keypoints.resize(k);
   for (auto& kp : f.keypoints) {
     kp.pt.x = r.f32("keypoint");
@@ -396,6 +412,7 @@ inline VisualMap parse_map(std::string_view file, const std::string& name, const
     if (!map.keys.empty() && idx <= map.keys.back().frame_index) r.corrupt("key image frame indices are not increasing");
     k.frame_index = static_cast<std::size_t>(idx);
     k.timestamp = r.f64("timestamp");
+    k.time_ns = nanoseconds_from_seconds(k.timestamp);  // a map file keeps seconds only
     k.name = r.str("name", map_max_string);
     k.features = read_features(r);
     k.image = read_image(r, limits, total_pixels);

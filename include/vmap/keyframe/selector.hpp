@@ -120,6 +120,7 @@ struct PreparedFrame {
   std::string name;
   double timestamp = 0.0;
   cv::Mat image;  ///< kept only when SelectorOptions::keep_images
+  std::int64_t time_ns = 0;  ///< Frame::time_ns
 };
 
 /// What a selector needs besides its options and policies to continue a sequence exactly
@@ -187,7 +188,7 @@ class BasicKeyframeSelector {
     // prepare(), with the name's buffer taken from the last frame this selector dropped
     // (a frame name is longer than the short-string buffer: one allocation per frame).
     check_frame(frame);
-    Prepared p{front_.prepare(frame.image), frame.index, std::move(spare_name_), frame.timestamp, {}};
+    Prepared p{front_.prepare(frame.image), frame.index, std::move(spare_name_), frame.timestamp, {}, frame.time_ns};
     p.name.assign(frame.name);
     if (options_.keep_images) p.image = frame.image;
     return push(std::move(p));
@@ -209,8 +210,8 @@ class BasicKeyframeSelector {
   FrameResult push(Prepared frame) {
     FrameResult r;
     r.frame_index = frame.index;
-    ++map_.frames;
     if (!key_) {  // K_1 = I_1, and the first frame of a chain (start_chain)
+      ++map_.frames;
       r.similarity = 1.0;
       r.key_taken = true;
       r.key_frame = frame.index;
@@ -227,6 +228,7 @@ class BasicKeyframeSelector {
       deferred = front_.score_into(key_->item, frame.item, skip_below, s, true);
     else
       s = front_.score(key_->item, frame.item, skip_below);
+    ++map_.frames;  // after the score, which may throw: nothing changed before it
     r.raw_matches = s.raw_matches;
     r.exact = s.verified_run;
     r.similarity = s.verified_run ? s.similarity : s.upper_bound;
@@ -377,12 +379,50 @@ class BasicKeyframeSelector {
     map_ = std::move(s.map);
     if (!map_.keys.empty()) {
       const KeyImage& k = map_.keys.back();
-      key_ = Prepared{k.features, k.frame_index, k.name, k.timestamp, k.image};
+      key_ = Prepared{k.features, k.frame_index, k.name, k.timestamp, k.image, k.time_ns};
     }
     prev_ = std::move(s.previous);
     prev_scored_ = s.previous_score.has_value();
     prev_degeneracy_pending_ = s.degeneracy_deferred;
     if (prev_scored_) prev_score_ = std::move(*s.previous_score);
+  }
+
+  /// What push() changes, taken before it: rollback() undoes that push, so that a caller
+  /// whose own work after the push fails (a visual memory) leaves the selector as it was.
+  /// Costs a copy of I_{j-1}'s item and score.
+  struct Checkpoint {
+    std::size_t keys = 0, pairs = 0, frames = 0;
+    std::optional<Prepared> previous;
+    PairScore previous_score;
+    bool previous_scored = false;
+    bool degeneracy_pending = false;
+    bool chain_open = false;
+  };
+
+  [[nodiscard]] Checkpoint checkpoint() const {
+    return {map_.keys.size(), map_.pairs.size(), map_.frames, prev_, prev_score_, prev_scored_,
+            prev_degeneracy_pending_, !key_.has_value()};
+  }
+
+  /// Undoes the pushes since `c` was taken (at most one: a frame adds at most one key
+  /// image and one link). As restore(), needs Features as the item.
+  void rollback(Checkpoint c)
+    requires std::same_as<Item, Features>
+  {
+    detail::check(c.keys <= map_.keys.size() && c.pairs <= map_.pairs.size() && c.frames <= map_.frames,
+                  "KeyframeSelector::rollback: the checkpoint is not of this selector");
+    map_.keys.resize(c.keys);
+    map_.pairs.resize(c.pairs);
+    map_.frames = c.frames;
+    key_.reset();
+    if (!c.chain_open && !map_.keys.empty()) {
+      const KeyImage& k = map_.keys.back();
+      key_ = Prepared{k.features, k.frame_index, k.name, k.timestamp, k.image, k.time_ns};
+    }
+    prev_ = std::move(c.previous);
+    prev_score_ = std::move(c.previous_score);
+    prev_scored_ = c.previous_scored;
+    prev_degeneracy_pending_ = c.degeneracy_pending;
   }
 
   /// The current key image's item (its features), nullptr before the first frame. The
@@ -404,7 +444,7 @@ class BasicKeyframeSelector {
 
   static Prepared prepare_with(F& front, bool keep_images, const Frame& frame) {
     check_frame(frame);
-    Prepared p{front.prepare(frame.image), frame.index, frame.name, frame.timestamp, {}};
+    Prepared p{front.prepare(frame.image), frame.index, frame.name, frame.timestamp, {}, frame.time_ns};
     if (keep_images) p.image = frame.image;
     return p;
   }
@@ -432,6 +472,7 @@ class BasicKeyframeSelector {
     k.frame_index = p.index;
     k.name = p.name;
     k.timestamp = p.timestamp;
+    k.time_ns = p.time_ns;
     k.features = front_.features_of(p.item);
     k.image = p.image;
     if (link) {

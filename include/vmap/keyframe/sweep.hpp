@@ -286,7 +286,7 @@ template <Descriptor D, Matcher M, Estimator E, Similarity S>
       }
       cache.prefetch(front, keys, n, skips, options.parallel_pairs);
     }
-    for (auto& s : selectors) s.push(PreparedFrame<std::size_t>{n, p.index, p.name, p.timestamp, {}});
+    for (auto& s : selectors) s.push(PreparedFrame<std::size_t>{n, p.index, p.name, p.timestamp, {}, p.time_ns});
     if (n > 0) cache.forget_before(n - 1);
     // Still readable: frame n (the next step's I_{j-1}) and each selector's key image.
     live.assign(1, n);
@@ -300,7 +300,7 @@ template <Descriptor D, Matcher M, Estimator E, Similarity S>
   auto prepare = [&](const Frame& f) {
     detail::check(!f.image.empty(),
                   [&] { return "threshold sweep: frame " + std::to_string(f.index) + " is an empty image"; });
-    return PreparedFrame<Features>{front.prepare(f.image), f.index, f.name, f.timestamp, {}};
+    return PreparedFrame<Features>{front.prepare(f.image), f.index, f.name, f.timestamp, {}, f.time_ns};
   };
   if (options.pipelined)
     detail::run_pipelined(source, 4, prepare, select);

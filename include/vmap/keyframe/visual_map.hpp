@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -23,6 +24,7 @@ struct KeyImage {
   double timestamp = 0.0;
   Features features;  ///< the features it was compared with (empty for pair matchers)
   cv::Mat image;      ///< the image, when the selector keeps images (else empty)
+  std::int64_t time_ns = 0;  ///< `timestamp` in whole nanoseconds (Frame::time_ns)
 };
 
 /// The link between key image i and key image i+1.

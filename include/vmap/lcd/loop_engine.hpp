@@ -84,6 +84,9 @@ enum class CandidateIndex : std::uint8_t {
   return c == CandidateIndex::tree || c == CandidateIndex::tree_ranked;
 }
 
+/// The most queries temporal consistency may ask to agree (LoopOptions).
+inline constexpr std::size_t max_temporal_consistency = 1000;
+
 /// The options of the loop engine, the same names for LoopDetector, VisualMemory and the
 /// command line.
 struct LoopOptions {
@@ -152,6 +155,11 @@ struct PlaceCandidate {
   int inliers = 0;         ///< 0 unless verified
   double confidence = 0.0;
   CandidateStage stage = CandidateStage::not_in_top_k;
+  int matches = 0;         ///< tentative correspondences verified (0 before verification)
+  /// The verification's status and model (F, or E with a calibrated estimator; zeros
+  /// unless verified).
+  VerificationStatus status = VerificationStatus::too_few_matches;
+  cv::Matx33d model = cv::Matx33d::zeros();
 };
 
 /// The answer for one query (a frame of the stream, or an image to localize).
@@ -233,57 +241,83 @@ struct LoopEngineState {
 
 namespace detail {
 
-// A memory saves every LoopOptions field: write_loop_search_options (the window, the top
-// k and the inlier floor) in its options, write_decision_options (the rest of the
-// decision, the temporal and revisit rules) beside the engine's state, and MemoryLabels
-// (eq. 3's threshold, the candidate source, m) with the label tree.
-static_assert(field_count<LoopOptions>() == 10 && field_count<PlaceDecisionOptions>() == 7 &&
-                  field_count<LabelVectorOptions>() == 1,
-              "a new loop or decision option must be written and read by one of the codecs that save them");
-
-/// The loop options a memory keeps with its own: the window, the top k and the inlier
-/// floor; the caller checks the options whole (LoopEngine::check_options).
-inline void write_loop_search_options(BinaryWriter& w, const LoopOptions& o) {
+/// LoopOptions whole, as a saved memory keeps them (memory/detail/record_codecs.hpp):
+/// eq. 3's threshold, the window, m, the candidate source, the top k, the BoW floor, the
+/// temporal and revisit rules, and the place decision's options. The reader checks
+/// them with check_loop_options, as the engine's constructor does.
+inline void write_loop_options(BinaryWriter& w, const LoopOptions& o) {
+  static_assert(field_count<LoopOptions>() == 10 && field_count<PlaceDecisionOptions>() == 7 &&
+                    field_count<LabelVectorOptions>() == 1,
+                "a new loop or decision option must be written and read here");
+  w.f32(o.labels.min_score);
   w.u64(o.window);
+  w.u64(o.min_candidates);
+  w.u8(static_cast<std::uint8_t>(o.index));
   w.u64(o.top_k);
-  w.i32(o.decision.min_inliers);
-}
-
-inline void read_loop_search_options(BinaryReader& r, LoopOptions& o) {
-  o.window = static_cast<std::size_t>(r.u64("window"));
-  o.top_k = static_cast<std::size_t>(r.u64("top k"));
-  o.decision.min_inliers = r.i32("min_loop_inliers");
-}
-
-/// The place decision's options of `o` (temporal consistency, BoW floor, revisit rule,
-/// PlaceDecisionOptions), as the memory's section "dcsn" begins.
-inline void write_decision_options(BinaryWriter& w, const LoopOptions& o) {
+  w.f64(o.min_bow_score);
   w.u64(o.temporal_consistency);
   w.u64(o.temporal_tolerance);
-  w.f64(o.min_bow_score);
   w.f64(o.left_ratio);
-  w.f64(o.decision.min_confidence);
-  w.f64(o.decision.chance_inlier_rate);
-  w.f64(o.decision.half_significance);
-  w.i32(o.decision.spread_grid);
-  w.f64(o.decision.full_spread);
-  w.f64(o.decision.ambiguity_ratio);
+  const PlaceDecisionOptions& d = o.decision;
+  w.f64(d.min_confidence);
+  w.i32(d.min_inliers);
+  w.f64(d.chance_inlier_rate);
+  w.f64(d.half_significance);
+  w.i32(d.spread_grid);
+  w.f64(d.full_spread);
+  w.f64(d.ambiguity_ratio);
 }
 
-/// Reads write_decision_options()'s bytes into `o`; the caller checks the options whole
-/// (LoopEngine::check_options).
-inline void read_decision_options(BinaryReader& r, LoopOptions& o) {
+/// LoopOptions that an engine can run, named by `owner` ("MemoryOptions.loops"): the one
+/// check of the constructors and of a saved memory's reader.
+inline void check_loop_options(const LoopOptions& o, std::string_view owner) {
+  check_label_min_score(o.labels.min_score);
+  check_place_decision_options(o.decision, owner);
+  check(std::isfinite(o.min_bow_score) && o.min_bow_score >= 0,
+        [&] { return option_name(owner, ".min_bow_score must be finite and >= 0"); });
+  check(std::isfinite(o.left_ratio) && o.left_ratio >= 0 && o.left_ratio <= 1,
+        [&] { return option_name(owner, ".left_ratio must be in [0, 1]"); });
+  check(o.index <= CandidateIndex::brute_force, [&] { return option_name(owner, ".index is not a candidate source"); });
+  // DBoW2's islands confirm a loop over a few queries; more than a thousand would hold
+  // every loop back for a whole run.
+  check(o.temporal_consistency <= max_temporal_consistency, [&] {
+    return option_name(owner, ".temporal_consistency must be at most ") + std::to_string(max_temporal_consistency) +
+           ", got " + std::to_string(o.temporal_consistency);
+  });
+  if (ranks(o.index))
+    check(o.top_k >= 1, [&] {
+      return option_name(owner, ".top_k must be >= 1 for the ") + std::string(to_string(o.index)) + " candidate source";
+    });
+}
+
+/// Reads write_loop_options()'s bytes, checked (check_loop_options) as `owner`.
+[[nodiscard]] inline LoopOptions read_loop_options(BinaryReader& r, std::string_view owner) {
+  LoopOptions o;
+  o.labels.min_score = r.f32("label min_score");
+  o.window = static_cast<std::size_t>(r.u64("window"));
+  o.min_candidates = static_cast<std::size_t>(r.u64("min_candidates"));
+  const std::uint8_t index = r.u8("candidate source");
+  if (index > static_cast<std::uint8_t>(CandidateIndex::brute_force)) r.corrupt("unknown candidate source");
+  o.index = static_cast<CandidateIndex>(index);
+  o.top_k = static_cast<std::size_t>(r.u64("top k"));
+  o.min_bow_score = r.f64("min_bow_score");
   o.temporal_consistency = static_cast<std::size_t>(r.u64("temporal_consistency"));
   o.temporal_tolerance = static_cast<std::size_t>(r.u64("temporal_tolerance"));
-  o.min_bow_score = r.f64("min_bow_score");
   o.left_ratio = r.f64("left_ratio");
-  o.decision.min_confidence = r.f64("min_confidence");
-  o.decision.chance_inlier_rate = r.f64("chance_inlier_rate");
-  o.decision.half_significance = r.f64("half_significance");
-  o.decision.spread_grid = r.i32("spread_grid");
-  o.decision.full_spread = r.f64("full_spread");
-  o.decision.ambiguity_ratio = r.f64("ambiguity_ratio");
-  if (o.temporal_consistency > 1000) r.corrupt("temporal_consistency above 1000");
+  PlaceDecisionOptions& d = o.decision;
+  d.min_confidence = r.f64("min_confidence");
+  d.min_inliers = r.i32("min_inliers");
+  d.chance_inlier_rate = r.f64("chance_inlier_rate");
+  d.half_significance = r.f64("half_significance");
+  d.spread_grid = r.i32("spread_grid");
+  d.full_spread = r.f64("full_spread");
+  d.ambiguity_ratio = r.f64("ambiguity_ratio");
+  try {
+    check_loop_options(o, owner);
+  } catch (const Error& e) {
+    r.corrupt(e.what());
+  }
+  return o;
 }
 
 template <class E>
@@ -333,19 +367,7 @@ class LoopEngine {
       });
   }
 
-  static void check_options(const LoopOptions& o, std::string_view owner) {
-    detail::check_label_min_score(o.labels.min_score);
-    detail::check_place_decision_options(o.decision, owner);
-    detail::check(std::isfinite(o.min_bow_score) && o.min_bow_score >= 0,
-                  [&] { return detail::option_name(owner, ".min_bow_score must be finite and >= 0"); });
-    detail::check(std::isfinite(o.left_ratio) && o.left_ratio >= 0 && o.left_ratio <= 1,
-                  [&] { return detail::option_name(owner, ".left_ratio must be in [0, 1]"); });
-    if (ranks(o.index))
-      detail::check(o.top_k >= 1, [&] {
-        return detail::option_name(owner, ".top_k must be >= 1 for the ") + std::string(to_string(o.index)) +
-               " candidate source";
-      });
-  }
+  static void check_options(const LoopOptions& o, std::string_view owner) { detail::check_loop_options(o, owner); }
 
   /// Frame `frames()` (its features `f`, its label vector for the label sources): its
   /// loop decision against the frames before it, then it is indexed.
@@ -492,6 +514,8 @@ class LoopEngine {
   [[nodiscard]] const Rank& ranker() const noexcept { return ranker_; }
   [[nodiscard]] const M& matcher() const noexcept { return matcher_; }
   [[nodiscard]] const E& estimator() const noexcept { return estimator_; }
+  /// The model its verifications fit (F, or E for an essential-matrix estimator).
+  [[nodiscard]] PlaceModel model() const noexcept { return model_; }
   [[nodiscard]] const ConsistencyState<std::size_t>& consistency() const noexcept { return consistency_.state(); }
   /// What restore() takes back besides the label vectors.
   [[nodiscard]] LoopEngineState state() const {
@@ -587,13 +611,14 @@ class LoopEngine {
       ++d.verifications;
       if (!v.ok()) {
         ++d.failed_verifications;
-        d.considered.push_back({j, score, 0, 0.0, CandidateStage::verification_failed});
+        d.considered.push_back({j, score, 0, 0.0, CandidateStage::verification_failed, static_cast<int>(matches.size()),
+                                v.status, cv::Matx33d::zeros()});
         continue;
       }
       PlaceEvidence e = measure_place_evidence(f, old, matches, v, model_, dec);
       e.bow_score = score;
       const double conf = place_confidence(e, dec);
-      d.considered.push_back({j, score, e.inliers, conf, CandidateStage::weaker});
+      d.considered.push_back({j, score, e.inliers, conf, CandidateStage::weaker, e.matches, v.status, v.model});
       verified.push_back({j, conf, e, std::move(v), d.considered.size() - 1});
     }
     d.verify_ms = ms_since(t0);

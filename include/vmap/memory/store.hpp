@@ -1,6 +1,8 @@
 #pragma once
 
-// A visual memory kept in an SQLite file (io/sqlite.hpp), written key image by key image.
+// A visual memory kept in an SQLite file (io/sqlite.hpp), written key image by key image:
+// the embedded back-end of the memory's records (memory/records.hpp; the other is the
+// single file of memory/vmem.hpp).
 //
 //   auto store = vmap::MemoryStore::create("run.vmdb");
 //   vmap::OrbVisualMemory memory;
@@ -9,31 +11,31 @@
 //   ...
 //   auto again = vmap::MemoryStore::open("run.vmdb").load<vmap::OrbVisualMemory>();
 //
-// sync() writes what the memory made since the last sync, in one transaction: each new
-// key image (its features, pixels, pose and detections), the link to it, the bag of
-// words of each key image newly checked for loops, each new loop edge, and the few small
-// rows of state (the selector's I_{j-1}, the loop engine's counters, the options); the
-// vocabulary and the GCS only when they change. Rows once written are never rewritten,
-// so a sync costs the same at key image 10 as at key image 10,000, and a key image's
-// JPEG or PNG is encoded once.
+// sync() writes the records the memory made since the last sync (VisualMemory::records),
+// in one transaction: each new key image (its features, pixels, pose and detections),
+// the link to it, the bag of words of each key image newly checked for loops, each new
+// loop edge, and the few small rows of state (the selector's I_{j-1}, the loop engine's
+// counts, the options); the vocabulary and the GCS only when they change. Rows once
+// written are never rewritten, so a sync costs the same at key image 10 as at key image
+// 10,000, and a key image's JPEG or PNG is encoded once.
 //
-// sync() collects and serialises the rows in the caller's thread (copies: the memory
-// changes once sync() returns) and hands them to the store's writer thread, which runs
-// the transaction (inserts, COMMIT and its fsync) while the caller pushes the next frame.
-// One sync is in flight at a time: sync() first waits for the previous one's commit.
-// A crash or power cut thus loses at most the sync in flight (SQLite's write-ahead log
-// with synchronous=FULL makes each committed one durable); the file stays a valid memory.
-// A transaction that fails in the writer thread is thrown as a vmap::Error by the next
-// sync(), flush() or reader of the store (below); it stored nothing, and the sync after
-// the error writes its rows again. flush() waits until every sync handed over is
-// committed (and throws its error). The destructor waits too but cannot throw, so a
-// failure of the last sync is seen only by a flush() (or checkpoint()) before the store
-// goes out of scope, as the command line does at the end of a run; a store destroyed
-// without one (e.g. while another exception unwinds) drops it.
+// sync() encodes the rows in the caller's thread (the memory changes once sync()
+// returns) and hands them to the store's writer thread, which runs the transaction
+// (inserts, COMMIT and its fsync) while the caller pushes the next frame. One sync is in
+// flight at a time: sync() first waits for the previous one's commit. A crash or power
+// cut thus loses at most the sync in flight (SQLite's write-ahead log with
+// synchronous=FULL makes each committed one durable); the file stays a valid memory. A
+// transaction that fails in the writer thread is thrown as a vmap::Error by the next
+// sync(), flush() or reader of the store; it stored nothing, and the sync after the
+// error writes its rows again. The destructor waits too but cannot throw: flush() (or
+// checkpoint()) before the store goes out of scope to learn a failure of the last sync.
 //
-// load() joins the rows back into the memory file's sections (memory/visual_memory.hpp)
-// and parses them with the same checks as a .vmem file: a memory loaded from a store is
-// the memory that was synced, and pushing on continues exactly as the uninterrupted run.
+// load() reads the rows back into records and rebuilds the memory from them
+// (VisualMemory::from_records), with the same checks as a .vmem file: a memory loaded
+// from a store is the memory that was synced, and pushing on continues exactly as the
+// uninterrupted run. Every row is checked: its CRC-32 (each blob's), its plain columns
+// against the record they repeat, and the row counts against the counts the state
+// records, so a damaged, deleted or duplicated row is an Error naming it.
 //
 // A working memory bounds the RAM of a long run: bound(memory, N) keeps the features of
 // the memory's N most recent key images in RAM, sync() releases the older ones once
@@ -47,21 +49,23 @@
 //
 // Threading: a MemoryStore object is used by one thread at a time (the one that pushes
 // into the memory). Its writer thread uses the SQLite connection only while a sync is
-// in flight; everything else that reads or writes the file through the object
-// (key_images(), loops(), synced(), note(), set_note(), load(), load_bounded(),
-// checkpoint(), key_image_bytes(), features(), bound()) waits for that sync first
-// (flush()), so the connection is used by one thread at a time.
+// in flight; everything else that reads or writes the file through the object waits for
+// that sync first (flush()), so the connection is used by one thread at a time.
 //
-// Schema version 3 (PRAGMA application_id 0x564D4150 "VMAP", PRAGMA user_version 3):
-// the tables meta, key_images, links, loops, notes and sessions, whose columns and blobs
-// (each the bytes of the .vmem section of that content) are documented for readers
-// without vmap in examples/memory.md, "The memory store". A reader reads a store of
-// version 1 (no sessions table: one session) or 2 (no deferred degeneracy in the
-// selector's blob) as it is; a writer brings it to version 3 when it opens it.
+// Schema version 4 (PRAGMA application_id 0x564D4150 "VMAP", PRAGMA user_version 4): the
+// tables meta, key_images, links, loops, notes and sessions, whose columns and blobs
+// (each the bytes of one record, memory/detail/record_codecs.hpp) are documented for
+// readers without vmap in examples/memory.md, "The memory store". A reader reads a store
+// of version 1 (no sessions table: one session), 2 or 3 (records as the single-file
+// format's version 4, no checksums) as it is; a writer brings it to version 4 when it
+// opens it, in one transaction.
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/binary.hpp>
 #include <vmap/io/sqlite.hpp>
+#include <vmap/memory/detail/format.hpp>
+#include <vmap/memory/detail/record_codecs.hpp>
+#include <vmap/memory/records.hpp>
 #include <vmap/memory/visual_memory.hpp>
 #include <vmap/place/database.hpp>
 
@@ -79,41 +83,55 @@
 #include <string_view>
 #include <system_error>
 #include <thread>
+#include <tuple>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
 namespace vmap {
 
 /// The store's schema version (PRAGMA user_version).
-inline constexpr std::int64_t memory_store_version = 3;
+inline constexpr std::int64_t memory_store_version = 4;
 /// PRAGMA application_id of a memory store: "VMAP".
 inline constexpr std::int64_t memory_store_application_id = 0x564D4150;
 
 namespace detail {
 
-/// One sync's rows, copied out of the memory in the caller's thread (the memory changes
-/// once sync() returns) for the store's writer thread to insert.
+/// The CRC-32 of a row's blobs, as the store records it.
+inline std::int64_t row_crc(std::string_view a, std::string_view b = {}) {
+  std::string joined;
+  joined.reserve(a.size() + b.size());
+  joined.append(a).append(b);
+  return static_cast<std::int64_t>(crc32(joined));
+}
+
+/// One sync's rows, encoded in the caller's thread for the store's writer thread.
 struct MemoryStoreRows {
   struct Key {
     std::int64_t id = 0, frame_index = 0;
     double timestamp = 0.0;
+    std::int64_t time_ns = 0;
     std::string name;
     std::int64_t keypoints = 0;
     std::string record, detections;
+    std::int64_t crc = 0;
   };
   struct Link {
     std::int64_t key = 0, matches = 0, inliers = 0;
     double similarity = 0.0;
     std::string record;
+    std::int64_t crc = 0;
   };
   struct Bow {
     std::int64_t key = 0;
     std::string record;
+    std::int64_t crc = 0;
   };
   struct Loop {
     std::int64_t id = 0, from_key = 0, to_key = 0, inliers = 0;
     double confidence = 0.0;
     std::string record;
+    std::int64_t crc = 0;
   };
   struct Session {
     std::int64_t id = 0, first_key = 0, first_frame = 0;
@@ -125,6 +143,128 @@ struct MemoryStoreRows {
   std::vector<Session> sessions;
   std::vector<std::pair<const char*, std::string>> meta;  ///< the state rows (name, bytes), rewritten at every sync
 };
+
+/// The counts the store records with every sync ("counts"): key images, loop edges, bags
+/// of words and sessions, so that a missing or extra row is found.
+inline std::string store_counts(std::size_t keys, std::size_t loops, std::size_t bows, std::size_t sessions) {
+  BinaryWriter w;
+  w.u64(keys);
+  w.u64(loops);
+  w.u64(bows);
+  w.u64(sessions);
+  return std::move(w).take();
+}
+
+/// The rows of the records a memory made since the store's last sync (a delta: the
+/// lists start where the store's rows end).
+inline MemoryStoreRows store_rows(const MemoryRecords& r) {
+  const ImageStorage storage = r.options.images;
+  const int quality = r.options.jpeg_quality;
+  MemoryStoreRows rows;
+  for (std::size_t i = 0; i < r.keys.size(); ++i) {
+    const KeyImageRecord& k = r.keys[i];
+    BinaryWriter record, detections;
+    write_key_record(record, k.key, k.key.features, k.pose, storage, quality);
+    memory_write_detections(detections, k.detections);
+    MemoryStoreRows::Key row{static_cast<std::int64_t>(r.first_key + i),
+                             static_cast<std::int64_t>(k.key.frame_index),
+                             k.key.timestamp,
+                             k.key.time_ns,
+                             k.key.name,
+                             static_cast<std::int64_t>(k.key.features.keypoints.size()),
+                             std::move(record).take(),
+                             std::move(detections).take(),
+                             0};
+    row.crc = row_crc(row.record, row.detections);
+    rows.keys.push_back(std::move(row));
+  }
+  const std::size_t first_linked = std::max<std::size_t>(r.first_key, 1);
+  for (std::size_t i = 0; i < r.links.size(); ++i) {
+    const KeyPair& p = r.links[i];
+    BinaryWriter record;
+    write_key_pair(record, p);
+    MemoryStoreRows::Link row{static_cast<std::int64_t>(first_linked + i), p.matches, p.inliers, p.similarity,
+                              std::move(record).take(), 0};
+    row.crc = row_crc(row.record);
+    rows.links.push_back(std::move(row));
+  }
+  for (std::size_t i = 0; i < r.bows.size(); ++i) {
+    const auto id = static_cast<std::uint32_t>(r.first_bow + i);
+    MemoryStoreRows::Bow row{id, PlaceDatabase<std::uint32_t>::record_of(id, r.bows[i]), 0};
+    row.crc = row_crc(row.record);
+    rows.bows.push_back(std::move(row));
+  }
+  for (std::size_t i = 0; i < r.loops.size(); ++i) {
+    const LoopEdge& e = r.loops[i];
+    BinaryWriter record;
+    write_loop_record(record, e);
+    MemoryStoreRows::Loop row{static_cast<std::int64_t>(r.first_loop + i), e.from, e.link.key, e.link.inliers,
+                              e.link.confidence, std::move(record).take(), 0};
+    row.crc = row_crc(row.record);
+    rows.loops.push_back(std::move(row));
+  }
+  for (std::size_t i = 0; i < r.sessions.size(); ++i)
+    rows.sessions.push_back({static_cast<std::int64_t>(r.first_session + i),
+                             static_cast<std::int64_t>(r.sessions[i].first_key),
+                             static_cast<std::int64_t>(r.sessions[i].first_frame)});
+  // The small state, rewritten at every sync (a few hundred bytes, and I_{j-1}'s features).
+  auto& meta = rows.meta;
+  const auto add = [&](const char* name, BinaryWriter&& w) { meta.emplace_back(name, std::move(w).take()); };
+  {
+    BinaryWriter w;
+    write_memory_options(w, r.options, storage);
+    add("options", std::move(w));
+  }
+  {
+    BinaryWriter w;
+    for (const std::string& p : r.policies) w.str(p, memory_max_policy, "MemoryStore::sync: a policy record");
+    add("policies", std::move(w));
+  }
+  {
+    BinaryWriter w;
+    write_labels_record(w, r.labelled, r.schema);
+    add("labels", std::move(w));
+  }
+  {
+    BinaryWriter w;
+    memory_write_detections(w, r.selector.previous ? r.selector.previous->detections : std::vector<Detection>{});
+    add("previous_detections", std::move(w));
+  }
+  {
+    BinaryWriter w;
+    write_selector_record(w, r.selector, storage, quality);
+    add("selector", std::move(w));
+  }
+  {
+    BinaryWriter w;
+    r.engine.write(w);
+    add("decision", std::move(w));
+  }
+  {
+    BinaryWriter w;
+    w.u8(static_cast<std::uint8_t>(r.options.scoring));
+    w.u64(r.words);
+    add("database", std::move(w));
+  }
+  {
+    BinaryWriter w;
+    w.u64(r.frames);
+    add("frames", std::move(w));
+  }
+  meta.emplace_back("counts", store_counts(r.key_count(), r.first_loop + r.loops.size(), r.first_bow + r.bows.size(),
+                                           r.first_session + r.sessions.size()));
+  if (r.vocabulary) {
+    BinaryWriter w;
+    write_vocabulary_record(w, *r.vocabulary);
+    add("vocabulary", std::move(w));
+  }
+  if (r.gcs_written) {
+    BinaryWriter w;
+    write_gcs_record(w, r.gcs);
+    add("gcs", std::move(w));
+  }
+  return rows;
+}
 
 /// A store's SQLite connection and, for a writer, the thread that commits its syncs, one
 /// at a time. MemoryStore holds it on the heap, so that the thread keeps using it while
@@ -154,22 +294,30 @@ class MemoryStoreConnection {
 
   /// Prepares the writer's statements and starts its thread.
   void start_writer() {
-    insert_key_.emplace(db.prepare(
-        "INSERT INTO key_images(id, frame_index, timestamp, name, keypoints, record, detections) VALUES(?,?,?,?,?,?,?)",
-        "insert a key image"));
-    insert_link_.emplace(
-        db.prepare("INSERT INTO links(key, matches, inliers, similarity, record) VALUES(?,?,?,?,?)", "insert a link"));
-    update_bow_.emplace(db.prepare("UPDATE key_images SET bow = ? WHERE id = ?", "write a bag of words"));
-    insert_loop_.emplace(db.prepare(
-        "INSERT INTO loops(id, from_key, to_key, inliers, confidence, record) VALUES(?,?,?,?,?,?)", "insert a loop edge"));
-    put_meta_.emplace(db.prepare("INSERT OR REPLACE INTO meta(name, value) VALUES(?,?)", "write the state"));
-    insert_session_.emplace(
-        db.prepare("INSERT INTO sessions(id, first_key, first_frame) VALUES(?,?,?)", "insert a session"));
+    prepare_statements();
     try {
       thread_ = std::thread([this] { run(); });
     } catch (const std::system_error& e) {
       db.fail(std::string("cannot start its writer thread: ") + e.what());
     }
+  }
+
+  /// Prepares the statements that insert rows (once).
+  void prepare_statements() {
+    if (insert_key_) return;
+    insert_key_.emplace(db.prepare(
+        "INSERT INTO key_images(id, frame_index, timestamp, time_ns, name, keypoints, record, detections, crc) "
+        "VALUES(?,?,?,?,?,?,?,?,?)",
+        "insert a key image"));
+    insert_link_.emplace(db.prepare(
+        "INSERT INTO links(key, matches, inliers, similarity, record, crc) VALUES(?,?,?,?,?,?)", "insert a link"));
+    update_bow_.emplace(db.prepare("UPDATE key_images SET bow = ?, bow_crc = ? WHERE id = ?", "write a bag of words"));
+    insert_loop_.emplace(db.prepare(
+        "INSERT INTO loops(id, from_key, to_key, inliers, confidence, record, crc) VALUES(?,?,?,?,?,?,?)",
+        "insert a loop edge"));
+    put_meta_.emplace(db.prepare("INSERT OR REPLACE INTO meta(name, value, crc) VALUES(?,?,?)", "write the state"));
+    insert_session_.emplace(
+        db.prepare("INSERT INTO sessions(id, first_key, first_frame) VALUES(?,?,?)", "insert a session"));
   }
 
   /// Hands one sync's rows to the writer thread. None may be in flight (wait() first):
@@ -192,6 +340,14 @@ class MemoryStoreConnection {
     return std::exchange(error_, nullptr);
   }
 
+  /// Inserts rows in the caller's thread, in the caller's transaction (a store being
+  /// brought to the current version), before the writer thread starts.
+  void write_now(const MemoryStoreRows& rows) {
+    check(!thread_.joinable(), "MemoryStoreConnection::write_now: the writer thread runs");
+    prepare_statements();
+    insert(rows);
+  }
+
  private:
   void run() noexcept {
     std::unique_lock lock(mutex_);
@@ -202,7 +358,9 @@ class MemoryStoreConnection {
       lock.unlock();
       std::exception_ptr error;
       try {
-        write(*rows_);
+        sqlite::Transaction t(db, "write the memory");
+        insert(*rows_);
+        t.commit();
       } catch (const std::exception& e) {
         error = std::make_exception_ptr(Error(std::string(e.what()) +
                                               " (an earlier sync, committed in the store's writer thread: it stored "
@@ -220,24 +378,25 @@ class MemoryStoreConnection {
     }
   }
 
-  void write(const MemoryStoreRows& rows) {
-    sqlite::Transaction t(db, "write the memory");
+  void insert(const MemoryStoreRows& rows) {
     for (const auto& k : rows.keys) {
       insert_key_->bind(1, k.id)
           .bind(2, k.frame_index)
           .bind(3, k.timestamp)
-          .bind_text(4, k.name)
-          .bind(5, k.keypoints)
-          .bind_blob(6, k.record)
-          .bind_blob(7, k.detections);
+          .bind(4, k.time_ns)
+          .bind_text(5, k.name)
+          .bind(6, k.keypoints)
+          .bind_blob(7, k.record)
+          .bind_blob(8, k.detections)
+          .bind(9, k.crc);
       insert_key_->run();
     }
     for (const auto& l : rows.links) {
-      insert_link_->bind(1, l.key).bind(2, l.matches).bind(3, l.inliers).bind(4, l.similarity).bind_blob(5, l.record);
+      insert_link_->bind(1, l.key).bind(2, l.matches).bind(3, l.inliers).bind(4, l.similarity).bind_blob(5, l.record).bind(6, l.crc);
       insert_link_->run();
     }
     for (const auto& b : rows.bows) {
-      update_bow_->bind_blob(1, b.record).bind(2, b.key);
+      update_bow_->bind_blob(1, b.record).bind(2, b.crc).bind(3, b.key);
       update_bow_->run();
     }
     for (const auto& e : rows.loops) {
@@ -246,7 +405,8 @@ class MemoryStoreConnection {
           .bind(3, e.to_key)
           .bind(4, e.inliers)
           .bind(5, e.confidence)
-          .bind_blob(6, e.record);
+          .bind_blob(6, e.record)
+          .bind(7, e.crc);
       insert_loop_->run();
     }
     for (const auto& x : rows.sessions) {
@@ -254,13 +414,12 @@ class MemoryStoreConnection {
       insert_session_->run();
     }
     for (const auto& [name, value] : rows.meta) {
-      put_meta_->bind_text(1, name).bind_blob(2, value);
+      put_meta_->bind_text(1, name).bind_blob(2, value).bind(3, row_crc(value));
       put_meta_->run();
     }
-    t.commit();
   }
 
-  // Prepared once for a writer, used by its thread only.
+  // Prepared once for a writer, used by one thread at a time (its thread, or write_now).
   std::optional<sqlite::Statement> insert_key_, insert_link_, update_bow_, insert_loop_, put_meta_, insert_session_;
   std::mutex mutex_;
   std::condition_variable changed_;      ///< busy_ or stop_ changed
@@ -292,8 +451,9 @@ class MemoryStore {
     return s;
   }
 
-  /// An existing store: `write` to sync a memory into it (one writer at a time), `read`
-  /// to load it while another program may write.
+  /// An existing store: `write` to sync a memory into it (one writer at a time; a store
+  /// of an older schema is brought to the current one first), `read` to load it while
+  /// another program may write.
   [[nodiscard]] static MemoryStore open(const std::filesystem::path& path, sqlite::Access access = sqlite::Access::write) {
     detail::check(access != sqlite::Access::create, "MemoryStore::open: use MemoryStore::create for a new store");
     std::error_code ec;
@@ -301,7 +461,8 @@ class MemoryStore {
       detail::fail("memory '" + path.string() + "' is empty: its creation was interrupted before the tables were "
                    "written (remove it, or create the memory again)");
     MemoryStore s(path, access);
-    s.check_schema(access);
+    s.check_schema();
+    if (access == sqlite::Access::write && s.version_ < memory_store_version) s.upgrade();
     s.count_rows();
     if (access == sqlite::Access::write) s.connection_->start_writer();
     return s;
@@ -318,6 +479,8 @@ class MemoryStore {
   ~MemoryStore() = default;
 
   [[nodiscard]] const std::filesystem::path& path() const noexcept { return path_; }
+  /// The schema version of the file (memory_store_version once a writer opened it).
+  [[nodiscard]] std::int64_t version() const noexcept { return version_; }
   /// Key images in the store, once every sync handed over is committed (flush() first,
   /// and its error thrown).
   [[nodiscard]] std::size_t key_images() {
@@ -327,7 +490,7 @@ class MemoryStore {
   /// Whether a memory was ever synced into the store (load() needs one); flushes first.
   [[nodiscard]] bool synced() {
     flush();
-    return held_.synced;
+    return synced_;
   }
   /// Loop edges in the store; flushes first.
   [[nodiscard]] std::size_t loops() {
@@ -336,7 +499,7 @@ class MemoryStore {
   }
 
   /// Writes what `memory` made since the last sync into the store, in one transaction.
-  /// The rows are collected here, in the caller's thread; the transaction runs in the
+  /// The rows are encoded here, in the caller's thread; the transaction runs in the
   /// store's writer thread, and sync() returns before it commits: it first waits for the
   /// previous sync's commit (one in flight at a time), and throws that one's error if it
   /// failed (then nothing of it was stored, and the next sync writes its rows again).
@@ -351,9 +514,7 @@ class MemoryStore {
   /// sync(), then releases from RAM the features of the key images older than the
   /// memory's working memory (VisualMemory::bound_features; a no-op for a memory without
   /// one) that are committed, so that the memory never reads a key image whose commit is
-  /// in flight or failed. The key images of the sync in flight are the newest: inside
-  /// the working memory anyway, unless one sync adds more key images than it holds (the
-  /// older of those are then released by the next sync).
+  /// in flight or failed.
   template <Descriptor D, Matcher M, Estimator E, Similarity S>
   void sync(VisualMemory<D, M, E, S>& memory) {
     memory.release_features(hand_over(std::as_const(memory)));
@@ -374,8 +535,7 @@ class MemoryStore {
   /// Bounds `memory`'s RAM to the features of its `working_memory` most recent key
   /// images, reading the others from this store (VisualMemory::bound_features), and
   /// releases those already stored (flushes first). The memory must be the one this
-  /// store holds (as for sync: anything else is an Error naming the file, and nothing is
-  /// released).
+  /// store holds (as for sync).
   template <Descriptor D, Matcher M, Estimator E, Similarity S>
   void bound(VisualMemory<D, M, E, S>& memory, std::size_t working_memory) {
     flush();
@@ -386,20 +546,20 @@ class MemoryStore {
 
   /// Reads a stored key image's features, through a read-only connection of its own (so
   /// it stays valid when this object moves, and reads what was committed): the source of
-  /// VisualMemory::bound_features. It reads what is committed when it runs: every key
-  /// image synced before features() was called (it flushes first), later ones once their
-  /// sync is committed (a memory released by sync() or bound() reads committed key images
-  /// only). A key image the store does not hold, or a damaged record, is an Error naming
-  /// the store.
+  /// VisualMemory::bound_features. A key image the store does not hold, or a damaged
+  /// record, is an Error naming the store.
   [[nodiscard]] std::function<Features(std::uint32_t)> features() {
     flush();
     struct Reader {
       sqlite::Database db;
       sqlite::Statement query;
+      std::int64_t version;
     };
     auto connection = sqlite::Database(path_, sqlite::Access::read, db().what());
-    auto query = connection.prepare("SELECT record FROM key_images WHERE id = ?", "read a key image's features");
-    auto reader = std::make_shared<Reader>(Reader{std::move(connection), std::move(query)});
+    auto query = connection.prepare(version_ >= 4 ? "SELECT record, detections, crc FROM key_images WHERE id = ?"
+                                                   : "SELECT record FROM key_images WHERE id = ?",
+                                    "read a key image's features");
+    auto reader = std::make_shared<Reader>(Reader{std::move(connection), std::move(query), version_});
     return [reader](std::uint32_t key) {
       sqlite::Statement& q = reader->query;
       q.bind(1, static_cast<std::int64_t>(key));
@@ -408,9 +568,14 @@ class MemoryStore {
         ~Reset() { q.reset(); }
       } reset{q};
       if (!q.step()) reader->db.fail("holds no key image " + std::to_string(key));
-      detail::BinaryReader r(q.blob(0), reader->db.what() + " key image " + std::to_string(key));
-      skip_to_features(r);
-      return detail::read_features(r);
+      const std::string who = reader->db.what() + " key image " + std::to_string(key);
+      if (reader->version >= 4 && detail::row_crc(q.blob(0), q.blob(1)) != q.integer(2))
+        detail::fail(who + ": checksum mismatch (the store is corrupt)");
+      detail::BinaryReader r(q.blob(0), who);
+      MapLoadOptions limits;
+      limits.decode_images = false;
+      std::uint64_t pixels = 0;
+      return detail::read_key_record(r, reader->version >= 4 ? 5 : 4, {limits, pixels, nullptr, true}).key.features;
     };
   }
 
@@ -453,136 +618,74 @@ class MemoryStore {
     db().exec("PRAGMA wal_checkpoint(TRUNCATE)", "checkpoint the write-ahead log");
   }
 
+  /// What each policy of the memory recorded of itself (VisualMemory::policy_records), read
+  /// without the rest: what a program reads to know the policies to load it with.
+  [[nodiscard]] std::array<std::string, 4> policy_records() {
+    flush();
+    const std::string bytes = meta("policies");
+    detail::BinaryReader r(bytes, db().what() + " state 'policies'");
+    std::array<std::string, 4> out;
+    for (std::string& p : out) p = r.str("policy record", detail::memory_max_policy);
+    r.expect_end("the policies");
+    return out;
+  }
+
+  /// The memory's records as the store holds them (flushes first; a snapshot, also while
+  /// another program writes), every row checked. With a `working_memory` (> 0), the key
+  /// images older than the most recent `working_memory` are read without their features.
+  /// `limits` bound the key images' pixels; `pixels_skipped` is set when they were checked
+  /// but not decoded.
+  [[nodiscard]] MemoryRecords records(std::size_t working_memory = 0, const MapLoadOptions& limits = {},
+                                      bool* pixels_skipped = nullptr) {
+    flush();
+    sqlite::Transaction snapshot(db(), "read the memory", sqlite::Transaction::Kind::read);
+    MemoryRecords r = read_records(working_memory, limits, pixels_skipped);
+    snapshot.commit();
+    return r;
+  }
+
   /// The memory the store holds, as synced last (flushes first; a snapshot, also while
-  /// another program writes). `policies` are the memory's descriptor, matcher, estimator and similarity when
-  /// they are not default-constructed, and then the MapLoadOptions bounding the key
-  /// images' pixels, as for VisualMemory::load.
-  template <class Memory, class... Policies>
-  [[nodiscard]] Memory load(Policies&&... policies) {
-    return load_holding<Memory>(0, std::forward<Policies>(policies)...);
+  /// another program writes). `args` are the memory's descriptor, matcher, estimator and
+  /// similarity when they are not default-constructed, and after the four the
+  /// MapLoadOptions bounding the key images' pixels, as for VisualMemory::load.
+  template <class Memory, class... Args>
+  [[nodiscard]] Memory load(Args&&... args) {
+    return load_holding<Memory>(0, std::forward<Args>(args)...);
   }
 
   /// load(), holding in RAM the features of the memory's `working_memory` (>= 1) most
   /// recent key images only, also while it loads: the older key images' records are read
   /// without their features, which the memory reads from this store when it needs them
   /// (bound()). The memory is the one load() gives, bounded.
-  template <class Memory, class... Policies>
-  [[nodiscard]] Memory load_bounded(std::size_t working_memory, Policies&&... policies) {
+  template <class Memory, class... Args>
+  [[nodiscard]] Memory load_bounded(std::size_t working_memory, Args&&... args) {
     detail::check(working_memory >= 1, "MemoryStore::load_bounded: the working memory must hold at least 1 key image");
-    return load_holding<Memory>(working_memory, std::forward<Policies>(policies)...);
+    return load_holding<Memory>(working_memory, std::forward<Args>(args)...);
   }
 
  private:
-  /// load() and load_bounded(): the rows joined into the memory file's sections; with a
-  /// working memory, the key images older than it are joined without their features.
-  template <class Memory, class... Policies>
-  [[nodiscard]] Memory load_holding(std::size_t working_memory, Policies&&... policies) {
-    flush();
-    sqlite::Transaction snapshot(db(), "read the memory", sqlite::Transaction::Kind::read);
-    std::array<std::string, detail::memory_sections> sections;
-    sections[0] = meta("options");
-    const std::string frames = meta("frames");
-
-    std::string keys, detections, bows;
-    std::size_t m = 0, checked = 0;
-    std::size_t released = 0;  // key images joined without their features
+  template <class Memory, class... Args>
+  [[nodiscard]] Memory load_holding(std::size_t working_memory, Args&&... args) {
+    bool skipped = false;
+    std::optional<Memory> memory;
+    if constexpr (sizeof...(Args) == 5) {
+      auto all = std::forward_as_tuple(std::forward<Args>(args)...);
+      MemoryRecords r = records(working_memory, std::get<4>(all), &skipped);
+      memory.emplace(Memory::from_records(std::move(r), db().what(), std::get<0>(std::move(all)), std::get<1>(std::move(all)),
+                                          std::get<2>(std::move(all)), std::get<3>(std::move(all)), skipped));
+    } else {
+      // Pixels are decoded with the default limits: none is skipped.
+      MemoryRecords r = records(working_memory, MapLoadOptions{}, &skipped);
+      memory.emplace(Memory::from_records(std::move(r), db().what(), std::forward<Args>(args)...));
+    }
     if (working_memory > 0) {
-      auto q = db().prepare("SELECT count(*) FROM key_images", "count the key images");
-      if (!q.step()) db().fail("count the key images: no row");
-      const auto stored = static_cast<std::size_t>(q.integer(0));
-      released = stored > working_memory ? stored - working_memory : 0;
+      const std::size_t m = memory->key_images();
+      memory->bound_features(working_memory, features(), m > working_memory ? m - working_memory : 0);
     }
-    {
-      auto q = db().prepare("SELECT id, record, detections, bow FROM key_images ORDER BY id", "read the key images");
-      while (q.step()) {
-        expect_index(q.integer(0), m, "key image");
-        if (m < released)
-          keys += without_features(q.blob(1), m);
-        else
-          keys += q.blob(1);
-        detections += q.blob(2);
-        if (!q.is_null(3)) {
-          if (checked != m)
-            db().fail("is corrupt: key image " + std::to_string(m) + " has a bag of words, an earlier one none");
-          bows += q.blob(3);
-          ++checked;
-        }
-        ++m;
-      }
-    }
-    sections[1] = frames + count32(m) + keys;
-
-    std::string links;
-    std::size_t p = 0;
-    {
-      auto q = db().prepare("SELECT key, record FROM links ORDER BY key", "read the links");
-      while (q.step()) {
-        expect_index(q.integer(0), p + 1, "link");
-        links += q.blob(1);
-        ++p;
-      }
-    }
-    sections[2] = count32(p) + links;
-
-    std::string loops, confidences;
-    std::size_t e = 0;
-    {
-      auto q = db().prepare("SELECT id, record, confidence FROM loops ORDER BY id", "read the loop edges");
-      while (q.step()) {
-        expect_index(q.integer(0), e, "loop edge");
-        loops += q.blob(1);
-        detail::BinaryWriter c;
-        c.f64(q.real(2));
-        confidences += c.data();
-        ++e;
-      }
-    }
-    sections[3] = count32(e) + loops;
-    sections[4] = meta("selector");
-    sections[5] = meta("vocabulary");
-    {
-      const std::string bytes = meta("database");
-      detail::BinaryReader head(bytes, db().what() + " state 'database'");
-      const std::uint8_t scoring = head.u8("scoring");
-      const std::uint64_t words = head.u64("words");
-      head.expect_end("the database head");
-      if (scoring > static_cast<std::uint8_t>(BowScoring::cosine)) db().fail("is corrupt: unknown scoring");
-      sections[6] = Memory::database_section(PlaceDatabase<std::uint32_t>::serialize_records(
-          static_cast<BowScoring>(scoring), static_cast<std::size_t>(words), checked, bows));
-    }
-    sections[7] = meta("policies");
-    sections[8] = meta("labels") + count32(m) + detections + meta("previous_detections");
-    sections[9] = meta("gcs");
-    sections[10] = meta("decision") + count32(e) + confidences;
-    {
-      // "sess": the sessions after the first (a version-1 store holds one).
-      std::string rows;
-      std::size_t n = 0;
-      if (version_ >= 2) {
-        auto q = db().prepare("SELECT id, first_key, first_frame FROM sessions ORDER BY id", "read the sessions");
-        while (q.step()) {
-          expect_index(q.integer(0), n, "session");
-          if (n > 0) {
-            detail::BinaryWriter w;
-            w.u64(static_cast<std::uint64_t>(q.integer(1)));
-            w.u64(static_cast<std::uint64_t>(q.integer(2)));
-            rows += w.data();
-          }
-          ++n;
-        }
-      }
-      sections[11] = count32(n > 0 ? n - 1 : 0) + rows;
-    }
-    snapshot.commit();
-    Memory memory = Memory::deserialize(Memory::file_bytes(sections), db().what(), std::forward<Policies>(policies)...);
-    if (working_memory > 0) {
-      memory.bound_features(working_memory, features());
-      memory.released_ = released;
-    }
-    return memory;
+    return std::move(*memory);
   }
 
-  /// sync(): waits for the sync in flight (throwing its error), collects the rows the
+  /// sync(): waits for the sync in flight (throwing its error), encodes the records the
   /// memory made since, and hands them to the writer thread. Returns the key images
   /// committed before them (those a working memory may release).
   template <Descriptor D, Matcher M, Estimator E, Similarity S>
@@ -590,70 +693,14 @@ class MemoryStore {
     if (!connection_->writes()) db().fail("is open read-only: open it with Access::write to sync a memory into it");
     flush();
     check_holds(memory);
-    const VisualMap& map = memory.selector_.map();
-    const std::size_t m = map.keys.size();
-    const std::size_t e = memory.loops_.size();
-    const auto* database = memory.engine_ ? &memory.engine_->ranker().database() : nullptr;
-    const std::size_t checked = database ? database->size() : 0;
-    const auto& sessions = memory.sessions_;
-
-    const ImageStorage storage = memory.options_.images;
-    memory.check_pixels_read(storage, "MemoryStore::sync");
-    detail::MemoryStoreRows rows;
-    rows.keys.reserve(m - held_.keys);
-    for (std::size_t k = held_.keys; k < m; ++k) {
-      const KeyImage& key = map.keys[k];
-      detail::BinaryWriter record, detections;
-      memory.write_key_record(record, k, storage);
-      detail::memory_write_detections(detections, memory.labels_.key_detections[k]);
-      rows.keys.push_back({static_cast<std::int64_t>(k), static_cast<std::int64_t>(key.frame_index), key.timestamp,
-                           key.name, static_cast<std::int64_t>(key.features.keypoints.size()), std::move(record).take(),
-                           std::move(detections).take()});
-    }
-    for (std::size_t k = std::max<std::size_t>(held_.keys, 1); k < m; ++k) {
-      const KeyPair& p = map.pairs[k - 1];
-      detail::BinaryWriter record;
-      memory.write_link_record(record, k - 1);
-      rows.links.push_back({static_cast<std::int64_t>(k), static_cast<std::int64_t>(p.matches),
-                            static_cast<std::int64_t>(p.inliers), p.similarity, std::move(record).take()});
-    }
-    for (std::size_t k = held_.bows; k < checked; ++k)
-      rows.bows.push_back({static_cast<std::int64_t>(k), database->record(static_cast<std::uint32_t>(k))});
-    for (std::size_t i = held_.loops; i < e; ++i) {
-      const LoopEdge& edge = memory.loops_[i];
-      detail::BinaryWriter record;
-      memory.write_loop_record(record, i);
-      rows.loops.push_back({static_cast<std::int64_t>(i), static_cast<std::int64_t>(edge.from),
-                            static_cast<std::int64_t>(edge.link.key), static_cast<std::int64_t>(edge.link.inliers),
-                            edge.link.confidence, std::move(record).take()});
-    }
-    for (std::size_t i = held_.sessions; i < sessions.size(); ++i)
-      rows.sessions.push_back({static_cast<std::int64_t>(i), static_cast<std::int64_t>(sessions[i].first_key),
-                               static_cast<std::int64_t>(sessions[i].first_frame)});
-    // The small state, rewritten at every sync (a few hundred bytes, and I_{j-1}'s
-    // features).
-    auto& meta = rows.meta;
-    meta.emplace_back("options", memory.options_bytes(storage));
-    meta.emplace_back("policies", memory.policies_bytes());
-    meta.emplace_back("labels", memory.labels_head_bytes());
-    meta.emplace_back("previous_detections", memory.previous_detections_bytes());
-    meta.emplace_back("selector", memory.selector_bytes(storage, detail::ScoreDegeneracy::deferred));
-    meta.emplace_back("decision", memory.decision_head_bytes());
-    detail::BinaryWriter head;
-    head.u8(static_cast<std::uint8_t>(memory.options_.scoring));
-    head.u64(memory.vocabulary_->size());
-    meta.emplace_back("database", std::move(head).take());
-    detail::BinaryWriter frames;
-    frames.u64(map.frames);
-    meta.emplace_back("frames", std::move(frames).take());
-    // The vocabulary once learned, the GCS when trained again: written when they change.
-    const bool has_vocabulary = !memory.vocabulary_->empty();
-    if (!held_.vocabulary_written || (has_vocabulary && !*held_.vocabulary_written))
-      meta.emplace_back("vocabulary", memory.vocabulary_bytes());
-    if (held_.gcs_written != memory.gcs_generation_) meta.emplace_back("gcs", memory.gcs_bytes());
-
-    connection_->hand_over(std::move(rows));
-    held_ = {m, e, checked, sessions.size(), true, has_vocabulary, memory.gcs_generation_};
+    memory.check_pixels_read(memory.options().images, "MemoryStore::sync");
+    const MemoryRecords r = memory.records(held_, false);
+    connection_->hand_over(detail::store_rows(r));
+    held_ = {r.key_count(), r.first_loop + r.loops.size(), r.first_bow + r.bows.size(),
+             r.first_session + r.sessions.size(),
+             r.vocabulary ? std::optional<bool>(!r.vocabulary->empty()) : held_.vocabulary_written,
+             r.gcs_written ? std::optional<std::uint64_t>(memory.gcs_generation()) : held_.gcs};
+    synced_ = true;
     return committed_.keys;
   }
 
@@ -666,22 +713,22 @@ class MemoryStore {
   static const std::string& schema_sql() {
     static const std::string sql =
         "PRAGMA application_id = " + std::to_string(memory_store_application_id) + ";"
-        "PRAGMA user_version = " + std::to_string(memory_store_version) + ";"
-        "CREATE TABLE meta(name TEXT PRIMARY KEY NOT NULL, value BLOB NOT NULL) WITHOUT ROWID;"
-        "CREATE TABLE key_images(id INTEGER PRIMARY KEY, frame_index INTEGER NOT NULL, timestamp REAL NOT NULL,"
-        " name TEXT NOT NULL, keypoints INTEGER NOT NULL, record BLOB NOT NULL, detections BLOB NOT NULL, bow BLOB);"
-        "CREATE TABLE links(key INTEGER PRIMARY KEY, matches INTEGER NOT NULL, inliers INTEGER NOT NULL,"
-        " similarity REAL NOT NULL, record BLOB NOT NULL);"
-        "CREATE TABLE loops(id INTEGER PRIMARY KEY, from_key INTEGER NOT NULL, to_key INTEGER NOT NULL,"
-        " inliers INTEGER NOT NULL, confidence REAL NOT NULL, record BLOB NOT NULL);"
-        "CREATE TABLE notes(name TEXT PRIMARY KEY NOT NULL, value TEXT NOT NULL) WITHOUT ROWID;" +
-        sessions_sql();
+        "PRAGMA user_version = " + std::to_string(memory_store_version) + ";" + tables_sql();
     return sql;
   }
 
-  /// The table version 2 added (a version-1 store holds one session).
-  static std::string sessions_sql() {
-    return "CREATE TABLE sessions(id INTEGER PRIMARY KEY, first_key INTEGER NOT NULL, first_frame INTEGER NOT NULL);";
+  /// The tables of the current schema: every blob with the CRC-32 of its bytes.
+  static std::string tables_sql() {
+    return "CREATE TABLE meta(name TEXT PRIMARY KEY NOT NULL, value BLOB NOT NULL, crc INTEGER NOT NULL) WITHOUT ROWID;"
+           "CREATE TABLE key_images(id INTEGER PRIMARY KEY, frame_index INTEGER NOT NULL, timestamp REAL NOT NULL,"
+           " time_ns INTEGER NOT NULL, name TEXT NOT NULL, keypoints INTEGER NOT NULL, record BLOB NOT NULL,"
+           " detections BLOB NOT NULL, crc INTEGER NOT NULL, bow BLOB, bow_crc INTEGER);"
+           "CREATE TABLE links(key INTEGER PRIMARY KEY, matches INTEGER NOT NULL, inliers INTEGER NOT NULL,"
+           " similarity REAL NOT NULL, record BLOB NOT NULL, crc INTEGER NOT NULL);"
+           "CREATE TABLE loops(id INTEGER PRIMARY KEY, from_key INTEGER NOT NULL, to_key INTEGER NOT NULL,"
+           " inliers INTEGER NOT NULL, confidence REAL NOT NULL, record BLOB NOT NULL, crc INTEGER NOT NULL);"
+           "CREATE TABLE IF NOT EXISTS notes(name TEXT PRIMARY KEY NOT NULL, value TEXT NOT NULL) WITHOUT ROWID;"
+           "CREATE TABLE sessions(id INTEGER PRIMARY KEY, first_key INTEGER NOT NULL, first_frame INTEGER NOT NULL);";
   }
 
   [[nodiscard]] std::int64_t pragma(const char* name) {
@@ -690,10 +737,8 @@ class MemoryStore {
     return q.integer(0);
   }
 
-  /// Checks the application id and version; a writer brings an older store to version 3
-  /// in one transaction (version 1: one session, no sessions table; version 2: the
-  /// selector blob never defers a degeneracy), a reader reads it as is.
-  void check_schema(sqlite::Access access) {
+  /// Checks the application id and the version.
+  void check_schema() {
     if (pragma("application_id") != memory_store_application_id)
       db().fail("is not a vmap memory store (an SQLite file without vmap's application id)");
     const std::int64_t version = pragma("user_version");
@@ -701,16 +746,27 @@ class MemoryStore {
       db().fail("has store version " + std::to_string(version) + "; this build reads versions 1 to " +
                 std::to_string(memory_store_version));
     version_ = version;
-    if (version < memory_store_version && access == sqlite::Access::write) {
-      sqlite::Transaction t(db(), "bring the store to version " + std::to_string(memory_store_version));
-      db().exec((version == 1 ? sessions_sql() +
-                                    "INSERT INTO sessions SELECT 0, 0, 0 WHERE EXISTS(SELECT 1 FROM key_images);"
-                              : std::string()) +
-                    "PRAGMA user_version = " + std::to_string(memory_store_version) + ";",
-                "bring the store to version " + std::to_string(memory_store_version));
-      t.commit();
-      version_ = memory_store_version;
+  }
+
+  /// Brings a store of an older schema to the current one, in one transaction: its
+  /// records read as they are and written again as the current version writes them (the
+  /// key images' encoded pixels kept byte for byte), its notes kept.
+  void upgrade() {
+    const std::int64_t from = version_;
+    sqlite::Transaction t(db(), "bring the store from version " + std::to_string(from) + " to version " +
+                                    std::to_string(memory_store_version));
+    std::optional<detail::MemoryStoreRows> rows;
+    {
+      count_rows();
+      if (synced_) rows = upgraded_rows();
     }
+    db().exec("DROP TABLE IF EXISTS meta; DROP TABLE IF EXISTS key_images; DROP TABLE IF EXISTS links;"
+              "DROP TABLE IF EXISTS loops; DROP TABLE IF EXISTS sessions;" +
+                  tables_sql() + "PRAGMA user_version = " + std::to_string(memory_store_version) + ";",
+              "bring the store to version " + std::to_string(memory_store_version));
+    version_ = memory_store_version;
+    if (rows) connection_->write_now(*rows);
+    t.commit();
   }
 
   void count_rows() {
@@ -719,12 +775,18 @@ class MemoryStore {
       if (!q.step()) db().fail(std::string(doing) + ": no row");
       return static_cast<std::size_t>(q.integer(0));
     };
+    held_ = {};
     held_.keys = count("SELECT count(*) FROM key_images", "count the key images");
     held_.loops = count("SELECT count(*) FROM loops", "count the loop edges");
     held_.bows = count("SELECT count(bow) FROM key_images", "count the bags of words");
-    held_.synced = count("SELECT count(*) FROM meta WHERE name = 'options'", "look for a sync") > 0;
-    held_.sessions =
-        version_ >= 2 ? count("SELECT count(*) FROM sessions", "count the sessions") : (held_.synced ? 1 : 0);
+    synced_ = count("SELECT count(*) FROM meta WHERE name = 'options'", "look for a sync") > 0;
+    held_.sessions = version_ >= 2 ? count("SELECT count(*) FROM sessions", "count the sessions") : (synced_ ? 1 : 0);
+    // A store written by an older version holds its vocabulary; whether it is a learned
+    // one decides whether the next sync writes it again.
+    if (synced_) {
+      const std::string v = meta("vocabulary");
+      held_.vocabulary_written = !v.empty() && v[0] == 1;
+    }
     committed_ = held_;
   }
 
@@ -733,15 +795,14 @@ class MemoryStore {
   /// stored one (checked once per store object, on the connection: nothing in flight).
   template <Descriptor D, Matcher M, Estimator E, Similarity S>
   void check_holds(const VisualMemory<D, M, E, S>& memory) {
-    const VisualMap& map = memory.selector_.map();
-    const std::size_t m = map.keys.size();
-    const std::size_t e = memory.loops_.size();
-    const std::size_t checked = memory.engine_ ? memory.engine_->ranker().database().size() : 0;
-    if (m < held_.keys || e < held_.loops || checked < held_.bows || memory.sessions_.size() < held_.sessions)
+    const std::size_t m = memory.key_images();
+    const std::size_t e = memory.loops().size();
+    const std::size_t checked = memory.database().size();
+    if (m < held_.keys || e < held_.loops || checked < held_.bows || memory.sessions().size() < held_.sessions)
       db().fail("holds " + std::to_string(held_.keys) + " key images and " + std::to_string(held_.loops) +
                 " loop edges, the memory given " + std::to_string(m) + " and " + std::to_string(e) +
                 ": use the memory loaded from this store, or a memory with a new store");
-    if (!matched_ && held_.keys > 0) check_same_memory(map);
+    if (!matched_ && held_.keys > 0) check_same_memory(memory.map());
     matched_ = true;
   }
 
@@ -758,11 +819,20 @@ class MemoryStore {
                 std::to_string(map.keys[held_.keys - 1].frame_index));
   }
 
+  /// A state row's bytes, its checksum checked (version 4).
   [[nodiscard]] std::string meta(const char* name) {
-    auto q = db().prepare("SELECT value FROM meta WHERE name = ?", "read the state");
+    auto q = db().prepare(version_ >= 4 ? "SELECT value, crc FROM meta WHERE name = ?" : "SELECT value FROM meta WHERE name = ?",
+                          "read the state");
     q.bind_text(1, name);
     if (!q.step()) db().fail(std::string("holds no '") + name + "' state (an empty store, or not synced)");
-    return std::string(q.blob(0));
+    std::string value(q.blob(0));
+    if (version_ >= 4 && detail::row_crc(value) != q.integer(1))
+      db().fail(std::string("is corrupt: the checksum of its '") + name + "' state does not match");
+    return value;
+  }
+
+  [[nodiscard]] detail::BinaryReader state_reader(const std::string& bytes, const char* name) const {
+    return detail::BinaryReader(bytes, db().what() + " state '" + name + "'");
   }
 
   void expect_index(std::int64_t got, std::size_t want, const char* what) const {
@@ -771,47 +841,253 @@ class MemoryStore {
                 " was expected");
   }
 
-  /// Reads past what a key image's record holds before its features: frame index, time
-  /// and name, as the file's "keys" section holds a key image.
-  static void skip_to_features(detail::BinaryReader& r) {
-    (void)r.u64("frame index");
-    (void)r.f64("timestamp");
-    (void)r.str("name", detail::map_max_string);
+  /// A row whose blobs do not match its checksum (version 4).
+  void check_crc(std::int64_t got, std::int64_t want, const std::string& row) const {
+    if (version_ >= 4 && got != want) db().fail("is corrupt: the checksum of " + row + " does not match");
   }
 
-  /// A key image's record with its features replaced by none of the same norm and image
-  /// size (the record's other fields as they are): what a bounded load keeps in RAM.
-  std::string without_features(std::string_view record, std::size_t key) const {
-    detail::BinaryReader r(record, db().what() + " key image " + std::to_string(key));
-    skip_to_features(r);
-    const std::size_t head = r.offset();
-    const Features f = detail::read_features(r);
-    std::string out(record.substr(0, head));
-    detail::BinaryWriter w;
-    detail::write_features(w, Features{{}, cv::Mat(), f.norm, f.image_size});
-    out += w.data();
-    out += record.substr(r.offset());
-    return out;
+  /// The records of every row (see records()), inside the caller's read transaction.
+  MemoryRecords read_records(std::size_t working_memory, const MapLoadOptions& limits, bool* pixels_skipped) {
+    const bool v4 = version_ >= 4;
+    const std::uint32_t format = v4 ? memory_format_version : 4;
+    MemoryRecords r;
+    r.version = format;
+    const std::string options = meta("options");
+    {
+      auto o = state_reader(options, "options");
+      r.options = v4 ? detail::read_memory_options(o) : detail::read_options_v4(o, 4);
+    }
+    {
+      const std::string bytes = meta("policies");
+      auto p = state_reader(bytes, "policies");
+      for (std::string& policy : r.policies) policy = p.str("policy record", detail::memory_max_policy);
+      p.expect_end("the policies");
+    }
+    {
+      const std::string bytes = meta("frames");
+      auto f = state_reader(bytes, "frames");
+      const std::uint64_t frames = f.u64("frame count");
+      if (frames > detail::memory_max_frames) f.corrupt("frame count " + std::to_string(frames) + " is above 2^40");
+      f.expect_end("the frame count");
+      r.frames = static_cast<std::size_t>(frames);
+    }
+    {
+      const std::string bytes = meta("database");
+      auto d = state_reader(bytes, "database");
+      const std::uint8_t scoring = d.u8("scoring");
+      if (scoring != static_cast<std::uint8_t>(r.options.scoring)) d.corrupt("its scoring is not the memory's");
+      const std::uint64_t words = d.u64("words");
+      if (words > std::numeric_limits<std::uint32_t>::max()) d.corrupt("vocabulary size " + std::to_string(words) + " is too large");
+      d.expect_end("the database head");
+      r.words = static_cast<std::size_t>(words);
+    }
+    {
+      const std::string bytes = meta("vocabulary");
+      auto v = state_reader(bytes, "vocabulary");
+      r.vocabulary = detail::read_vocabulary_record(v);
+    }
+
+    // Key images, their detections and bags of words.
+    std::size_t stored = 0;
+    {
+      auto q = db().prepare("SELECT count(*) FROM key_images", "count the key images");
+      if (!q.step()) db().fail("count the key images: no row");
+      stored = static_cast<std::size_t>(q.integer(0));
+    }
+    const std::size_t released = working_memory > 0 && stored > working_memory ? stored - working_memory : 0;
+    std::uint64_t total_pixels = 0;
+    {
+      auto q = db().prepare(v4 ? "SELECT id, frame_index, timestamp, time_ns, name, keypoints, record, detections, crc, bow, "
+                                 "bow_crc FROM key_images ORDER BY id"
+                               : "SELECT id, frame_index, timestamp, 0, name, keypoints, record, detections, 0, bow, 0 "
+                                 "FROM key_images ORDER BY id",
+                            "read the key images");
+      std::size_t m = 0;
+      while (q.step()) {
+        expect_index(q.integer(0), m, "key image");
+        const std::string row = "key image " + std::to_string(m);
+        check_crc(detail::row_crc(q.blob(6), q.blob(7)), q.integer(8), row);
+        detail::BinaryReader rec(q.blob(6), db().what() + " " + row);
+        KeyImageRecord k = detail::read_key_record(rec, format, {limits, total_pixels, pixels_skipped, m >= released});
+        rec.expect_end("the key image");
+        const KeyImage& key = k.key;
+        if (q.integer(1) != static_cast<std::int64_t>(key.frame_index) || q.real(2) != key.timestamp ||
+            (v4 && q.integer(3) != key.time_ns) || q.text(4) != key.name ||
+            (m >= released && q.integer(5) != static_cast<std::int64_t>(key.features.keypoints.size())))
+          db().fail("is corrupt: the columns of " + row + " do not match its record");
+        detail::BinaryReader det(q.blob(7), db().what() + " " + row + "'s detections");
+        k.detections = detail::memory_read_detections(det);
+        det.expect_end("the detections");
+        if (!q.is_null(9)) {
+          if (r.bows.size() != m) db().fail("is corrupt: " + row + " has a bag of words, an earlier one none");
+          check_crc(detail::row_crc(q.blob(9)), q.integer(10), row + "'s bag of words");
+          detail::BinaryReader b(q.blob(9), db().what() + " " + row + "'s bag of words");
+          auto [id, bow] = PlaceDatabase<std::uint32_t>::read_record(b, r.words, r.options.scoring);
+          b.expect_end("the bag of words");
+          if (id != m) b.corrupt("it is the bag of words of key image " + std::to_string(id));
+          r.bows.push_back(std::move(bow));
+        }
+        r.keys.push_back(std::move(k));
+        ++m;
+      }
+    }
+    const std::size_t m = r.keys.size();
+    {
+      auto q = db().prepare(v4 ? "SELECT key, matches, inliers, similarity, record, crc FROM links ORDER BY key"
+                               : "SELECT key, matches, inliers, similarity, record, 0 FROM links ORDER BY key",
+                            "read the links");
+      while (q.step()) {
+        expect_index(q.integer(0), r.links.size() + 1, "link");
+        const std::string row = "the link into key image " + std::to_string(r.links.size() + 1);
+        check_crc(detail::row_crc(q.blob(4)), q.integer(5), row);
+        detail::BinaryReader rec(q.blob(4), db().what() + " " + row);
+        KeyPair p = detail::read_key_pair(rec, "verification status");
+        rec.expect_end("the link");
+        if (q.integer(1) != p.matches || q.integer(2) != p.inliers || q.real(3) != p.similarity)
+          db().fail("is corrupt: the columns of " + row + " do not match its record");
+        r.links.push_back(p);
+      }
+    }
+    {
+      auto q = db().prepare(v4 ? "SELECT id, from_key, to_key, inliers, confidence, record, crc FROM loops ORDER BY id"
+                               : "SELECT id, from_key, to_key, inliers, confidence, record, 0 FROM loops ORDER BY id",
+                            "read the loop edges");
+      while (q.step()) {
+        expect_index(q.integer(0), r.loops.size(), "loop edge");
+        const std::string row = "loop edge " + std::to_string(r.loops.size());
+        check_crc(detail::row_crc(q.blob(5)), q.integer(6), row);
+        detail::BinaryReader rec(q.blob(5), db().what() + " " + row);
+        LoopEdge e = detail::read_loop_record(rec, format, m);
+        rec.expect_end("the loop edge");
+        if (!v4) {
+          // Before version 4 the confidence was only a column.
+          const double c = q.real(4);
+          if (!(c >= 0.0 && c <= 1.0)) rec.corrupt("a loop confidence outside [0, 1]");
+          e.link.confidence = c;
+        }
+        if (q.integer(1) != e.from || q.integer(2) != e.link.key || q.integer(3) != e.link.inliers ||
+            q.real(4) != e.link.confidence)
+          db().fail("is corrupt: the columns of " + row + " do not match its record");
+        r.loops.push_back(std::move(e));
+      }
+    }
+    {
+      const std::string bytes = meta("selector");
+      auto s = state_reader(bytes, "selector");
+      r.selector = detail::read_selector_record(
+          s, format, {limits, total_pixels, pixels_skipped, true},
+          m > 0 ? std::optional<std::size_t>(r.keys.back().key.frame_index) : std::nullopt);
+    }
+    {
+      const std::string bytes = meta("labels");
+      auto l = state_reader(bytes, "labels");
+      if (!v4) detail::read_options_v4_labels(l, r.options);
+      detail::read_labels_record(l, r.options, r.labelled, r.schema);
+      l.expect_end("the labels");
+    }
+    {
+      const std::string bytes = meta("previous_detections");
+      auto p = state_reader(bytes, "previous_detections");
+      std::vector<Detection> previous = detail::memory_read_detections(p);
+      p.expect_end("the detections");
+      if (!r.labelled && !previous.empty()) p.corrupt("detections in a memory without labels");
+      if (r.selector.previous) r.selector.previous->detections = std::move(previous);
+    }
+    {
+      const std::string bytes = meta("decision");
+      auto d = state_reader(bytes, "decision");
+      if (!v4) detail::read_options_v4_decision(d, r.options);
+      r.engine = LoopEngineState::read(d, r.bows.size());
+      d.expect_end("the decision");
+    }
+    if (!v4) {
+      auto o = state_reader(options, "options");
+      r.options = detail::checked_or_corrupt(o, r.options);
+    }
+    {
+      const std::string bytes = meta("gcs");
+      auto g = state_reader(bytes, "gcs");
+      std::vector<OdometryPose> poses;
+      for (const KeyImageRecord& k : r.keys) poses.push_back(k.pose);
+      r.gcs = detail::read_gcs_record(g, poses);
+    }
+    if (version_ >= 2) {
+      auto q = db().prepare("SELECT id, first_key, first_frame FROM sessions ORDER BY id", "read the sessions");
+      while (q.step()) {
+        expect_index(q.integer(0), r.sessions.size(), "session");
+        if (q.integer(1) < 0 || q.integer(2) < 0) db().fail("is corrupt: session " + std::to_string(r.sessions.size()) + " starts before 0");
+        r.sessions.push_back({static_cast<std::size_t>(q.integer(1)), static_cast<std::size_t>(q.integer(2))});
+      }
+    }
+    if (r.sessions.empty()) r.sessions.push_back({});
+    if (v4) {
+      const std::string bytes = meta("counts");
+      auto c = state_reader(bytes, "counts");
+      const std::uint64_t keys = c.u64("key images"), loops = c.u64("loop edges"), bows = c.u64("bags of words"),
+                          sessions = c.u64("sessions");
+      c.expect_end("the counts");
+      if (keys != m || loops != r.loops.size() || bows != r.bows.size() || sessions != r.sessions.size())
+        db().fail("is corrupt: it holds " + std::to_string(m) + " key images, " + std::to_string(r.loops.size()) +
+                  " loop edges, " + std::to_string(r.bows.size()) + " bags of words and " +
+                  std::to_string(r.sessions.size()) + " sessions, its state records " + std::to_string(keys) + ", " +
+                  std::to_string(loops) + ", " + std::to_string(bows) + " and " + std::to_string(sessions));
+    }
+    return r;
   }
 
-  static std::string count32(std::size_t n) {
-    detail::BinaryWriter w;
-    w.u32(static_cast<std::uint32_t>(n));
-    return std::move(w).take();
+  /// The rows of a store of an older schema as the current version writes them (upgrade):
+  /// each record read and written again, the key images' encoded pixels copied as they
+  /// are (they are never decoded and encoded again).
+  detail::MemoryStoreRows upgraded_rows() {
+    MapLoadOptions keep;
+    keep.decode_images = false;
+    MemoryRecords r = read_records(0, keep, nullptr);
+    detail::MemoryStoreRows rows = detail::store_rows(r);
+    // The pixels: the old key records' image bytes, spliced into the new records.
+    auto q = db().prepare("SELECT record FROM key_images ORDER BY id", "read the key images' pixels");
+    for (auto& row : rows.keys) {
+      if (!q.step()) db().fail("is corrupt: a key image went missing");
+      row.record = with_image_of(row.record, q.blob(0), row.id);
+      row.crc = detail::row_crc(row.record, row.detections);
+    }
+    for (auto& [name, value] : rows.meta)
+      if (std::string_view(name) == "selector") {
+        const std::string old = meta("selector");
+        if (!old.empty() && old[0] == 1) value = with_image_of(value, old, -1, 1);
+      }
+    return rows;
   }
 
-  /// What the store holds, counted: each table's rows and the state last written.
-  struct Held {
-    std::size_t keys = 0, loops = 0, bows = 0, sessions = 0;
-    bool synced = false;                       ///< the store holds a memory (a sync happened)
-    std::optional<bool> vocabulary_written;    ///< whether the stored vocabulary is a learned one
-    std::optional<std::uint64_t> gcs_written;  ///< the memory's GCS generation stored
-  };
+  /// `fresh` (a current key record, written from records read without their pixels) with
+  /// the image part of `old` (a version-4 key record of the same key image) instead of its
+  /// own: the encoded pixels carried over byte for byte. `at` skips a prefix of both (the
+  /// selector record's flag byte); the rest of `fresh` after its record is kept.
+  std::string with_image_of(const std::string& fresh, std::string_view old, std::int64_t key, std::size_t at = 0) const {
+    const std::string who = db().what() + (key >= 0 ? " key image " + std::to_string(key) : std::string(" state 'selector'"));
+    const auto image_span = [&](std::string_view bytes, std::uint32_t version) {
+      detail::BinaryReader r(bytes.substr(at), who, at);
+      (void)r.u64("frame index");
+      (void)r.f64("timestamp");
+      if (version >= 5) (void)r.i64("timestamp in nanoseconds");
+      (void)r.str("name", detail::map_max_string);
+      (void)detail::read_features(r, false);
+      const std::size_t begin = at + (r.offset() - at);
+      MapLoadOptions skip;
+      skip.decode_images = false;
+      std::uint64_t pixels = 0;
+      (void)detail::read_memory_image(r, skip, pixels);
+      return std::pair{begin, r.offset()};
+    };
+    const auto [nb, ne] = image_span(fresh, memory_format_version);
+    const auto [ob, oe] = image_span(old, 4);
+    return fresh.substr(0, nb) + std::string(old.substr(ob, oe - ob)) + fresh.substr(ne);
+  }
 
   std::filesystem::path path_;
   std::unique_ptr<detail::MemoryStoreConnection> connection_;
-  Held held_;       ///< with the sync in flight committed: where the next sync goes on from
-  Held committed_;  ///< without it: what a failure of the sync in flight leaves
+  RecordsHeld held_;       ///< with the sync in flight committed: where the next sync goes on from
+  RecordsHeld committed_;  ///< without it: what a failure of the sync in flight leaves
+  bool synced_ = false;    ///< the store holds a memory (a sync happened)
   std::int64_t version_ = memory_store_version;  ///< the file's schema version
   bool matched_ = false;                         ///< the synced memory was checked against the stored one
 };

@@ -98,8 +98,11 @@ struct PlaceLink {
   std::uint32_t key = 0;        ///< the matched key image (the older one for a loop)
   double bow_score = 0.0;       ///< its rank score (place/bow.hpp), in [0, 1]
   VerificationStatus status = VerificationStatus::too_few_matches;
-  cv::Matx33d fundamental = cv::Matx33d::zeros();  ///< x_query^T F x_key = 0 (when verified)
-  int matches = 0;                                 ///< raw correspondences
+  /// The verified model: x_query^T F x_key = 0 for the fundamental matrix (raw pixels),
+  /// or the essential matrix on normalised points (zeros unless verified).
+  cv::Matx33d model = cv::Matx33d::zeros();
+  PlaceModel model_kind = PlaceModel::fundamental;  ///< which of the two `model` is
+  int matches = 0;                                 ///< tentative correspondences verified
   int inliers = 0;                                 ///< F-matrix inliers
   double similarity = 0.0;                         ///< eq. 5
   double confidence = 0.0;                         ///< the place decision's (lcd/place_decision.hpp)

@@ -250,6 +250,15 @@ class PlaceDatabase {
     return std::move(w).take();
   }
 
+  /// record() of an image with this vector.
+  [[nodiscard]] static std::string record_of(const Id& id, const BowVector& bow)
+    requires std::integral<Id>
+  {
+    detail::BinaryWriter w;
+    write_record(w, id, bow);
+    return std::move(w).take();
+  }
+
   /// The file's bytes from `count` records (record()) joined in increasing id order.
   [[nodiscard]] static std::string serialize_records(BowScoring scoring, std::size_t words, std::size_t count,
                                                      std::string_view records) {
@@ -269,44 +278,56 @@ class PlaceDatabase {
     if (scoring > static_cast<std::uint8_t>(BowScoring::cosine)) r.corrupt("unknown scoring " + std::to_string(scoring));
     const std::uint64_t words = r.u64("words");
     if (words > std::numeric_limits<std::uint32_t>::max()) r.corrupt("vocabulary size " + std::to_string(words) + " is too large");
-    PlaceDatabase db(static_cast<std::size_t>(words), static_cast<BowScoring>(scoring));
     const std::uint64_t n = r.u64("image count");
     r.require_items(n, 12, "image count");  // an image takes at least 12 bytes
-    std::optional<Id> previous;
     std::vector<std::pair<Id, BowVector>> images;
     images.reserve(static_cast<std::size_t>(n));
     for (std::uint64_t i = 0; i < n; ++i) {
-      using Wide = std::conditional_t<std::is_signed_v<Id>, std::int64_t, std::uint64_t>;
-      const auto wide = static_cast<Wide>(r.u64("image id"));
-      const auto id = static_cast<Id>(wide);
-      if (static_cast<Wide>(id) != wide) r.corrupt("image id " + std::to_string(wide) + " does not fit the id type");
-      if (previous && !(*previous < id)) r.corrupt("image ids are not strictly increasing");
-      previous = id;
-      const std::uint32_t e = r.u32("entry count");
-      r.require_items(e, 8, "entry count");
-      BowVector v;
-      v.entries.resize(e);
-      if constexpr (entries_as_bytes) {
-        const auto block = r.bytes(std::uint64_t{e} * sizeof(BowEntry), "entries");
-        if (e > 0) std::memcpy(v.entries.data(), block.data(), block.size());  // no null destination
-      } else {
-        for (auto& x : v.entries) {
-          x.word = r.u32("word");
-          x.weight = r.f32("weight");
-        }
-      }
-      try {
-        detail::check_bow(v, db.words_, "an image's vector");
-      } catch (const Error& err) {
-        r.corrupt(err.what());
-      }
-      for (const auto& x : v.entries)
-        if (x.weight <= 0.0f) r.corrupt("an image's vector has a zero weight");
-      if (!v.empty() && std::fabs(detail::scoring_norm(v, db.scoring_) - 1.0) > 1e-3)
-        r.corrupt("an image's vector is not normalised");
-      images.emplace_back(id, std::move(v));
+      images.push_back(read_record(r, static_cast<std::size_t>(words), static_cast<BowScoring>(scoring)));
+      if (i > 0 && !(images[i - 1].first < images[i].first)) r.corrupt("image ids are not strictly increasing");
     }
     r.expect_end("the last image");
+    return from_records(static_cast<BowScoring>(scoring), static_cast<std::size_t>(words), std::move(images));
+  }
+
+  /// One image's record (record()) read back: its id and vector, checked against a
+  /// vocabulary of `words` words and the scoring's normalisation.
+  [[nodiscard]] static std::pair<Id, BowVector> read_record(detail::BinaryReader& r, std::size_t words, BowScoring scoring)
+    requires std::integral<Id>
+  {
+    using Wide = std::conditional_t<std::is_signed_v<Id>, std::int64_t, std::uint64_t>;
+    const auto wide = static_cast<Wide>(r.u64("image id"));
+    const auto id = static_cast<Id>(wide);
+    if (static_cast<Wide>(id) != wide) r.corrupt("image id " + std::to_string(wide) + " does not fit the id type");
+    const std::uint32_t e = r.u32("entry count");
+    r.require_items(e, 8, "entry count");
+    BowVector v;
+    v.entries.resize(e);
+    if constexpr (entries_as_bytes) {
+      const auto block = r.bytes(std::uint64_t{e} * sizeof(BowEntry), "entries");
+      if (e > 0) std::memcpy(v.entries.data(), block.data(), block.size());  // no null destination
+    } else {
+      for (auto& x : v.entries) {
+        x.word = r.u32("word");
+        x.weight = r.f32("weight");
+      }
+    }
+    try {
+      detail::check_bow(v, words, "an image's vector");
+    } catch (const Error& err) {
+      r.corrupt(err.what());
+    }
+    for (const auto& x : v.entries)
+      if (x.weight <= 0.0f) r.corrupt("an image's vector has a zero weight");
+    if (!v.empty() && std::fabs(detail::scoring_norm(v, scoring) - 1.0) > 1e-3) r.corrupt("an image's vector is not normalised");
+    return {id, std::move(v)};
+  }
+
+  /// A database of these images (read_record()'s, in increasing id order) over a
+  /// vocabulary of `words` words.
+  [[nodiscard]] static PlaceDatabase from_records(BowScoring scoring, std::size_t words,
+                                                  std::vector<std::pair<Id, BowVector>> images) {
+    PlaceDatabase db(words, scoring);
     // The posting lists sized once from the word counts: no regrowth while loading, and
     // no spare capacity afterwards.
     std::vector<std::uint32_t> per_word;

@@ -167,6 +167,20 @@ struct VocabularyTreeOptions {
 
 namespace detail {
 
+/// Options a tree can be learned with, or an Error naming the option: the one check of
+/// the learning and of whoever keeps the options to learn later (a visual memory).
+inline void check_vocabulary_tree_options(const VocabularyTreeOptions& o) {
+  check(o.branching >= 2 && o.branching <= 4096, [&] {
+    return "VocabularyTreeOptions.branching must be in 2..4096, got " + std::to_string(o.branching);
+  });
+  check(o.depth >= 1 && o.depth <= 64,
+        [&] { return "VocabularyTreeOptions.depth must be in 1..64, got " + std::to_string(o.depth); });
+  check(o.iterations >= 1, [&] { return "VocabularyTreeOptions.iterations must be >= 1, got " + std::to_string(o.iterations); });
+  check(o.max_descriptors >= static_cast<std::size_t>(o.branching), [&] {
+    return "VocabularyTreeOptions.max_descriptors must be >= branching, got " + std::to_string(o.max_descriptors);
+  });
+}
+
 /// VocabularyTreeOptions as a memory that learns its vocabulary keeps them (checked when
 /// the vocabulary is learned).
 inline void write_vocabulary_tree_options(BinaryWriter& w, const VocabularyTreeOptions& o) {
@@ -622,18 +636,7 @@ class VocabularyTree {
     return v;
   }
 
-  static void check_options(const VocabularyTreeOptions& o) {
-    detail::check(o.branching >= 2 && o.branching <= max_branching, [&] {
-      return "VocabularyTreeOptions.branching must be in 2..4096, got " + std::to_string(o.branching);
-    });
-    detail::check(o.depth >= 1 && o.depth <= max_depth,
-                  [&] { return "VocabularyTreeOptions.depth must be in 1..64, got " + std::to_string(o.depth); });
-    detail::check(o.iterations >= 1,
-                  [&] { return "VocabularyTreeOptions.iterations must be >= 1, got " + std::to_string(o.iterations); });
-    detail::check(o.max_descriptors >= static_cast<std::size_t>(o.branching), [&] {
-      return "VocabularyTreeOptions.max_descriptors must be >= branching, got " + std::to_string(o.max_descriptors);
-    });
-  }
+  static void check_options(const VocabularyTreeOptions& o) { detail::check_vocabulary_tree_options(o); }
 
   void check_descriptors(const cv::Mat& d, const char* what) const {
     // Messages appended piece by piece: GCC 12 at -O2 reports a false -Warray-bounds on a

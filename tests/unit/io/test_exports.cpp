@@ -78,16 +78,20 @@ TEST_CASE("g2o EDGE_SE3:QUAT: ids, the relative pose T_from^-1 T_to, and the inf
     for (int j = i; j < 6; ++j, ++at) CHECK(std::stod(t[at]) == (i != j ? 0.0 : i < 3 ? 4.0 : 9.0));
 }
 
-TEST_CASE("loop pairs and key image lists carry names and times") {
-  const std::string pairs = vmap::loop_pairs_text({{5, 1, 1403636590.5, 1403636580.25, "b.png", "a name.png", 120}});
+TEST_CASE("loop pairs and key image lists carry names and times exact to the nanosecond") {
+  const std::string pairs = vmap::loop_pairs_text(
+      {{5, 1, 1403636590500000000LL, 1403636580763555584LL, "b.png", "a name.png", 120},
+       {6, 2, -500000000LL, 12000000000LL, "line\nbreak", "", 7}});
   CHECK(pairs == "# query_time match_time query_name match_name inliers\n"
-                 "1403636590.5 1403636580.25 b.png a_name.png 120\n");
+                 "1403636590.5 1403636580.763555584 b.png a_name.png 120\n"
+                 "-0.5 12 line_break - 7\n");
   std::vector<vmap::KeyImage> keys(2);
   keys[0].frame_index = 0;
   keys[0].name = "euroc.mp4#0";
-  keys[0].timestamp = 0.0;
+  keys[0].time_ns = 0;
   keys[1].frame_index = 12;
-  keys[1].name = "euroc.mp4#12";
-  keys[1].timestamp = 0.6;
-  CHECK(vmap::key_images_text(keys) == "# frame_index name timestamp\n0 euroc.mp4#0 0\n12 euroc.mp4#12 0.6\n");
+  keys[1].name = "two words.png";
+  keys[1].time_ns = 1305031229528748000LL;
+  CHECK(vmap::key_images_text(keys) ==
+        "# frame_index name timestamp\n0 euroc.mp4#0 0\n12 two_words.png 1305031229.528748\n");
 }

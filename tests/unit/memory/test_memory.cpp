@@ -303,10 +303,10 @@ TEST_CASE("memory files: truncated at every section, flipped bytes, wrong versio
     CHECK(names_a_part(m));
   }
   // Wrong version, wrong magic, padding.
-  std::string v5 = file;
-  v5[8] = 5;
-  CHECK(message_of(v5).find("format version 5 is not supported") != std::string::npos);
-  std::string v1 = file;  // a version 1 header over the 12 sections of version 4
+  std::string v6 = file;
+  v6[8] = 6;
+  CHECK(message_of(v6).find("format version 6 is not supported") != std::string::npos);
+  std::string v1 = file;  // a version 1 header over the 12 sections of version 5
   v1[8] = 1;
   CHECK(message_of(v1).find("12 sections, expected 7 in version 1") != std::string::npos);
   std::string magic = file;

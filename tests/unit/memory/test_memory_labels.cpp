@@ -12,6 +12,7 @@
 #include <vmap/hooks/precomputed_detections.hpp>
 #include <vmap/lcd/evaluation.hpp>
 #include <vmap/lcd/influence.hpp>
+#include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 
 #include <doctest/doctest.h>
@@ -24,10 +25,12 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <tuple>
 #include <vector>
 
 namespace {
 
+namespace fs = std::filesystem;
 using vmap::test::section_starts;
 
 using vmap::test::sample_frames;
@@ -284,35 +287,27 @@ TEST_CASE("memory files v2: policies' options are checked on load; version 1 fil
     (void)vmap::OrbVisualMemory::deserialize(file, "m.vmem", vmap::OrbDescriptor({.features = 500}),
                                              vmap::BruteForceMatcher{}, memory_estimator(), vmap::InlierRatio{});
   });
-  CHECK(orb.find("section 'plcy'") != std::string::npos);
-  CHECK(orb.find("the descriptor given to load (OrbDescriptor features=500") != std::string::npos);
+  CHECK(orb.find("memory file 'm.vmem': the descriptor given to load (OrbDescriptor features=500") == 0);
   CHECK(orb.find("features=1000") != std::string::npos);
   const std::string est = vmap::test::error_of([&] { (void)vmap::OrbVisualMemory::deserialize(file, "m.vmem"); });
   CHECK(est.find("the estimator given to load") != std::string::npos);
   CHECK(est.find("check_degeneracy=0") != std::string::npos);
 
-  // A version 1 file: the same first seven sections (their layout is unchanged), no
-  // policies, labels or GCS. It loads (policies unchecked) and continues.
-  const auto starts = section_starts(file);
-  REQUIRE(starts.size() == 12);
-  std::string v1 = file.substr(0, starts[7]);
-  v1[8] = 1;
-  v1[12] = 7;
+  // A version 1 file (tests/fuzz/corpus/memory/v1_five_keys.vmem, written by the version 1
+  // code): no policies, labels or GCS. It loads with any policies (none recorded) and
+  // continues; saved again, it is a file of the current version holding the same memory.
+  const std::string v1 = vmap::read_file(vmap::test::source_dir() / "tests/fuzz/corpus/memory/v1_five_keys.vmem",
+                                         1 << 20, "seed");
   auto old = from_bytes(v1, "v1.vmem");
-  CHECK(old.map().key_indices() == mem.map().key_indices());
-  CHECK(old.loops().size() == mem.loops().size());
-  CHECK(!old.labelled());
-  CHECK(!old.has_gcs());
-  const auto v1_any = vmap::OrbVisualMemory::deserialize(v1, "v1.vmem");  // not recorded: any policies
-  CHECK(v1_any.key_images() == mem.key_images());
-  for (std::size_t i = 25; i < 40; ++i) {
-    old.push(frames[i]);
-    mem.push(frames[i]);
-  }
-  CHECK(old.map().key_indices() == mem.map().key_indices());
-  CHECK(old.loops().size() == mem.loops().size());
-  // Saved again, it is a file of the current version.
-  CHECK(old.serialize()[8] == static_cast<char>(vmap::memory_format_version));
+  const auto v1_any = vmap::OrbVisualMemory::deserialize(v1, "v1.vmem");
+  CHECK(v1_any.key_images() == old.key_images());
+  const std::string again = old.serialize();
+  CHECK(again[8] == static_cast<char>(vmap::memory_format_version));
+  const auto reread = from_bytes(again, "again.vmem");
+  CHECK(reread.map().key_indices() == old.map().key_indices());
+  CHECK(reread.serialize() == again);
+  for (std::size_t i = 0; i < 10; ++i) old.push(frames[i]);
+  CHECK(old.frames() == 10 + v1_any.frames());
 }
 
 // A descriptor of a user's: A-KAZE's (or ORB's) features under a policy of its own, which
@@ -390,7 +385,7 @@ TEST_CASE("memory files: policies are recorded by their own describe(); key imag
     (void)UserMemory<Described>::deserialize(akaze_file, "m.vmem", Described{vmap::AkazeDescriptor({.octaves = 3})},
                                              vmap::BruteForceMatcher{}, memory_estimator());
   });
-  CHECK(other.find("section 'plcy'") != std::string::npos);
+  CHECK(other.find("memory file 'm.vmem': the descriptor given to load") == 0);
   CHECK(other.find("octaves=3") != std::string::npos);
 
   // A memory built with a calibrated camera records the camera: another camera is refused.
@@ -408,7 +403,7 @@ TEST_CASE("memory files: policies are recorded by their own describe(); key imag
     (void)CalibratedMemory::deserialize(calibrated_file, "c.vmem", vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
                                         CalibratedF(other_camera, memory_estimator()));
   });
-  CHECK(camera_error.find("section 'plcy'") != std::string::npos);
+  CHECK(camera_error.find("memory file 'c.vmem': the estimator given to load") == 0);
   CHECK(camera_error.find("the estimator given to load (Calibrated camera=(pinhole fx=500 ") != std::string::npos);
 
   // A memory of A-KAZE key images under a policy that does not describe itself: nothing
@@ -425,7 +420,7 @@ TEST_CASE("memory files: policies are recorded by their own describe(); key imag
     (void)UserMemory<OrbStated>::deserialize(file, "akaze.vmem", OrbStated{}, vmap::BruteForceMatcher{}, memory_estimator());
   });
   CHECK(layout.find("akaze.vmem") != std::string::npos);
-  CHECK(layout.find("section 'keys'") != std::string::npos);
+  CHECK(layout.find("memory file 'akaze.vmem': ") == 0);
   CHECK(layout.find("key image 0 has descriptors of CV_8UC1 x 61, Hamming, the descriptor given to load makes "
                     "CV_8UC1 x 32, Hamming") != std::string::npos);
   using AkazeStated = UserDescriptor<vmap::AkazeDescriptor, false, true>;
@@ -525,6 +520,8 @@ TEST_SUITE("data") {
 TEST_CASE("memory fuzz seeds: both load, fill every section and write back the same bytes") {
   const auto dir = vmap::test::source_dir() / "tests/fuzz/corpus/memory";
   const std::string full = vmap::read_file(dir / "labels_gcs.vmem", 1 << 20, "seed");
+  REQUIRE(full.size() > 16);
+  CHECK(full[8] == static_cast<char>(vmap::memory_format_version));
   const auto mem = vmap::OrbVisualMemory::deserialize(full, "labels_gcs.vmem");
   CHECK(mem.key_images() == 5);
   CHECK(mem.labelled());
@@ -539,73 +536,78 @@ TEST_CASE("memory fuzz seeds: both load, fill every section and write back the s
   CHECK(none.serialize() == empty);
 }
 
-TEST_CASE("memory files v3: a version 3 file loads as one session and writes its 11 sections unchanged") {
+TEST_CASE("memory files of every earlier version load as the same memory and write the current version's bytes") {
+  // The seeds of each version hold one memory: format 2 written by main at 83a80c7, format 3
+  // from those by the version 3 code, format 4 from those (tests/fuzz/corpus/README.md),
+  // format 5 from those by this code. Each loads and writes the format-5 file byte for
+  // byte: the options, key images (their times in nanoseconds from the seconds), links,
+  // loops with their confidences (0 in format 2, which kept none), the selector's state,
+  // labels, GCS and sessions read the same from every layout.
   const auto dir = vmap::test::source_dir() / "tests/fuzz/corpus/memory";
-  for (const char* name : {"labels_gcs_v3.vmem", "empty_v3.vmem"}) {
-    CAPTURE(name);
-    const std::string v3 = vmap::read_file(dir / name, 1 << 20, "seed");
-    REQUIRE(v3.size() > 16);
-    CHECK(v3[8] == 3);
-    const auto mem = vmap::OrbVisualMemory::deserialize(v3, name);
-    CHECK(mem.sessions().size() == 1);
-    const std::string v4 = mem.serialize();
-    const auto old_starts = section_starts(v3), new_starts = section_starts(v4);
-    REQUIRE(old_starts.size() == 11);
-    REQUIRE(new_starts.size() == 12);
-    CHECK(v4.substr(16, new_starts[11] - 16) == v3.substr(16));
-    CHECK(v4.substr(new_starts[11] + 16) == std::string(4, '\0'));  // no session after the first
+  for (const char* stem : {"labels_gcs", "empty"}) {
+    const std::string current = vmap::read_file(dir / (std::string(stem) + ".vmem"), 1 << 20, "seed");
+    for (const char* version : {"_v4", "_v3", "_v2"}) {
+      const std::string name = std::string(stem) + version + ".vmem";
+      CAPTURE(name);
+      const std::string old = vmap::read_file(dir / name, 1 << 20, "seed");
+      REQUIRE(old.size() > 16);
+      CHECK(old[8] == version[2] - '0');
+      const auto mem = vmap::OrbVisualMemory::deserialize(old, name);
+      CHECK(mem.serialize() == current);
+      for (const auto& k : mem.map().keys) CHECK(k.time_ns == vmap::nanoseconds_from_seconds(k.timestamp));
+    }
   }
 }
 
-TEST_CASE("memory files v2: a version 2 file loads and writes its sections unchanged, the options aside") {
-  // The version 2 seeds (written by main at 83a80c7); the version 3 seeds were written
-  // from them by the version 3 code, the version 4 seeds above from those.
-  const auto dir = vmap::test::source_dir() / "tests/fuzz/corpus/memory";
-  for (const char* name : {"labels_gcs_v2.vmem", "empty_v2.vmem"}) {
-    CAPTURE(name);
-    const std::string v2 = vmap::read_file(dir / name, 1 << 20, "seed");
-    REQUIRE(v2.size() > 16);
-    CHECK(v2[8] == 2);
-    const auto mem = vmap::OrbVisualMemory::deserialize(v2, name);
-    const std::string v3 = mem.serialize();
-    const auto old_starts = section_starts(v2), new_starts = section_starts(v3);
-    REQUIRE(old_starts.size() == 10);
-    REQUIRE(new_starts.size() == 12);
-    // "opts" keeps its layout but holds one inlier floor twice (version 2 had two);
-    // "voca" and "gcsl" hold vocabularies in their current file layout
-    // (place/vocabulary.hpp); "keys" .. "selc" and "plcd" .. "labl" are the same bytes;
-    // "dcsn" and "sess" are new.
-    CHECK(v3.substr(new_starts[1], new_starts[5] - new_starts[1]) ==
-          v2.substr(old_starts[1], old_starts[5] - old_starts[1]));
-    CHECK(v3.substr(new_starts[6], new_starts[9] - new_starts[6]) ==
-          v2.substr(old_starts[6], old_starts[9] - old_starts[6]));
-    CHECK(mem.options().loops.decision.min_confidence == vmap::PlaceDecisionOptions{}.min_confidence);
-    for (const auto& e : mem.loops()) CHECK(e.link.confidence == 0.0);  // not recorded in version 2
+TEST_CASE("a memory of two sessions written by the format-4 code (a .vmem and a store of schema 3) loads unchanged") {
+  // tests/unit/memory/data: `vmap memory build` of the sample frames 0-29 (ORB 80, a
+  // 64-word vocabulary, the TUM fr1 camera), then 5-32 as a second session, by main at
+  // 4e8e235 (a store of schema version 3 with its stack note), and that store saved as a
+  // format-4 file by the Python module of the same commit.
+  const auto data = vmap::test::source_dir() / "tests/unit/memory/data";
+  const vmap::Camera tum{.fx = 517.3, .fy = 516.5, .cx = 318.6, .cy = 255.3,
+                         .distortion = {0.2624, -0.9531, -0.0054, 0.0026, 1.1633}, .image_size = {640, 480}};
+  using CalibratedF = vmap::Calibrated<vmap::FundamentalEstimator>;
+  using Memory = vmap::VisualMemory<vmap::OrbDescriptor, vmap::BruteForceMatcher, CalibratedF, vmap::InlierRatio>;
+  const auto policies = [&] {
+    return std::tuple{vmap::OrbDescriptor({.features = 80}), vmap::BruteForceMatcher({.mode = vmap::MatchMode::mutual}),
+                      CalibratedF(tum, vmap::FundamentalEstimator{})};
+  };
+  auto [d, m, e] = policies();
+  const auto file = Memory::load(data / "tum_two_sessions_v4.vmem", d, m, e);
+  CHECK(file.key_images() == 13);
+  CHECK(file.sessions().size() == 2);
+  CHECK(file.loops().size() == 4);
+  CHECK(file.vocabulary().size() == 64);
+  for (const auto& edge : file.loops()) {
+    CHECK(file.session_of(edge.from) == 1);
+    CHECK(file.session_of(edge.link.key) == 0);
+    CHECK(edge.link.confidence > 0.5);
   }
-}
-
-TEST_CASE("memory files v1: a file written by the version 1 code loads; its sections but the options are written unchanged") {
-  // tests/fuzz/corpus/memory/v1_five_keys.vmem: written by main at 6af038d (format 1)
-  // from five 72x72 crops of seeded noise with SE(2) poses.
-  const std::string v1 = vmap::read_file(vmap::test::source_dir() / "tests/fuzz/corpus/memory/v1_five_keys.vmem",
-                                         1 << 20, "seed");
-  REQUIRE(v1.size() > 16);
-  CHECK(v1[8] == 1);
-  const auto mem = vmap::OrbVisualMemory::deserialize(v1, "v1_five_keys.vmem");
-  CHECK(mem.key_images() == 5);
-  CHECK(mem.database().size() == 5);
-  CHECK(!mem.labelled());
-  CHECK(!mem.has_gcs());
-  REQUIRE(std::get_if<vmap::Pose2>(&mem.poses()[4]) != nullptr);
-  CHECK(std::get_if<vmap::Pose2>(&mem.poses()[4])->x() == 2.0);
-  const std::string v3 = mem.serialize();
-  const auto starts = section_starts(v3), old = section_starts(v1);
-  REQUIRE(starts.size() == 12);
-  REQUIRE(old.size() == 7);
-  // Header (version and count aside) and the sections after "opts" (which holds one
-  // inlier floor twice now) but "voca" (the vocabulary's current file layout): the same
-  // bytes.
-  CHECK(v3.substr(0, 8) == v1.substr(0, 8));
-  CHECK(v3.substr(starts[1], starts[5] - starts[1]) == v1.substr(old[1], old[5] - old[1]));
-  CHECK(v3.substr(starts[6], starts[7] - starts[6]) == v1.substr(old[6]));
+  // The store, read where it is: the same memory.
+  const fs::path copy = vmap::test::scratch_dir("old_store") / "tum_two_sessions_v3.vmdb";
+  fs::copy_file(data / "tum_two_sessions_v3.vmdb", copy);
+  std::string from_store;
+  {
+    auto reader = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read);
+    CHECK(reader.version() == 3);
+    auto [d2, m2, e2] = policies();
+    from_store = reader.load<Memory>(d2, m2, e2, vmap::InlierRatio{}, vmap::MapLoadOptions{}).serialize();
+    CHECK(from_store == file.serialize());
+    CHECK(reader.note("stack").has_value());
+  }
+  // A writer brings it to schema 4: the same memory, and it goes on.
+  {
+    auto store = vmap::MemoryStore::open(copy);
+    CHECK(store.version() == vmap::memory_store_version);
+    auto [d3, m3, e3] = policies();
+    auto mem = store.load<Memory>(d3, m3, e3, vmap::InlierRatio{}, vmap::MapLoadOptions{});
+    CHECK(mem.serialize() == from_store);
+    for (std::size_t i = 33; i < 40; ++i) mem.push(sample_frames()[i]);
+    store.sync(mem);
+    store.flush();
+    auto [d4, m4, e4] = policies();
+    auto again = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read).load<Memory>(d4, m4, e4);
+    CHECK(again.serialize() == mem.serialize());
+  }
 }

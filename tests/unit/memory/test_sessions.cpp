@@ -228,36 +228,38 @@ TEST_CASE("sessions: the store's sessions table, read without vmap; a version-1 
   CHECK(sql_integer(p, "SELECT first_frame FROM sessions WHERE id = 1") == 40);
   CHECK(sql_integer(p, "SELECT count(*) FROM key_images WHERE id >= (SELECT first_key FROM sessions WHERE id = 1)") ==
         static_cast<std::int64_t>(whole.key_images() - whole.sessions()[1].first_key));
-  CHECK(sql_integer(p, "PRAGMA user_version") == 3);
+  CHECK(sql_integer(p, "PRAGMA user_version") == 4);
 
-  // A store of the version 1 schema (one session, no sessions table).
-  auto one = make_small_memory(o);
-  for (const auto& f : run1()) one.push(f);
+  // A store of the version 1 schema (one session, no sessions table, records of the
+  // single-file format 3: `vmap memory convert` of the format-3 seed, tests/fuzz/corpus).
+  const fs::path corpus = vmap::test::source_dir() / "tests/fuzz/corpus";
+  const auto seed = vmap::OrbVisualMemory::deserialize(
+      vmap::read_file(corpus / "memory/labels_gcs_v4.vmem", 1 << 20, "seed"), "labels_gcs_v4.vmem");
   const fs::path v1 = fresh("v1.vmdb");
-  {
-    auto store = vmap::MemoryStore::create(v1);
-    store.sync(one);
-  }
-  raw_sql(v1, "DROP TABLE sessions; PRAGMA user_version = 1");
+  fs::copy_file(corpus / "memory_store/labels_gcs.vmdb", v1);
+  CHECK(sql_integer(v1, "PRAGMA user_version") == 1);
   {
     auto reader = vmap::MemoryStore::open(v1, vmap::sqlite::Access::read);
-    CHECK(load(reader).serialize() == one.serialize());
+    CHECK(reader.load<vmap::OrbVisualMemory>().serialize() == seed.serialize());
     CHECK(sql_integer(v1, "PRAGMA user_version") == 1);  // a reader changes nothing
   }
-  // A writer brings it to version 3 and continues it with a second session.
+  // A writer brings it to version 4 (the same memory) and continues it with a session.
+  std::string expected;
   {
     auto store = vmap::MemoryStore::open(v1);
-    CHECK(sql_integer(v1, "PRAGMA user_version") == 3);
-    auto mem = load(store);
-    CHECK(mem.serialize() == one.serialize());
+    CHECK(sql_integer(v1, "PRAGMA user_version") == 4);
+    auto mem = store.load<vmap::OrbVisualMemory>();
+    CHECK(mem.serialize() == seed.serialize());
     mem.start_session();
-    for (const auto& f : run2()) {
-      mem.push(f);
+    for (const auto& f : part(0, 20)) {
+      mem.push(f, {}, std::vector<vmap::Detection>{});
       store.sync(mem);
     }
+    store.flush();
+    expected = mem.serialize();
   }
   auto back = vmap::MemoryStore::open(v1, vmap::sqlite::Access::read);
-  CHECK(load(back).serialize() == whole.serialize());
+  CHECK(back.load<vmap::OrbVisualMemory>().serialize() == expected);
   CHECK(sql_integer(v1, "SELECT count(*) FROM sessions") == 2);
 }
 

@@ -136,8 +136,8 @@ TEST_CASE("store: a sync that fails in the writer thread is an Error at the next
   store->flush();
   const std::size_t m = memory.key_images();
   REQUIRE(m >= 2);
-  raw_sql(file, "INSERT INTO key_images(id, frame_index, timestamp, name, keypoints, record, detections) VALUES(" +
-                    std::to_string(m) + ", 0, 0, 'intruder', 0, x'', x'')");
+  raw_sql(file, "INSERT INTO key_images(id, frame_index, timestamp, time_ns, name, keypoints, record, detections, crc) "
+                "VALUES(" + std::to_string(m) + ", 0, 0, 0, 'intruder', 0, x'', x'', 0)");
   // Pushed and synced up to the frame that makes key image m: the sync that writes it
   // returns, and fails in the writer thread.
   while (memory.key_images() == m) {
@@ -511,10 +511,10 @@ TEST_CASE("store: files that are not stores, other versions and damaged rows are
     auto store = vmap::MemoryStore::create(file);
     store.sync(memory);
   }
-  raw_sql(file, "PRAGMA user_version = 4");
+  raw_sql(file, "PRAGMA user_version = 5");
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(file); })
-            .find("has store version 4; this build reads versions 1 to 3") != std::string::npos);
-  raw_sql(file, "PRAGMA user_version = 3");
+            .find("has store version 5; this build reads versions 1 to 4") != std::string::npos);
+  raw_sql(file, "PRAGMA user_version = 4");
 
   // A key image's record cut short, a missing key image, a descriptor blob of another
   // width: each an Error from the memory's own checks, naming the store.

@@ -1,10 +1,10 @@
 #pragma once
 
-// What the memory file (memory/visual_memory.hpp) and the memory store
-// (memory/store.hpp) share of the format: the header's constants, the section framing
-// (tag, length, CRC; each section read by a reader that names it) and the codecs of the
-// records several sections hold (detections, poses, images, links). The format itself
-// is documented in examples/memory.md, "The single-file format (.vmem)".
+// What the single-file format (memory/vmem.hpp) and the memory store (memory/store.hpp)
+// share of the encoding: the header's constants, the section framing (tag, length, CRC;
+// each section read by a reader that names it) and the codecs of the values several
+// records hold (detections, poses, images, links; memory/detail/record_codecs.hpp
+// composes them). The format itself is described in memory/vmem.hpp.
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
@@ -30,9 +30,6 @@
 
 namespace vmap {
 
-/// Written by this build; versions 1 to 3 still load.
-inline constexpr std::uint32_t memory_format_version = 4;
-
 namespace detail {
 
 inline constexpr char memory_magic[8] = {'V', 'M', 'A', 'P', 'M', 'E', 'M', 'O'};
@@ -40,9 +37,6 @@ inline constexpr std::uint32_t memory_sections_v1 = 7;
 inline constexpr std::uint32_t memory_sections_v2 = 10;
 inline constexpr std::uint32_t memory_sections_v3 = 11;
 inline constexpr std::uint32_t memory_sections = 12;
-/// How "selc" holds I_{j-1}'s score: complete (a file saved whole), or with its
-/// degeneracy test deferred (the store, which rewrites it at every sync).
-enum class ScoreDegeneracy : std::uint8_t { complete, deferred };
 /// Longest policy description a file may hold.
 inline constexpr std::uint32_t memory_max_policy = 4096;
 /// Most detections one key image may have in a file (a detector gives a few hundred).
@@ -186,7 +180,7 @@ inline OdometryPose memory_read_pose(BinaryReader& r) {
 inline void memory_write_link(BinaryWriter& w, const PlaceLink& l) {
   w.f64(l.bow_score);
   w.u8(static_cast<std::uint8_t>(l.status));
-  write_matx33(w, l.fundamental);
+  write_matx33(w, l.model);
   w.i32(l.matches);
   w.i32(l.inliers);
   w.f64(l.similarity);
@@ -197,7 +191,7 @@ inline PlaceLink memory_read_link(BinaryReader& r) {
   l.bow_score = r.f64("BoW score");
   if (!(l.bow_score >= 0.0 && l.bow_score <= 1.0 + 1e-9)) r.corrupt("BoW score outside [0, 1]");
   l.status = read_verification_status(r, "verification status");
-  l.fundamental = read_matx33(r, "fundamental matrix");
+  l.model = read_matx33(r, "model matrix");
   l.matches = r.i32("matches");
   l.inliers = r.i32("inliers");
   if (l.matches < 0 || l.inliers < 0 || l.inliers > l.matches) r.corrupt("invalid match/inlier counts");
