@@ -8,7 +8,6 @@
 #include "common/draw.hpp"
 #include "common/keyframe_cli.hpp"
 #include "common/memory_cli.hpp"
-#include "common/memory_export.hpp"
 #include "common/policies.hpp"
 #include "vmap/cli.hpp"
 
@@ -18,6 +17,10 @@
 #include <vmap/keyframe/pipeline.hpp>
 #include <vmap/keyframe/selector.hpp>
 #include <vmap/matching/brute_force.hpp>
+#include <vmap/runtime/exports.hpp>
+#include <vmap/runtime/memory.hpp>
+#include <vmap/runtime/policies.hpp>
+#include <vmap/runtime/recorder.hpp>
 
 #include <nlohmann/json.hpp>
 
@@ -68,9 +71,9 @@ void print_table(std::FILE* out, const vmap::VisualMap& map) {
     }
     const std::string name = keys[k].name.size() > 28 ? "..." + keys[k].name.substr(keys[k].name.size() - 25) : keys[k].name;
     if (k == 0)
-      std::fprintf(out, "  %4zu  %6zu  %-28s  %8s  %6s\n", k + 1, keys[k].frame_index, name.c_str(), "-", "-");
+      std::fprintf(out, "  %4zu  %6zu  %-28s  %8s  %6s\n", k, keys[k].frame_index, name.c_str(), "-", "-");
     else
-      std::fprintf(out, "  %4zu  %6zu  %-28s  %8d  %6.3f\n", k + 1, keys[k].frame_index, name.c_str(),
+      std::fprintf(out, "  %4zu  %6zu  %-28s  %8d  %6.3f\n", k, keys[k].frame_index, name.c_str(),
                   map.pairs[k - 1].inliers, map.pairs[k - 1].similarity);
   }
 }
@@ -107,7 +110,7 @@ void key_pixels_for_pictures(vmap::VisualMap& map, const vmap::FrameSource& src,
   }
   for (std::size_t k = 0; k < map.keys.size(); ++k)
     if (map.keys[k].image.empty())
-      vmap::detail::fail("--out: no pixels of key image " + std::to_string(k + 1) + " (frame " +
+      vmap::detail::fail("--out: no pixels of key image " + std::to_string(k) + " (frame " +
                          std::to_string(map.keys[k].frame_index) + ", " + map.keys[k].name + ") for the pictures");
 }
 
@@ -131,7 +134,7 @@ cv::Mat pair_picture(const vmap::VisualMap& map, std::size_t i, Selector& sel, c
   fe.verify(a.features, b.features, matches, s);
   char caption[256];
   std::snprintf(caption, sizeof caption, "%s: K%zu-K%zu, frames %zu-%zu: %zu matches, %d inliers, S = %.3f",
-                what.c_str(), i + 1, i + 2, a.frame_index, b.frame_index, matches.size(), s.verification.inliers,
+                what.c_str(), i, i + 1, a.frame_index, b.frame_index, matches.size(), s.verification.inliers,
                 map.pairs[i].similarity);
   return ex::captioned(ex::draw_verified_matches(a.image, a.features, b.image, b.features, matches, s.verification),
                        caption);
@@ -148,7 +151,7 @@ std::vector<std::string> write_outputs(const ex::OutputFolder& dir, const vmap::
   std::vector<std::string> captions;
   for (std::size_t k = 0; k < map.keys.size(); ++k) {
     images.push_back(map.keys[k].image);
-    captions.push_back("K" + std::to_string(k + 1) + "  frame " + std::to_string(map.keys[k].frame_index));
+    captions.push_back("K" + std::to_string(k) + "  frame " + std::to_string(map.keys[k].frame_index));
   }
   vmap::write_image_atomically(dir / "contact_sheet.png", ex::contact_sheet(images, captions));
   written.push_back("contact_sheet.png");
@@ -167,13 +170,13 @@ struct MemoryRun {
   std::filesystem::path file;
   bool resumed = false;
   std::size_t session = 0;  ///< the session this run pushed into
-  ex::StreamResult stream;
+  vmap::RecordResult record;
   std::size_t loops = 0;  ///< loop edges in the whole memory
   std::optional<std::size_t> last_frame;
   std::uintmax_t bytes = 0;
-  /// Writes the memory's exports (common/memory_export.hpp) into a folder.
+  /// Writes the memory's exports (runtime/exports.hpp) into a folder.
   std::function<std::vector<std::string>(const std::filesystem::path&)> write_exports;
-  ex::MemoryStack stack;  ///< the memory's policies (a resumed memory's own)
+  vmap::PolicyStack stack;  ///< the memory's policies (a resumed memory's own)
 };
 
 /// The key images' outputs (--out), the JSON or the table, for a plain or a memory run.
@@ -202,12 +205,12 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
   nlohmann::json memory_json = nullptr;
   if (memory) {
     nlohmann::json new_loops = nlohmann::json::array();
-    for (const auto& e : memory->stream.loops) new_loops.push_back({{"from", e.from}, {"to", e.link.key}});
+    for (const auto& e : memory->record.loops) new_loops.push_back({{"from", e.from}, {"to", e.link.key}});
     memory_json = {{"file", ex::path_string(memory->file)},
                    {"resumed", memory->resumed},
                    {"session", memory->session},
-                   {"pushed", memory->stream.pushed},
-                   {"saves", memory->stream.saves},
+                   {"pushed", memory->record.pushed},
+                   {"saves", memory->record.syncs},
                    {"loops", memory->loops},
                    {"new_loops", new_loops},
                    {"last_frame_index", memory->last_frame ? nlohmann::json(*memory->last_frame) : nlohmann::json(nullptr)},
@@ -238,8 +241,9 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
   std::FILE* out = stdout;
   const bool previous_rule = memory ? sel.options().rule == vmap::KeyRule::previous_frame : a.rule == "previous";
   std::fprintf(out, "vmap build: %s (%s + mutual NN + %s, threshold %.2f, %s rule)%s\n\n", a.input.c_str(),
-               (memory ? memory->stack.descriptor.name : a.features).c_str(),
-               (memory ? memory->stack.estimator : a.estimator).c_str(), memory ? sel.options().tau : args.threshold,
+               (memory ? std::string(vmap::to_string(memory->stack.descriptor)) : a.features).c_str(),
+               (memory ? std::string(vmap::to_string(memory->stack.method)) : a.estimator).c_str(),
+               memory ? sel.options().tau : args.threshold,
                previous_rule ? "eq. 6 previous-frame" : "Algorithm 1 current-frame",
                camera ? (", camera " + camera->file.string()).c_str() : "");
   print_table(out, map);
@@ -257,8 +261,8 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
   std::fprintf(out, "  time              %.2f s (%.1f frames/s)\n", seconds, fps);
   if (memory)
     std::fprintf(out, "  memory            %s: session %zu %s %zu frames, %zu loop edges (%zu new), last frame %zu, %ju bytes\n",
-                 memory->file.c_str(), memory->session + 1, memory->resumed ? "resumed with" : "pushed", memory->stream.pushed,
-                 memory->loops, memory->stream.loops.size(), memory->last_frame.value_or(0),
+                 memory->file.c_str(), memory->session, memory->resumed ? "resumed with" : "pushed", memory->record.pushed,
+                 memory->loops, memory->record.loops.size(), memory->last_frame.value_or(0),
                  static_cast<std::uintmax_t>(memory->bytes));
   if (out_dir) {
     std::fprintf(out, "\n  wrote %s\n", ex::written_files(a.out, written).c_str());
@@ -273,14 +277,28 @@ std::optional<std::size_t> expected_frames(const vmap::FrameSource& src, const v
   return end > so.start ? (end - so.start + so.stride - 1) / so.stride : 0;
 }
 
-/// `vmap build INPUT --memory DIR|FILE [--resume] [--save-every N] [--images none|png|jpeg]`.
+/// The options of a new memory from the command line.
+vmap::MemoryOptions memory_options(const BuildArgs& args) {
+  vmap::MemoryOptions o;
+  o.selector.tau = args.threshold;
+  o.selector.rule = ex::parse_rule(args.common.rule);
+  o.vocabulary_after = args.vocabulary_after;
+  o.loops.decision.min_confidence = args.min_confidence;
+  o.images = args.images == "png" ? vmap::ImageStorage::png : args.images == "jpeg" ? vmap::ImageStorage::jpeg
+                                                                                    : vmap::ImageStorage::none;
+  return o;
+}
+
+/// `vmap build INPUT --memory DIR|FILE [--resume] [--save-every N] [--images none|png|jpeg]`
+/// (also `vmap memory build`): the frames streamed into a visual memory store
+/// (runtime/recorder.hpp), synced at every key image.
 int build_memory(const BuildArgs& args, const CLI::App& app) {
   namespace fs = std::filesystem;
   const auto& a = args.common;
   auto given = [&](const char* name) { return app.get_option(name)->count() > 0; };
   if (given("--vocabulary") && given("--vocabulary-after"))
     ex::usage_error("--vocabulary and --vocabulary-after conflict (the second is for a vocabulary learned online)");
-  const fs::path file = ex::memory_file(args.memory);
+  const fs::path file = vmap::memory_path(args.memory);
   const auto continuation = ex::continuation_of(args.resume, !args.session.empty(), args.force);
   const bool continued = continuation.has_value();
   const auto how = continuation.value_or(ex::Continuation::resume);
@@ -291,84 +309,81 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   }
   // The policy stack: a new memory's from the command line (its camera read before any
   // folder is made), a continued one's as it recorded it (the stack's options then
-  // conflict, store_to_continue).
-  ex::MemoryStack stack;
-  if (!continued) stack = ex::stack_of_args(a.descriptor(), a.estimator, a.camera);
+  // conflict, check_continuable).
+  vmap::PolicyStack stack;
+  if (!continued) stack = ex::stack_of_args(a.features, a.nfeatures, a.model, a.refine_model, a.estimator, a.camera);
   ex::prepare_memory_output(file, "--memory", inputs, continued, args.force);
-  std::optional<vmap::MemoryStore> kept;
-  if (continued) {
-    kept.emplace(ex::store_to_continue(
-        file, app, {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after", "--min-confidence"}, how));
-    stack = ex::recorded_stack(*kept);
+  if (continued)
+    ex::check_continuable(file, app, {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after",
+                                      "--min-confidence"}, how);
+  if (!args.vocabulary.empty()) ex::check_input_file(args.vocabulary, "--vocabulary");
+  const vmap::SyncPolicy sync{args.save_every};
+  std::optional<vmap::AnyMemory> mem;
+  if (continued)
+    mem.emplace(vmap::AnyMemory::open(file, {.write = true, .new_session = how == ex::Continuation::new_session,
+                                             .working_memory = args.working_memory, .sync = sync}));
+  inputs.push_back(file);
+  std::optional<ex::OutputFolder> out_dir;
+  if (!a.out.empty()) {
+    // The --out folder is replaced as a whole when the run ends: a memory inside it would go.
+    if (ex::cli_detail::inside(ex::cli_detail::resolved(file), ex::cli_detail::resolved(a.out)))
+      ex::usage_error("--memory: '" + file.string() + "' is inside the --out folder '" + a.out +
+                      "', which is replaced as a whole (keep the memory elsewhere)");
+    std::vector<std::string> files{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"};
+    files.insert(files.end(), vmap::memory_export_files().begin(), vmap::memory_export_files().end());
+    out_dir.emplace(a.out, "--out", inputs, files);
   }
-  return ex::with_stack(stack, [&](auto descriptor, auto matcher, auto estimator) -> int {
-    using Memory = ex::MemoryOf<decltype(descriptor), decltype(matcher), decltype(estimator)>;
-    std::optional<ex::MemoryWriter<Memory>> writer;
-    if (continued)
-      writer.emplace(ex::memory_to_continue(std::move(*kept), args.working_memory, how, std::move(descriptor), std::move(matcher),
-                                            std::move(estimator)));
-    inputs.push_back(file);
-    std::optional<ex::OutputFolder> out_dir;
-    if (!a.out.empty()) {
-      // The --out folder is replaced as a whole when the run ends: a memory inside it would go.
-      if (ex::cli_detail::inside(ex::cli_detail::resolved(file), ex::cli_detail::resolved(a.out)))
-        ex::usage_error("--memory: '" + file.string() + "' is inside the --out folder '" + a.out +
-                        "', which is replaced as a whole (keep the memory elsewhere)");
-      std::vector<std::string> files{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"};
-      files.insert(files.end(), ex::export_file_names().begin(), ex::export_file_names().end());
-      out_dir.emplace(a.out, "--out", inputs, files);
-    }
-    auto so = ex::source_options(a, true);
-    if (args.resume)
-      so = ex::resume_range(writer->memory, so, file.string());
-    auto src = vmap::FrameSource::open(a.input, so);
-    const bool no_pixels = continued ? writer->memory.options().images == vmap::ImageStorage::none : args.images == "none";
-    if (out_dir && src.kind() == vmap::SourceKind::live && no_pixels)
-      ex::usage_error("--out with --memory on a live source needs the memory's pixels (--images png or jpeg): a live "
-                      "stream cannot be read again");
-    std::optional<ex::FramePoses> poses;
-    if (args.gcs && args.poses.empty()) ex::usage_error("--gcs needs --poses FILE (the GCS learns a pose per neuron)");
-    if (!args.poses.empty()) poses.emplace(args.poses, src, args.gcs);
-    const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
-    if (continued) {
-      ex::record_input(*writer, how, fingerprint);
-      if (args.resume) ex::check_frames_left(writer->memory, src, so, file.string());
+  auto so = ex::source_options(a, true);
+  if (args.resume) so = ex::resume_range(*mem, so);
+  auto src = vmap::FrameSource::open(a.input, so);
+  const bool no_pixels = continued ? mem->options().images == vmap::ImageStorage::none : args.images == "none";
+  if (out_dir && src.kind() == vmap::SourceKind::live && no_pixels)
+    ex::usage_error("--out with --memory on a live source needs the memory's pixels (--images png or jpeg): a live "
+                    "stream cannot be read again");
+  std::optional<vmap::FramePoses> poses;
+  if (args.gcs && args.poses.empty()) ex::usage_error("--gcs needs --poses FILE (the GCS learns a pose per neuron)");
+  if (!args.poses.empty()) poses.emplace(args.poses, src, args.gcs);
+  const vmap::RecordedInput input = vmap::recorded_input(a.input, src, so.stride);
+  if (continued) {
+    if (args.resume) {
+      ex::check_same_input(*mem, input);
+      ex::check_frames_left(*mem, src, so);
     } else {
-      writer.emplace(ex::create_memory(file, args.force,
-                                       ex::new_memory({.tau = args.threshold,
-                                                       .rule = ex::parse_rule(a.rule),
-                                                       .images = args.images,
-                                                       .vocabulary = args.vocabulary,
-                                                       .vocabulary_after = args.vocabulary_after,
-                                                       .min_confidence = args.min_confidence},
-                                                      std::move(descriptor), std::move(matcher), std::move(estimator)),
-                                       stack));
-      writer->store.set_note("input", fingerprint);
+      vmap::set_session_input(*mem, input);
     }
-    ex::NewMemoryGuard guard(writer, !continued);
-    auto* mem = &writer->memory;
-    ex::Progress progress("vmap build", expected_frames(src, so));
-    MemoryRun run{file, args.resume, mem->sessions().size() - 1, {}, 0, std::nullopt, 0, {}, stack};
-    run.stream = ex::stream_into(*writer, src, args.save_every, args.working_memory, poses, [&](const Memory& m) {
-      progress.update(src.delivered(), std::to_string(m.key_images()) + " key images");
-  });
+  } else {
+    vmap::AnyVocabulary vocabulary;
+    if (!args.vocabulary.empty()) vocabulary = vmap::AnyVocabulary::load(args.vocabulary);
+    if (args.force) ex::remove_memory(file);
+    mem.emplace(vmap::AnyMemory::create(file, stack, memory_options(args), std::move(vocabulary),
+                                        {.working_memory = args.working_memory, .sync = sync}));
+    vmap::set_session_input(*mem, input);
+  }
+  ex::NewMemoryGuard guard(mem, !continued);
+  ex::Progress progress("vmap build", expected_frames(src, so));
+  MemoryRun run{file, args.resume, mem->sessions().size() - 1, {}, 0, std::nullopt, 0, {}, mem->stack()};
+  vmap::RecordOptions record;
+  if (poses) record.poses = [&](const vmap::Frame& f) { return (*poses)(f); };
+  record.on_frame = [&](const vmap::AnyMemory& m) {
+    progress.update(src.delivered(), std::to_string(m.key_images()) + " key images");
+  };
+  run.record = vmap::record(*mem, src, record);
   progress.done(std::to_string(mem->key_images()) + " key images, " + std::to_string(src.skipped().size()) + " skipped");
-  if (run.stream.pushed == 0)
+  if (run.record.pushed == 0)
     vmap::detail::fail("'" + a.input + "' gave no frame in the requested range" +
                        (args.resume ? " after the memory's last frame " + std::to_string(mem->last_frame_index().value_or(0)) : ""));
   guard.keep();
   if (args.gcs) {
     // The GCS (Trujillo-Romero 2024, Algorithms 1 and 4) learns from every key image with
     // a floor pose, the resumed ones included, so it is trained again after each run.
-    mem->train_gcs();
-    writer->store.sync(*mem);
-    ++run.stream.saves;
+    (void)mem->train_gcs();
+    ++run.record.syncs;
   }
-  writer->store.checkpoint();
+  mem->close();
   run.loops = mem->loops().size();
   run.last_frame = mem->last_frame_index();
   run.bytes = fs::file_size(file);
-  run.write_exports = [&](const fs::path& dir) { return ex::export_memory(*mem, dir, false); };
+  run.write_exports = [&](const fs::path& dir) { return vmap::export_memory(*mem, dir, false); };
   // map.vmap and the pictures need every key image's features: the released ones are
   // read back from the memory.
   std::optional<vmap::VisualMap> whole;
@@ -377,9 +392,14 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
     for (std::size_t k = 0; k < whole->keys.size(); ++k)
       if (!mem->holds_features(k)) whole->keys[k].features = mem->key_features(static_cast<std::uint32_t>(k));
   }
-  return report(args, app, whole ? *whole : mem->map(), mem->selector(), src, run.stream.pushed, run.stream.seconds,
-                out_dir, stack.camera, run);
-  });
+  // The pictures match key image pairs again with the memory's own policies.
+  return vmap::with_policies(mem->stack(), vmap::StackUse::selection, [&](auto d, auto m, auto e) -> int {
+    vmap::KeyframeSelector sel(std::move(d), std::move(m), std::move(e), vmap::InlierRatio{}, mem->options().selector);
+    return report(args, app, whole ? *whole : mem->map(), sel, src, run.record.pushed, run.record.seconds, out_dir,
+                  run.stack.camera ? std::optional<ex::CameraOption>(ex::CameraOption{run.stack.camera_source, *run.stack.camera})
+                                   : std::nullopt,
+                  run);
+  }, "the memory's camera");
 }
 
 std::function<int()> setup(CLI::App& app) {

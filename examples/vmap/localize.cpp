@@ -408,7 +408,7 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--memory", s->memory,
                  "Answer from a saved visual memory (vmap build --memory; a folder means DIR/memory.vmdb): the key "
                  "image each IMAGE matches, instead of training a GCS map");
-  app.add_option("image", s->images, "With --memory: the query images");
+  app.add_option("image", s->images, "With --memory: the query images, or folders, lists or videos of query images");
   app.add_option("--min-confidence", s->min_confidence,
                  "With --memory: accept a key image at this place-decision confidence in [0, 1] (default: the "
                  "memory's, 0.5); below it the answer is \"unknown place\"")
@@ -417,7 +417,7 @@ std::function<int()> setup(CLI::App& app) {
     if (!s->memory.empty()) {
       ex::refuse_other_options(app, {"--memory", "IMAGE", "--json", "--min-confidence"}, "--memory");
       if (s->images.empty()) ex::usage_error("--memory needs query images: vmap localize --memory M IMAGE...");
-      return ex::localize_from_memory(ex::memory_file(s->memory), "--memory", s->images, s->json, s->min_confidence);
+      return ex::localize_from_memory(vmap::memory_path(s->memory), "--memory", s->images, s->json, s->min_confidence);
     }
     if (!s->images.empty())
       ex::usage_error("query images on the command line need --memory M (the GCS modes take --query or --every-other)");

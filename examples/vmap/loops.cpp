@@ -123,11 +123,12 @@ vmap::LoopGroundTruth key_ground_truth(const LoopsArgs& a, const Memory& mem) {
 int run_memory(const LoopsArgs& a, const CLI::App& app) {
   ex::refuse_other_options(app, {"--memory", "--gt", "--gt-poses", "--gt-distance", "--gt-angle", "--json", "--edges"}, "--memory");
   if (!a.gt.empty() && !a.gt_poses.empty()) ex::usage_error("give at most one of --gt MATRIX and --gt-poses POSES");
-  const auto file = ex::memory_file(a.memory);
+  const auto file = vmap::memory_path(a.memory);
   ex::current_inputs() = {file.string()};
   for (const auto& [path, option] : {std::pair{a.gt, "--gt"}, std::pair{a.gt_poses, "--gt-poses"}})
     if (!path.empty()) ex::check_input_file(path, option);
-  return ex::with_memory(file, "--memory", false, [&](const auto& mem, const ex::MemoryStack&) -> int {
+  const auto mem = ex::open_memory_input(file, "--memory");
+  {
     const double min_confidence = mem.options().loops.decision.min_confidence;
     nlohmann::json loops = nlohmann::json::array();
     for (const auto& e : mem.loops()) loops.push_back(ex::loop_json(mem, e));
@@ -185,7 +186,7 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
     std::printf("key images (best edge each): TP %zu, FP %zu, precision %.3f, recall %.3f; recall@100%%P %.3f\n",
                 pr.true_positives, pr.false_positives, pr.precision, pr.recall, full.recall);
     return 0;
-  });
+  }
 }
 
 int run(LoopsArgs& a, const CLI::App& app) {
@@ -311,7 +312,8 @@ int run(LoopsArgs& a, const CLI::App& app) {
   for (const auto& r : result.results)
     if (r.loop()) {
       const std::size_t q = r.frame, m = *r.best;
-      pairs.push_back({q, m, features.times[q], features.times[m], features.names[q], features.names[m], r.evidence.inliers});
+      pairs.push_back({q, m, vmap::nanoseconds_from_seconds(features.times[q]), vmap::nanoseconds_from_seconds(features.times[m]),
+                       features.names[q], features.names[m], r.evidence.inliers});
       if (q < frame_poses.size() && m < frame_poses.size()) {
         g2o_edges += vmap::g2o_edge_line(q, m, frame_poses[q], frame_poses[m]);
         g2o_vertex[q] = g2o_vertex[m] = true;

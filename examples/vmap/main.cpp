@@ -39,6 +39,26 @@ std::string subcommand_of(int argc, char** argv) {
   return {};
 }
 
+/// Where the subcommand named on the command line is (subcommand_of), or argc.
+int subcommand_at(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a.empty() || a[0] != '-') return i;
+    if (a == "--config") ++i;
+  }
+  return argc;
+}
+
+/// `vmap memory build ...` is `vmap build ...` (one command builds a memory: `vmap build
+/// INPUT --memory M`, documented as such): the arguments with "memory build" made "build".
+std::vector<char*> without_memory_build(int argc, char** argv) {
+  std::vector<char*> args(argv, argv + argc);
+  const int at = subcommand_at(argc, argv);
+  if (at + 1 < argc && std::string(argv[at]) == "memory" && std::string(argv[at + 1]) == "build")
+    args.erase(args.begin() + at);
+  return args;
+}
+
 }  // namespace
 
 static int run_vmap(int argc, char** argv) {
@@ -79,7 +99,23 @@ static int run_vmap(int argc, char** argv) {
       sub->footer(exit_codes_text);
       runners[sub] = c.setup(*sub);
     }
-    if (!sub_name.empty()) ex::check_option_names(app, *app.get_subcommand(sub_name), argc, argv);
+    if (!sub_name.empty()) {
+      // A subcommand of a subcommand (vmap memory info) misspelt: named with the nearest.
+      const CLI::App* sub = app.get_subcommand(sub_name);
+      const int at = subcommand_at(argc, argv);
+      std::vector<std::string> inner;
+      for (const CLI::App* c : sub->get_subcommands([](const CLI::App*) { return true; })) inner.push_back(c->get_name());
+      if (!inner.empty() && sub->get_require_subcommand_min() > 0 && at + 1 < argc && argv[at + 1][0] != '-' &&
+          std::find(inner.begin(), inner.end(), std::string(argv[at + 1])) == inner.end()) {
+        const auto near = ex::closest(argv[at + 1], inner);
+        std::string list;
+        for (const auto& n : inner) list += (list.empty() ? "" : ", ") + n;
+        std::fprintf(stderr, "%s: unknown subcommand '%s'; %s\n", where.c_str(), argv[at + 1],
+                     near ? ("did you mean '" + sub_name + " " + *near + "'?").c_str() : ("choose one of: " + list).c_str());
+        return ex::exit_usage;
+      }
+      ex::check_option_names(app, *sub, argc, argv);
+    }
     try {
       app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {
@@ -128,7 +164,8 @@ static int run_vmap(int argc, char** argv) {
 }
 
 int main(int argc, char** argv) {
-  const int code = run_vmap(argc, argv);
+  std::vector<char*> args = without_memory_build(argc, argv);
+  const int code = run_vmap(static_cast<int>(args.size()), args.data());
   if (code != ex::exit_ok) ex::remove_unused_output_folders();
   return code;
 }

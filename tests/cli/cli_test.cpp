@@ -497,7 +497,8 @@ TEST_CASE("cli: localize --memory answers every query with its place decision; -
     CHECK(best["inliers"].get<int>() <= best["matches"].get<int>());
     CHECK(best["bow_score"].get<double>() > 0.0);
     CHECK(best["bow_score"].get<double>() <= 1.0);
-    CHECK(best["fundamental"].size() == 9);
+    CHECK(best["model"].size() == 9);
+    CHECK(best["model_kind"] == "fundamental");
     CHECK(best["pose"].is_null());  // built from images alone: no odometry
     for (std::size_t m = 1; m < q["matches"].size(); ++m)  // every verified key image, most confident first
       CHECK(q["matches"][m]["confidence"].get<double>() <= q["matches"][m - 1]["confidence"].get<double>());
@@ -557,9 +558,22 @@ TEST_CASE("cli: localize --memory errors: mixed modes, no image, missing or non-
   const Run bad = run_vmap({"localize", "--memory", sample, frame_a});
   CHECK(bad.code == 1);
   CHECK(bad.err.find("'" + sample + "' is not a vmap memory") != std::string::npos);
-  const Run img = run_vmap({"localize", "--memory", file.string(), sample});
+  // A list, a folder or a video of queries: each frame a query, in order.
+  const Run list = run_vmap({"localize", "--memory", file.string(), sample, "--json"});
+  INFO(list.err);
+  REQUIRE(list.code == 0);
+  const auto answers = nlohmann::json::parse(list.out)["queries"];
+  REQUIRE(answers.size() == 60);
+  CHECK(answers[0]["image"] == "1305031229.528748.jpg");
+  CHECK(answers[0]["key"] == 0);
+  const Run folder = run_vmap({"localize", "--memory", file.string(), "examples/data/tum_fr1_rpy_60/rgb"});
+  CHECK(folder.code == 0);
+  CHECK(std::count(folder.out.begin(), folder.out.end(), '\n') >= 60);
+  // One image that cannot be read is an Error naming it.
+  const Run img = run_vmap({"localize", "--memory", file.string(), (work_dir() / "no_such.jpg").string()});
   CHECK(img.code == 1);
-  CHECK(img.err.find("query image '" + sample + "': ") != std::string::npos);
+  CHECK(img.err.find("query image '" + (work_dir() / "no_such.jpg").string() + "': ") != std::string::npos);
+  usage_error({"memory", "localise", file.string(), frame_a}, "unknown subcommand 'localise'; did you mean 'memory localize'?");
 }
 
 TEST_CASE("cli: loops --memory prints the memory's loop edges; --gt evaluates them over the key images") {
@@ -922,9 +936,9 @@ TEST_CASE("cli: a misspelt option gets a suggestion; another subcommand's option
   fails_with({"build", sample, "--treshold", "0.3"}, 2, "unknown option '--treshold'; did you mean '--threshold'?");
   fails_with({"build", sample, "--treshold=0.3"}, 2, "unknown option '--treshold'; did you mean '--threshold'?");
   fails_with({"loops", sample, "--camera", "x.yaml"}, 2,
-             "option '--camera' is not an option of 'vmap loops'; it belongs to: build, match, memory, sweep");
+             "option '--camera' is not an option of 'vmap loops'; it belongs to: build, match, sweep");
   fails_with({"localize", "--room", "--images", "2"}, 2,
-             "option '--images' is not an option of 'vmap localize'; it belongs to: build, memory");
+             "option '--images' is not an option of 'vmap localize'; it belongs to: build");
   fails_with({"build", sample, "--zzzzzzzzzz"}, 2, "unknown option '--zzzzzzzzzz' (see vmap build --help)");
 }
 
@@ -1292,8 +1306,8 @@ TEST_CASE("cli: --session new adds a run to a memory; memory merge of two memori
   CHECK(across == j["sessions"][1]["loops_across"]);
   const Run text = run_vmap({"memory", "info", two});
   CHECK(text.out.find("2 sessions") != std::string::npos);
-  CHECK(text.out.find("  session 2: 40 frames") != std::string::npos);
-  CHECK(text.out.find("(session 2, frame") != std::string::npos);
+  CHECK(text.out.find("  session 1: 40 frames") != std::string::npos);
+  CHECK(text.out.find("(session 1, frame") != std::string::npos);
 
   // --resume continues the last session, whose input is checked; with every frame of it
   // already held, it says so.
@@ -1449,7 +1463,7 @@ TEST_CASE("cli: a memory keeps the policy stack it was built with (--features, -
   INFO(r.err);
   REQUIRE(r.code == 0);
   const auto resumed = nlohmann::json::parse(r.out);
-  CHECK(resumed["stack"]["features"] == "akaze");
+  CHECK(resumed["memory"]["stack"]["features"] == "akaze");
   CHECK(resumed["frames"] == 40);
   // Memories of two stacks are not merged.
   const std::string orb = (dir / "orb.vmdb").string();
@@ -1467,7 +1481,7 @@ TEST_CASE("cli: a memory keeps the policy stack it was built with (--features, -
                           "--end", "30", "--json"});
   INFO(c.err);
   REQUIRE(c.code == 0);
-  const auto camera = nlohmann::json::parse(c.out)["stack"]["camera"];
+  const auto camera = nlohmann::json::parse(c.out)["memory"]["stack"]["camera"];
   CHECK(camera["fx"] == 517.3);
   CHECK(camera["cy"] == 255.3);
   CHECK(camera["distortion"].size() == 5);
