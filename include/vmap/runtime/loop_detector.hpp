@@ -55,8 +55,8 @@ inline void check_candidate_source(CandidateIndex index, bool labels, bool vocab
                                    const OptionNames& names = OptionNames::keywords()) {
   const std::string rank = names.with_value("rank", to_string(index));
   detail::check(labels || !uses_labels(index), [&] {
-    return rank + " needs labels: give " + names("labels") + " (or " + names.with_value("rank", "bow") +
-           " or all, which need none)";
+    return rank + " needs labels (" + names.with_value("rank", "bow") + " or all need none): give " +
+           names("labels");
   });
   detail::check(vocabulary || !ranks(index),
                 [&] { return rank + " ranks by bag of words: give " + names("vocabulary"); });

@@ -52,11 +52,11 @@ TEST_CASE("candidate sources: the command line's names, brute_force read too, al
 
   // What a source needs and is not given, named as the front end names it.
   CHECK(error_of([] { vmap::check_candidate_source(CandidateIndex::tree, false, true); }) ==
-        "rank=tree needs labels: give labels (or rank=bow or all, which need none)");
+        "rank=tree needs labels (rank=bow or all need none): give labels");
   CHECK(error_of([] {
           vmap::check_candidate_source(CandidateIndex::tree_ranked, false, true,
                                        OptionNames::command_line({{"labels", "--labels FILE"}}));
-        }) == "--rank tree_ranked needs labels: give --labels FILE (or --rank bow or all, which need none)");
+        }) == "--rank tree_ranked needs labels (--rank bow or all need none): give --labels FILE");
   CHECK(error_of([] { vmap::check_candidate_source(CandidateIndex::bow, false, false); }) ==
         "rank=bow ranks by bag of words: give vocabulary");
   CHECK(error_of([] { vmap::check_candidate_source(CandidateIndex::brute_force, false, false); }) == "no error");
