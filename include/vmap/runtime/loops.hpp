@@ -360,40 +360,43 @@ struct LoopRun {
 
 namespace detail {
 
-/// The vocabulary of a run whose file (if any) was read before its features.
-inline void learn_run_vocabulary(LoopRun& run, const LoopRunOptions& o, const SequenceFeatures& features,
-                                 const LoopRunCallbacks& callbacks) {
-  if (run.vocabulary || !ranks(o.detector.index)) return;
-  if (callbacks.progress) callbacks.progress(LoopStage::vocabulary, 0, 1);
-  const auto t0 = std::chrono::steady_clock::now();
-  run.vocabulary = std::make_shared<const AnyVocabulary>(learn_vocabulary(features.frames, o.vocabulary.learning));
-  run.vocabulary_seconds = seconds_since(t0);
-  run.vocabulary_learned = true;
-  if (callbacks.progress) callbacks.progress(LoopStage::vocabulary, 1, 1);
+/// A run's vocabulary and where it came from.
+struct RunVocabulary {
+  std::shared_ptr<const AnyVocabulary> vocabulary;
+  bool learned = false;
+  double seconds = 0.0;  ///< loading or learning it
+};
+
+/// The vocabulary file of a run whose candidate source ranks, read before any frame so
+/// that a bad one fails at once.
+inline RunVocabulary vocabulary_file_of(const LoopRunOptions& o) {
+  RunVocabulary v;
+  if (ranks(o.detector.index) && !o.vocabulary.file.empty()) {
+    const auto t0 = std::chrono::steady_clock::now();
+    v.vocabulary = std::make_shared<const AnyVocabulary>(AnyVocabulary::load(o.vocabulary.file));
+    v.seconds = seconds_since(t0);
+  }
+  return v;
 }
 
 inline LoopRun detect_loops_in(const SequenceFeatures& features, const LoopRunOptions& o,
-                               const PrecomputedDetections* labels, const LoopRunCallbacks& callbacks, LoopRun prepared) {
+                               const PrecomputedDetections* labels, const LoopRunCallbacks& callbacks, RunVocabulary v) {
   check(!features.frames.empty(), [&] { return "no frames to detect loops in ('" + features.source + "')"; });
   if (features.skipped > 0 && (labels != nullptr || o.every_frame))
     fail(std::to_string(features.skipped) + " frame(s) of '" + features.source +
          "' could not be read; the labels and the ground truth are per frame, so they would be shifted");
-  learn_run_vocabulary(prepared, o, features, callbacks);
-  LoopRun run = run_loops(o, features, labels ? *labels : PrecomputedDetections{}, prepared.vocabulary, callbacks);
-  run.vocabulary_learned = prepared.vocabulary_learned;
-  run.vocabulary_seconds = prepared.vocabulary_seconds;
-  return run;
-}
-
-/// A run's vocabulary file, read before any frame so that a bad one fails at once.
-inline LoopRun run_with_vocabulary_file(const LoopRunOptions& o) {
-  LoopRun prepared;
-  if (ranks(o.detector.index) && !o.vocabulary.file.empty()) {
+  if (!v.vocabulary && ranks(o.detector.index)) {
+    if (callbacks.progress) callbacks.progress(LoopStage::vocabulary, 0, 1);
     const auto t0 = std::chrono::steady_clock::now();
-    prepared.vocabulary = std::make_shared<const AnyVocabulary>(AnyVocabulary::load(o.vocabulary.file));
-    prepared.vocabulary_seconds = seconds_since(t0);
+    v.vocabulary = std::make_shared<const AnyVocabulary>(learn_vocabulary(features.frames, o.vocabulary.learning));
+    v.seconds = seconds_since(t0);
+    v.learned = true;
+    if (callbacks.progress) callbacks.progress(LoopStage::vocabulary, 1, 1);
   }
-  return prepared;
+  LoopRun run = run_loops(o, features, labels ? *labels : PrecomputedDetections{}, v.vocabulary, callbacks);
+  run.vocabulary_learned = v.learned;
+  run.vocabulary_seconds = v.seconds;
+  return run;
 }
 
 }  // namespace detail
@@ -408,21 +411,21 @@ inline LoopRun run_with_vocabulary_file(const LoopRunOptions& o) {
                                           const PrecomputedDetections* labels, const LoopRunCallbacks& callbacks = {},
                                           FrameSourceOptions frames = {}) {
   o.validate();
-  LoopRun prepared = detail::run_with_vocabulary_file(o);
+  detail::RunVocabulary vocabulary = detail::vocabulary_file_of(o);
   const SequenceFeatures features = extract_features(
       input, o.stack,
       [&](std::size_t done, std::size_t total) {
         if (callbacks.progress) callbacks.progress(LoopStage::features, done, total);
       },
       std::move(frames));
-  return detail::detect_loops_in(features, o, labels, callbacks, std::move(prepared));
+  return detail::detect_loops_in(features, o, labels, callbacks, std::move(vocabulary));
 }
 
 /// The same run over features already extracted by the stack's descriptor.
 [[nodiscard]] inline LoopRun detect_loops(const SequenceFeatures& features, const LoopRunOptions& o,
                                           const PrecomputedDetections* labels, const LoopRunCallbacks& callbacks = {}) {
   o.validate();
-  return detail::detect_loops_in(features, o, labels, callbacks, detail::run_with_vocabulary_file(o));
+  return detail::detect_loops_in(features, o, labels, callbacks, detail::vocabulary_file_of(o));
 }
 
 // ---------------------------------------------------------------------------------------
