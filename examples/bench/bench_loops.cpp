@@ -19,10 +19,11 @@
 //   bench_loops [--shared DIR] [--window 10] [--min-score 0.5,0.3,0.2] [--min-candidates 5]
 //               [--top-k 1,2,3,5] [--distractors 10000] [--label-sources]
 //               [--datasets rtabmap_loop,tum_fr3_cabinet_kf] [--scale-words 10000 --scale-depth 4]
-#include "common/lcd_distractors.hpp"
-#include "common/lcd_run.hpp"
-
+#include <vmap/core/names.hpp>
 #include <vmap/io/atomic_file.hpp>
+#include <vmap/runtime/distractors.hpp>
+#include <vmap/runtime/loops.hpp>
+#include <vmap/runtime/vocabulary.hpp>
 
 #include <CLI/CLI.hpp>
 
@@ -40,7 +41,16 @@
 
 namespace {
 
-using vmap::examples::seconds_since;
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+/// The default stack (ORB 1000, MAGSAC++) with another descriptor.
+vmap::PolicyStack stack_with(const std::string& descriptor) {
+  vmap::PolicyStack s;
+  s.descriptor = vmap::parse<vmap::DescriptorKind>(descriptor, "descriptor");
+  return s;
+}
 
 struct BaselineFigures {
   double recall = 0.0;
@@ -94,19 +104,19 @@ struct Reference {
   double ms = 0.0;
 };
 
-void print_row(const std::string& method, const vmap::examples::LoopSummary& s, const Reference& ref) {
+void print_row(const std::string& method, const vmap::LoopEvaluation& s, const Reference& ref) {
   std::printf("  %-44s recall@100%%P %.3f (%+.3f)  verifications %5zu (%6.1fx fewer)  %7.1f ms/frame (%5.2fx faster)\n",
               method.c_str(), s.at_full_precision.recall, s.at_full_precision.recall - ref.recall, s.verifications,
               static_cast<double>(ref.verifications) / static_cast<double>(std::max<std::size_t>(1, s.verifications)),
               s.ms_per_frame, ref.ms / std::max(1e-9, s.ms_per_frame));
 }
 
-std::vector<vmap::Features> features_of(const std::vector<std::filesystem::path>& inputs,
-                                        const vmap::examples::DescriptorChoice& choice, double& seconds) {
+std::vector<vmap::Features> features_of(const std::vector<std::filesystem::path>& inputs, const vmap::PolicyStack& stack,
+                                        double& seconds) {
   std::vector<vmap::Features> all;
   seconds = 0.0;
   for (const auto& in : inputs) {
-    auto f = vmap::examples::extract_features(in, choice);
+    auto f = vmap::extract_features(in, stack);
     seconds += f.seconds;
     for (auto& x : f.frames) all.push_back(std::move(x));
   }
@@ -127,9 +137,9 @@ int main(int argc, char** argv) {
   std::vector<std::string> datasets = {"rtabmap_loop", "tum_fr3_cabinet_kf"};
   // The scale runs' vocabulary: posting lists shrink with more words, and a query's cost
   // is the sum of its words' lists (10^4 words: 10x shorter lists than 10^3).
-  vmap::examples::VocabularyChoice scale_vocabulary{.file = {}, .words = 10000, .depth = 4, .seed = 1};
+  vmap::VocabularyLearning scale_vocabulary{.words = 10000, .depth = 4, .seed = 1};
   double gt_distance = 0.5, gt_angle = 30.0;
-  vmap::examples::VocabularyChoice vocabulary;
+  vmap::VocabularyLearning vocabulary;
   app.add_option("--shared", shared, "The shared data folder")->capture_default_str();
   app.add_option("--window", window, "Frames this recent are never candidates")->capture_default_str();
   app.add_option("--min-score", min_scores, "Label score thresholds (eq. 3), one tree run each; the first is LFM-LCD's")
@@ -199,12 +209,10 @@ int main(int argc, char** argv) {
     std::vector<vmap::Features> other_orb;  // kept for the scale runs' vocabulary
     for (const std::string& name : other_names) {
       double extract_s = 0.0;
-      vmap::examples::DescriptorChoice choice;
-      choice.name = name;
-      const auto frames = features_of(other_inputs, choice, extract_s);
+      const auto frames = features_of(other_inputs, stack_with(name), extract_s);
       if (name == "orb") other_orb = frames;
       const auto t0 = std::chrono::steady_clock::now();
-      const vmap::AnyVocabulary v = vmap::examples::learn_vocabulary(frames, vocabulary);
+      const vmap::AnyVocabulary v = vmap::learn_vocabulary(frames, vocabulary);
       const double learn_s = seconds_since(t0);
       const auto path = tmp / ("other_" + name + ".voc");
       v.save(path);
@@ -218,7 +226,7 @@ int main(int argc, char** argv) {
     }
     std::printf("\n");
 
-    vmap::examples::SequenceFeatures rtabmap_orb;
+    vmap::SequenceFeatures rtabmap_orb;
     for (const Dataset& d : sets) {
       if (std::find(datasets.begin(), datasets.end(), d.name) == datasets.end()) continue;
       std::string list;
@@ -239,18 +247,17 @@ int main(int argc, char** argv) {
       const auto labels = vmap::PrecomputedDetections::load(d.labels);
 
       for (const std::string& desc : d.descriptors) {
-        vmap::examples::LoopRunConfig config;
-        config.input = d.input;
-        config.descriptor.name = desc;
+        vmap::LoopRunOptions config;
+        config.stack = stack_with(desc);
         config.detector.window = window;
         config.detector.min_candidates = min_candidates;
-        const auto features = vmap::examples::extract_features(d.input, config.descriptor);
+        const auto features = vmap::extract_features(d.input, config.stack);
         if (d.name == "rtabmap_loop" && desc == "orb") rtabmap_orb = features;
         const auto run = [&](vmap::CandidateIndex index, const vmap::PrecomputedDetections& l,
                              std::shared_ptr<const vmap::AnyVocabulary> v) {
           config.detector.index = index;
-          const auto r = vmap::examples::run_loops(config, features, l, std::move(v));
-          return std::make_pair(r, vmap::examples::summarize(r, d.gt, config.detector.decision.min_confidence));
+          const auto r = vmap::run_loops(config, features, l, std::move(v));
+          return std::make_pair(r, vmap::evaluate_loop_run(r, d.gt, config.detector.decision.min_confidence));
         };
 
         const auto all = run(vmap::CandidateIndex::brute_force, labels, nullptr).second;
@@ -266,7 +273,7 @@ int main(int argc, char** argv) {
         for (const TreeRow& row : rows) {
           config.detector.labels.min_score = row.min_score;
           config.influence.min_influence = row.min_influence;
-          const auto [tree_run, st] = run(vmap::CandidateIndex::tree, vmap::examples::load_labels(row.labels), nullptr);
+          const auto [tree_run, st] = run(vmap::CandidateIndex::tree, vmap::load_labels(row.labels), nullptr);
           std::string kept;
           for (int l : tree_run.schema.labels()) {  // piecewise: GCC 12 -O3 warns falsely on "," + to_string
             if (!kept.empty()) kept += ',';
@@ -289,7 +296,7 @@ int main(int argc, char** argv) {
         // The vocabulary learned on this sequence's own frames, with this descriptor.
         const auto t0 = std::chrono::steady_clock::now();
         const auto self =
-            std::make_shared<const vmap::AnyVocabulary>(vmap::examples::learn_vocabulary(features.frames, vocabulary));
+            std::make_shared<const vmap::AnyVocabulary>(vmap::learn_vocabulary(features.frames, vocabulary));
         std::printf("  vocabulary 'self' (%s): %zu words learned on the sequence in %.2f s\n", desc.c_str(),
                     self->size(), seconds_since(t0));
         for (const auto& [vname, voc] : {std::pair{std::string("self"), self}, std::pair{std::string("other"), other.at(desc)}}) {
@@ -317,9 +324,9 @@ int main(int argc, char** argv) {
     for (std::size_t n : distractor_counts) {
       if (n == 0) continue;
       if (!scale_voc) {
-        if (rtabmap_orb.frames.empty()) rtabmap_orb = vmap::examples::extract_features(rt.input, {});
+        if (rtabmap_orb.frames.empty()) rtabmap_orb = vmap::extract_features(rt.input, vmap::PolicyStack{});
         const auto t0 = std::chrono::steady_clock::now();
-        const vmap::AnyVocabulary v = vmap::examples::learn_vocabulary(other_orb, scale_vocabulary);
+        const vmap::AnyVocabulary v = vmap::learn_vocabulary(other_orb, scale_vocabulary);
         const double learn_s = seconds_since(t0);
         const auto path = tmp / "scale_orb.voc";
         v.save(path);
@@ -331,7 +338,7 @@ int main(int argc, char** argv) {
                     static_cast<std::size_t>(std::filesystem::file_size(path)), 1e3 * seconds_since(t1));
       }
       if (sources.empty())
-        sources = vmap::examples::load_distractor_sources(
+        sources = vmap::load_distractor_sources(
             {data / "tum_fr1_rpy/rgb.txt", data / "kitti07_160/image_0", data / "tum_fr3_cabinet_kf/rgb"});
       std::printf("scale: %zu distractor key frames (256x192 seeded crops/rotations/brightness of %zu frames of "
                   "tum_fr1_rpy, kitti07_160, tum_fr3_cabinet_kf) before rtabmap_loop, ORB 1000, the scale vocabulary\n",
@@ -343,7 +350,7 @@ int main(int argc, char** argv) {
       {
         vmap::OrbDescriptor orb({.features = 1000});
         for (std::size_t i = 0; i < n; ++i) {
-          distractors.push_back(orb.extract(vmap::examples::make_distractor(sources, i)));
+          distractors.push_back(orb.extract(vmap::make_distractor(sources, i)));
           keypoints += distractors.back().size();
           if ((i + 1) % 1000 == 0) std::fprintf(stderr, "\rdistractors %zu/%zu", i + 1, n);
         }
@@ -381,17 +388,16 @@ int main(int argc, char** argv) {
                     static_cast<std::size_t>(std::filesystem::file_size(path)), load_ms, query_ms, query_cpu_ms, hits);
       }
 
-      vmap::examples::LoopRunConfig config;
-      config.input = rt.input;
+      vmap::LoopRunOptions config;
       config.detector.window = window;
       config.detector.min_candidates = min_candidates;
       const auto labels = vmap::PrecomputedDetections::load(rt.labels);
       for (vmap::CandidateIndex index : {vmap::CandidateIndex::bow, vmap::CandidateIndex::tree_ranked}) {
         config.detector.index = index;
         const std::clock_t c0 = std::clock();
-        const auto r = vmap::examples::run_loops(config, rtabmap_orb, labels, scale_voc, {}, &distractors);
+        const auto r = vmap::run_loops(config, rtabmap_orb, labels, scale_voc, {}, &distractors);
         const double run_cpu_s = static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;
-        const auto s = vmap::examples::summarize(r, rt.gt, config.detector.decision.min_confidence);
+        const auto s = vmap::evaluate_loop_run(r, rt.gt, config.detector.decision.min_confidence);
         const double frames = static_cast<double>(r.results.size());
         std::printf("  %-44s recall@100%%P %.3f  verifications %4zu  ranking %.2f ms per query (wall), whole key frame "
                     "%.1f ms wall (detector %.1f + features %.1f); the run (%zu distractors + %zu frames) %.1f s CPU; "

@@ -8,6 +8,7 @@
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/calibration.hpp>
+#include <vmap/io/frame_source.hpp>
 #include <vmap/io/image.hpp>
 #include <vmap/io/yaml_limits.hpp>
 
@@ -43,10 +44,11 @@ inline constexpr int exit_failure = 1;  ///< bad input (a file, an image) or a f
 inline constexpr int exit_usage = 2;    ///< bad command line: unknown subcommand or option, bad value, conflict
 
 /// A command-line mistake found after parsing (conflicting options, an output that is
-/// an input): exit code 2, like CLI11's own parse errors.
-class UsageError : public std::runtime_error {
+/// an input): exit code 2, like CLI11's own parse errors. A vmap::Error, so that code
+/// which reports the library's errors (the Python module) reports these too.
+class UsageError : public vmap::Error {
  public:
-  using std::runtime_error::runtime_error;
+  using vmap::Error::Error;
 };
 
 [[noreturn]] inline void usage_error(const std::string& what) { throw UsageError(what); }
@@ -547,6 +549,15 @@ inline void check_input_file(const std::filesystem::path& p, const std::string& 
   if (!fs::is_regular_file(st)) usage_error(option + ": '" + p.string() + "' is not a regular file");
   std::ifstream f(p);
   if (!f) vmap::detail::fail(option + ": '" + p.string() + "' cannot be read (permission?)");
+}
+
+/// Frame-source options that report each skipped (unreadable) frame on stderr; the count
+/// is in the summary and the JSON (FrameSource::skipped()).
+inline vmap::FrameSourceOptions reporting_skips(vmap::FrameSourceOptions o = {}) {
+  o.on_skip = [](const vmap::SkippedFrame& s) {
+    std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", s.index, s.name.c_str(), s.reason.c_str());
+  };
+  return o;
 }
 
 /// The --camera option: the calibration file read by vmap::read_camera (ORB-SLAM /

@@ -1,17 +1,17 @@
 #pragma once
 
-// Options and helpers shared by `vmap build` and `vmap sweep` (and the key-image
-// benchmark): the policy choice from the command line, the F-matrix options and the
-// frame range.
+// Options shared by `vmap build` and `vmap sweep`: the policy stack (common/policies.hpp),
+// the key-image rule and the frame range.
 
 #include "common/cli_support.hpp"
 #include "common/policies.hpp"
 
-#include <vmap/core/error.hpp>
-#include <vmap/geometry/calibrated.hpp>
-#include <vmap/geometry/fundamental.hpp>
-#include <vmap/io/calibration.hpp>
+#include <vmap/core/names.hpp>
+#include <vmap/io/frame_source.hpp>
 #include <vmap/keyframe/selector.hpp>
+#include <vmap/runtime/frame_range.hpp>
+#include <vmap/runtime/option_names.hpp>
+#include <vmap/runtime/stack.hpp>
 
 #include <CLI/CLI.hpp>
 
@@ -42,6 +42,10 @@ struct KeyframeArgs {
   bool json = false;
 
   [[nodiscard]] DescriptorChoice descriptor() const { return {features, nfeatures, model, refine_model}; }
+  /// The policy stack of the options, with the calibration --camera read.
+  [[nodiscard]] PolicyStack stack(const std::optional<CameraOption>& calibration) const {
+    return stack_of(descriptor(), estimator, calibration);
+  }
 };
 
 /// --features/--model/--nfeatures, shared by every subcommand that extracts features.
@@ -74,41 +78,28 @@ inline void add_keyframe_options(CLI::App& app, KeyframeArgs& a) {
   app.add_flag("--json", a.json, "Print one JSON object on stdout (the table goes to stderr)");
 }
 
+/// --rule: previous (eq. 6) or current (Algorithm 1).
 inline KeyRule parse_rule(const std::string& name) {
-  if (name == "previous") return KeyRule::previous_frame;
-  if (name == "current") return KeyRule::current_frame;
-  usage_error("--rule: unknown rule '" + name + "' (choose previous or current)");
+  return as_usage([&] { return parse_option<KeyRule>(name, "rule", "rule", OptionNames::command_line()); });
 }
 
-/// The paper's verification: F-matrix, 1 px, 0.99; the homography degeneracy check is
-/// off because the selection does not use it. With a calibration file the keypoints are
-/// undistorted first (the same type either way, so one instantiation serves both).
-inline Calibrated<FundamentalEstimator> make_estimator(const std::string& method,
-                                                      const std::optional<CameraOption>& camera = std::nullopt) {
-  return {camera ? std::optional<Camera>(camera->camera) : std::nullopt,
-          FundamentalEstimator({.method = parse_method(method), .check_degeneracy = false}),
-          camera ? "--camera " + camera->file.string() : std::string("camera")};
+/// --start, --end (0: to the end) and --stride.
+inline FrameRange frame_range(const KeyframeArgs& a) {
+  return {a.start, a.end > 0 ? std::optional<std::size_t>(a.end) : std::nullopt, a.stride};
 }
 
 /// Frame range and decoding; each skipped frame is reported on stderr (the count is in
 /// the summary and the JSON, from FrameSource::skipped()).
 inline FrameSourceOptions source_options(const KeyframeArgs& a, bool grey) {
   FrameSourceOptions o;
-  o.start = a.start;
-  if (a.end > 0) o.end = a.end;
-  o.stride = a.stride;
   o.grey = grey;
   o.time_offset = a.time_offset;
-  o.on_skip = [](const SkippedFrame& s) {
-    std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", s.index, s.name.c_str(), s.reason.c_str());
-  };
-  return o;
+  return reporting_skips(as_usage([&] { return frame_range(a).apply(o, OptionNames::command_line()); }));
 }
 
 /// --end before --start is a usage error, found before any frame is read.
 inline void check_range(const KeyframeArgs& a) {
-  if (a.end > 0 && a.end <= a.start)
-    usage_error("--end: must be > --start (" + std::to_string(a.start) + "), got " + std::to_string(a.end));
+  as_usage([&] { frame_range(a).validate(OptionNames::command_line()); });
 }
 
 }  // namespace vmap::examples

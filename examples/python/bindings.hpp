@@ -13,6 +13,7 @@
 // descriptors) own a reference to the cv::Mat they view, so they are not copied either.
 
 #include <vmap/core/error.hpp>
+#include <vmap/runtime/stack.hpp>
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -20,6 +21,7 @@
 
 #include <opencv2/core.hpp>
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -51,12 +53,18 @@ inline constexpr int order_place = 20;
 inline constexpr int order_loops = 30;
 inline constexpr int order_memory = 40;
 
-/// vmap.Error (a RuntimeError): vmap::Error, the command line's usage errors (bad option
-/// values, which the module shares with it) and OpenCV's exceptions, with their message.
+/// vmap.Error (a RuntimeError): vmap::Error and OpenCV's exceptions, with their message.
 void bind_errors(py::module_& m);
 
 /// Raises vmap.Error with `what` (for checks made by the bindings themselves).
 [[noreturn]] inline void fail(const std::string& what) { vmap::detail::fail(what); }
+
+/// The policy stack of the keyword arguments every part reads alike (features, nfeatures,
+/// model, refine_model, estimator, camera: a calibration file), checked by the library
+/// (runtime/stack_choice.hpp) with messages that name the keywords.
+PolicyStack policy_stack(const std::string& features, int nfeatures, const std::string& model,
+                         const std::string& refine_model, const std::string& estimator = "magsac",
+                         const std::optional<std::string>& camera = std::nullopt);
 
 /// A cv::Mat over `a`'s pixels (see the top of this file); `what` names the argument in
 /// errors ("image"). The array must outlive the Mat (the caller holds it for the call).

@@ -4,8 +4,8 @@
 
 #include "bindings.hpp"
 
-#include "common/cli_support.hpp"
-
+#include <vmap/io/calibration.hpp>
+#include <vmap/runtime/stack_choice.hpp>
 #include <vmap/version.hpp>
 
 #include <algorithm>
@@ -16,19 +16,33 @@ namespace vmap::python {
 void bind_errors(py::module_& m) {
   static py::exception<vmap::Error> error(m, "Error", PyExc_RuntimeError);
   error.doc() = "A bad input (a file, an image, an option value) or a failed step, with vmap's message.";
-  // vmap::Error itself, the command line's usage errors (the module parses the same
-  // option values: a descriptor name, an estimator) and OpenCV's own exceptions.
+  // vmap::Error (the library's checks of every argument it is given) and OpenCV's own
+  // exceptions.
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const vmap::Error& e) {
       error(e.what());
-    } catch (const vmap::examples::UsageError& e) {
-      error(e.what());
     } catch (const cv::Exception& e) {
       error(("OpenCV: " + e.msg).c_str());
     }
   });
+}
+
+PolicyStack policy_stack(const std::string& features, int nfeatures, const std::string& model,
+                         const std::string& refine_model, const std::string& estimator,
+                         const std::optional<std::string>& camera) {
+  StackChoice c{.descriptor = features, .features = nfeatures, .model = model, .refine_model = refine_model,
+                .method = estimator};
+  if (camera) {
+    try {
+      c.camera = read_camera(*camera);
+    } catch (const vmap::Error& e) {
+      fail(std::string("camera: ") + e.what());
+    }
+    c.camera_source = *camera;
+  }
+  return stack_of(c);
 }
 
 cv::Mat image_view(const py::array& a, const std::string& what) {

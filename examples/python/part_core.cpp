@@ -3,11 +3,11 @@
 
 #include "bindings.hpp"
 
-#include "common/policies.hpp"
-
 #include <vmap/hooks/any_descriptor.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/matching/brute_force.hpp>
+#include <vmap/runtime/policies.hpp>
+#include <vmap/runtime/stack.hpp>
 
 #include <cstdint>
 #include <limits>
@@ -84,9 +84,9 @@ py::array_t<float> keypoint_array(const std::vector<cv::KeyPoint>& kps) {
 /// A descriptor chosen by name, as the command line's --features / --nfeatures / --model.
 class PyDescriptor {
  public:
-  PyDescriptor(std::string features, int nfeatures, std::string model, std::string refine_model)
-      : choice_{std::move(features), nfeatures, std::move(model), std::move(refine_model)},
-        descriptor_(examples::with_descriptor(choice_, [](auto d) { return AnyDescriptor(std::move(d)); })) {}
+  PyDescriptor(const std::string& features, int nfeatures, const std::string& model, const std::string& refine_model)
+      : stack_(policy_stack(features, nfeatures, model, refine_model)),
+        descriptor_(with_descriptor(stack_, [](auto d) { return AnyDescriptor(std::move(d)); })) {}
 
   Features extract(const py::array& image) {
     const cv::Mat view = image_view(image, "image");
@@ -94,10 +94,10 @@ class PyDescriptor {
     return descriptor_.extract(view);
   }
 
-  [[nodiscard]] const examples::DescriptorChoice& choice() const noexcept { return choice_; }
+  [[nodiscard]] const PolicyStack& stack() const noexcept { return stack_; }
 
  private:
-  examples::DescriptorChoice choice_;
+  PolicyStack stack_;
   AnyDescriptor descriptor_;
 };
 
@@ -132,7 +132,13 @@ void bind(py::module_& m) {
             for (const auto& s : f.source().skipped()) out.append(py::make_tuple(s.index, s.name, s.reason));
             return out;
           },
-          "frames that could not be decoded and were skipped, as (index, name, reason)");
+          "frames that could not be decoded and were skipped, as (index, name, reason)")
+      .def("__repr__", [](const Frames& f) {
+        const auto total = f.source().total();
+        return "<vmap.Frames " + std::string(kind_name(f.source().kind())) + ", " +
+               std::to_string(f.source().delivered()) + " delivered" +
+               (total ? " of " + std::to_string(*total) : std::string()) + ">";
+      });
 
   m.def(
       "frames",
@@ -170,11 +176,21 @@ void bind(py::module_& m) {
   py::class_<PyDescriptor>(m, "Descriptor",
                            "A feature descriptor chosen by name: orb, akaze, sift (OpenCV's), xfeat, xfeat-dense or\n"
                            "xfeat-star (learned; `model` is the ONNX file, `refine_model` XFeat*'s refinement network).")
-      .def(py::init<std::string, int, std::string, std::string>(), py::arg("features") = "orb", py::kw_only(),
+      .def(py::init<const std::string&, int, const std::string&, const std::string&>(), py::arg("features") = "orb", py::kw_only(),
            py::arg("nfeatures") = 1000, py::arg("model") = "", py::arg("refine_model") = "")
       .def("extract", &PyDescriptor::extract, py::arg("image"), "The image's keypoints and descriptors (Features).")
-      .def_property_readonly("name", [](const PyDescriptor& d) { return d.choice().name; })
-      .def_property_readonly("nfeatures", [](const PyDescriptor& d) { return d.choice().features; });
+      .def_property_readonly(
+          "name", [](const PyDescriptor& d) { return std::string(to_string(d.stack().descriptor)); },
+          "orb, akaze, sift, xfeat, xfeat-dense or xfeat-star")
+      .def_property_readonly(
+          "nfeatures", [](const PyDescriptor& d) { return d.stack().features; },
+          "the keypoint budget (ORB, SIFT; XFeat's top-k)")
+      .def("__repr__", [](const PyDescriptor& d) {
+        std::string out = "<vmap.Descriptor " + std::string(to_string(d.stack().descriptor));
+        if (d.stack().budgeted()) out += ", " + std::to_string(d.stack().features) + " features";
+        if (!d.stack().model.empty()) out += ", model " + d.stack().model;
+        return out + ">";
+      });
 
   m.def(
       "match",

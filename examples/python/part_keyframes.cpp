@@ -1,12 +1,10 @@
 // vmap.KeyframeSelector (the key images of García-Pintos et al. 2023, Algorithm 1 /
 // eq. 6), vmap.VisualMap (its map, eq. 7's quality, map files) and vmap.sweep (the
-// paper's threshold table). The descriptor, matcher and estimator are chosen by name
-// exactly as `vmap build` and `vmap sweep` choose them (common/keyframe_cli.hpp).
+// paper's threshold table). The descriptor, matcher and estimator are the policy stack
+// the keywords name (vmap/runtime/stack_choice.hpp), as `vmap build` and `vmap sweep`
+// read theirs; the selector is the library's AnySelector (vmap/runtime/selector.hpp).
 
 #include "bindings.hpp"
-
-#include "common/keyframe_cli.hpp"
-#include "common/policies.hpp"
 
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/frame_source.hpp>
@@ -14,6 +12,10 @@
 #include <vmap/keyframe/pipeline.hpp>
 #include <vmap/keyframe/selector.hpp>
 #include <vmap/keyframe/sweep.hpp>
+#include <vmap/runtime/frame_range.hpp>
+#include <vmap/runtime/option_names.hpp>
+#include <vmap/runtime/selector.hpp>
+#include <vmap/runtime/stack_choice.hpp>
 
 #include <pybind11/stl/filesystem.h>
 
@@ -31,90 +33,14 @@
 namespace vmap::python {
 namespace {
 
-namespace ex = vmap::examples;
-
-/// The command line's KeyframeArgs from keyword arguments, so that every value goes
-/// through the same parsing and checks as `vmap build` / `vmap sweep`.
-ex::KeyframeArgs keyframe_args(std::string features, int nfeatures, std::string model, std::string refine_model,
-                               std::string estimator, std::string rule, std::optional<std::string> camera) {
-  // CLI11 checks the budget on the command line; here the module does.
-  if (nfeatures < 1 || static_cast<unsigned long long>(nfeatures) > ex::max_nfeatures)
-    fail("nfeatures: must be in [1, " + std::to_string(ex::max_nfeatures) + "], got " + std::to_string(nfeatures));
-  ex::KeyframeArgs a;
-  a.features = std::move(features);
-  a.nfeatures = nfeatures;
-  a.model = std::move(model);
-  a.refine_model = std::move(refine_model);
-  a.estimator = std::move(estimator);
-  a.rule = std::move(rule);
-  a.camera = camera.value_or("");
-  return a;
-}
-
-/// The frame range of `a` (start, end, stride, time offset), checked as the command line
-/// checks it; `end` None reads to the end.
-void set_range(ex::KeyframeArgs& a, const std::string& source, std::size_t start, std::optional<std::size_t> end,
-               std::size_t stride, double time_offset) {
-  // KeyframeArgs reads end = 0 as "to the end"; an explicit 0 is an empty range instead.
-  if (end && *end <= start)
-    fail("end: must be > start (" + std::to_string(start) + "), got " + std::to_string(*end));
-  if (stride < 1) fail("stride: must be >= 1");
-  a.input = source;
-  a.start = start;
-  a.end = end.value_or(0);
-  a.stride = stride;
-  a.time_offset = time_offset;
-}
-
-/// A KeyframeSelector<D, M, E, S> of any policies behind the calls the module makes: the
-/// policies are chosen at run time by name, and the per-frame work stays statically
-/// dispatched inside (as with_descriptor does for the command line).
-class AnySelector {
- public:
-  AnySelector() = default;
-  AnySelector(const AnySelector&) = delete;
-  AnySelector& operator=(const AnySelector&) = delete;
-  virtual ~AnySelector() = default;
-
-  virtual FrameResult push(const Frame& frame) = 0;
-  /// Every frame of `source` through run_selector, on_frame after each push.
-  virtual void run(FrameSource& source, const RunOptions& options,
-                   const std::function<void(const FrameResult&)>& on_frame) = 0;
-  [[nodiscard]] virtual const VisualMap& map() const = 0;
-  [[nodiscard]] virtual const SelectorOptions& options() const = 0;
-  virtual void reset() = 0;
-};
-
-template <class S>
-class SelectorOf final : public AnySelector {
- public:
-  template <class... Args>
-  explicit SelectorOf(Args&&... args) : selector_(std::forward<Args>(args)...) {}
-
-  FrameResult push(const Frame& frame) override { return selector_.push(frame); }
-  void run(FrameSource& source, const RunOptions& options,
-           const std::function<void(const FrameResult&)>& on_frame) override {
-    run_selector(source, selector_, options, on_frame);
-  }
-  [[nodiscard]] const VisualMap& map() const override { return selector_.map(); }
-  [[nodiscard]] const SelectorOptions& options() const override { return selector_.options(); }
-  void reset() override { selector_.reset(); }
-
- private:
-  S selector_;
-};
-
-/// The selector `vmap build` makes from the same arguments.
-std::unique_ptr<AnySelector> make_selector(const ex::KeyframeArgs& a, const SelectorOptions& options) {
-  const auto camera = ex::load_camera_option(a.camera);
-  const auto estimator = ex::make_estimator(a.estimator, camera);
-  return ex::with_descriptor(a.descriptor(), [&](auto descriptor) -> std::unique_ptr<AnySelector> {
-    auto matcher = ex::matcher_for(descriptor);
-    auto verifier = ex::estimator_for(descriptor, a.descriptor(), estimator);
-    using Selector = KeyframeSelector<decltype(descriptor), decltype(matcher), decltype(verifier), InlierRatio>;
-    return std::make_unique<SelectorOf<Selector>>(std::move(descriptor), std::move(matcher), std::move(verifier),
-                                                  InlierRatio{}, options);
-  });
+/// The frames of `source` in the range of the keywords (start, end: None to the end,
+/// stride), decoded to grey as `vmap build` decodes them.
+FrameSource open_range(const std::string& source, std::size_t start, std::optional<std::size_t> end, std::size_t stride,
+                       double time_offset) {
+  FrameSourceOptions o;
+  o.grey = true;
+  o.time_offset = time_offset;
+  return FrameSource::open(source, FrameRange{start, end, stride}.apply(o));
 }
 
 /// vmap.KeyframeSelector. A selector is single-threaded (selector.hpp) while its calls
@@ -123,8 +49,8 @@ std::unique_ptr<AnySelector> make_selector(const ex::KeyframeArgs& a, const Sele
 /// push_frames (the same thread, between two frames) may read the map.
 class PySelector {
  public:
-  PySelector(ex::KeyframeArgs args, const SelectorOptions& options)
-      : args_(std::move(args)), selector_(make_selector(args_, options)) {}
+  PySelector(const PolicyStack& stack, const SelectorOptions& options)
+      : selector_(stack, options, camera_name(stack, OptionNames::keywords())) {}
 
   FrameResult push(const py::array& image, std::optional<double> timestamp, std::optional<std::string> name) {
     const Claim claim(owner_);
@@ -138,8 +64,8 @@ class PySelector {
     {
       const py::gil_scoped_release unlocked;
       // A kept key image must not alias the caller's array, which may change or go.
-      if (selector_->options().keep_images) f.image = f.image.clone();
-      r = selector_->push(f);
+      if (selector_.options().keep_images) f.image = f.image.clone();
+      r = selector_.push(f);
     }
     last_index_ = f.index;
     return r;
@@ -149,8 +75,6 @@ class PySelector {
                                        std::size_t stride, double time_offset, bool single_thread,
                                        const py::object& progress, std::size_t progress_every) {
     const Claim claim(owner_);
-    ex::KeyframeArgs a = args_;
-    set_range(a, source, start, end, stride, time_offset);
     // The map's frame indices must keep increasing (map files require it).
     if (last_index_ && start <= *last_index_)
       fail("push_frames: this selector already saw frame " + std::to_string(*last_index_) + "; pass start=" +
@@ -159,8 +83,8 @@ class PySelector {
     std::vector<FrameResult> results;
     {
       const py::gil_scoped_release unlocked;
-      auto src = FrameSource::open(a.input, ex::source_options(a, true));
-      selector_->run(src, {.pipelined = !single_thread}, [&](const FrameResult& r) {
+      auto src = open_range(source, start, end, stride, time_offset);
+      selector_.run(src, {.pipelined = !single_thread}, [&](const FrameResult& r) {
         results.push_back(r);
         last_index_ = r.frame_index;
         hook(results.size());
@@ -172,7 +96,7 @@ class PySelector {
 
   [[nodiscard]] const VisualMap& map() const {
     check_readable();
-    return selector_->map();
+    return selector_.map();
   }
 
   void save_map(const std::filesystem::path& path) const {
@@ -184,12 +108,12 @@ class PySelector {
 
   void reset() {
     const Claim claim(owner_);
-    selector_->reset();
+    selector_.reset();
     last_index_.reset();
   }
 
-  [[nodiscard]] const SelectorOptions& options() const noexcept { return selector_->options(); }
-  [[nodiscard]] const ex::KeyframeArgs& args() const noexcept { return args_; }
+  [[nodiscard]] const SelectorOptions& options() const noexcept { return selector_.options(); }
+  [[nodiscard]] const PolicyStack& stack() const noexcept { return selector_.stack(); }
 
  private:
   /// Marks the selector in use by this thread for a call that changes it.
@@ -214,8 +138,7 @@ class PySelector {
       fail("KeyframeSelector: busy in another thread (a selector is single-threaded; use one per thread)");
   }
 
-  ex::KeyframeArgs args_;
-  std::unique_ptr<AnySelector> selector_;
+  AnySelector selector_;
   std::optional<std::size_t> last_index_;  ///< the last frame pushed
   std::atomic<std::thread::id> owner_{};
 };
@@ -246,30 +169,23 @@ QualityForm parse_form(const std::string& form) {
   fail("quality: form must be 'mean_over_pairs' or 'paper_literal', not '" + form + "'");
 }
 
-/// `vmap sweep`: one selector per threshold over `source`, the paper's table as rows.
+/// `vmap sweep`: every threshold over `source` in one pass, the paper's table as rows.
 py::list sweep(const std::string& source, std::vector<double> taus, const std::string& features, int nfeatures,
                const std::string& model, const std::string& refine_model, const std::string& estimator,
-               const std::string& rule, std::optional<std::string> camera, std::size_t start,
+               const std::string& rule, const std::optional<std::string>& camera, std::size_t start,
                std::optional<std::size_t> end, std::size_t stride, double time_offset, bool single_thread,
                const py::object& progress, std::size_t progress_every) {
-  ex::KeyframeArgs a = keyframe_args(features, nfeatures, model, refine_model, estimator, rule, std::move(camera));
-  set_range(a, source, start, end, stride, time_offset);
+  const PolicyStack stack = policy_stack(features, nfeatures, model, refine_model, estimator, camera);
   const ProgressHook hook(progress, progress_every);
+  const SweepOptions so{.taus = std::move(taus),
+                        .rule = parse_option<KeyRule>(rule, "rule", "rule"),
+                        .pipelined = !single_thread,
+                        .on_frame = [&hook](std::size_t done) { hook(done); }};
   SweepResult r;
   {
     const py::gil_scoped_release unlocked;
-    const auto cam = ex::load_camera_option(a.camera);
-    const auto verifier = ex::make_estimator(a.estimator, cam);
-    const SweepOptions so{.taus = std::move(taus),
-                          .rule = ex::parse_rule(a.rule),
-                          .pipelined = !single_thread,
-                          .on_frame = [&hook](std::size_t done) { hook(done); }};
-    auto src = FrameSource::open(a.input, ex::source_options(a, true));
-    r = ex::with_descriptor(a.descriptor(), [&](auto descriptor) {
-      const auto matcher = ex::matcher_for(descriptor);
-      auto stack_verifier = ex::estimator_for(descriptor, a.descriptor(), verifier);
-      return sweep_thresholds(src, std::move(descriptor), matcher, std::move(stack_verifier), InlierRatio{}, so);
-    });
+    auto src = open_range(source, start, end, stride, time_offset);
+    r = sweep_thresholds(src, stack, so, camera_name(stack, OptionNames::keywords()));
   }
   if (r.frames == 0) fail("'" + source + "' gave no frame in the requested range");
   py::list rows;
@@ -414,17 +330,16 @@ void bind(py::module_& m) {
                          "'current' takes I_j (Algorithm 1 as printed). skip_by_upper_bound skips the estimator\n"
                          "when the raw matches already bound S below tau (never changes the key images);\n"
                          "keep_images keeps each key image's pixels in the map.")
-      .def(py::init([](std::string features, int nfeatures, std::string model, std::string refine_model,
-                       std::string estimator, std::optional<std::string> camera, double tau, std::string rule,
+      .def(py::init([](const std::string& features, int nfeatures, const std::string& model,
+                       const std::string& refine_model, const std::string& estimator,
+                       const std::optional<std::string>& camera, double tau, const std::string& rule,
                        bool skip_by_upper_bound, bool keep_images) {
-             ex::KeyframeArgs a = keyframe_args(std::move(features), nfeatures, std::move(model),
-                                                std::move(refine_model), std::move(estimator), std::move(rule),
-                                                std::move(camera));
              const SelectorOptions options{.tau = tau,
-                                           .rule = ex::parse_rule(a.rule),
+                                           .rule = parse_option<KeyRule>(rule, "rule", "rule"),
                                            .skip_by_upper_bound = skip_by_upper_bound,
                                            .keep_images = keep_images};
-             return std::make_unique<PySelector>(std::move(a), options);
+             return std::make_unique<PySelector>(
+                 policy_stack(features, nfeatures, model, refine_model, estimator, camera), options);
            }),
            py::arg("features") = "orb", py::kw_only(), py::arg("nfeatures") = 1000, py::arg("model") = "",
            py::arg("refine_model") = "", py::arg("estimator") = "magsac", py::arg("camera") = py::none(),
@@ -452,14 +367,19 @@ void bind(py::module_& m) {
       .def("reset", &PySelector::reset, "Starts a new sequence: an empty map, the next frame is K_1.")
       .def_property_readonly("tau", [](const PySelector& s) { return s.options().tau; },
                              "a new key image is taken when S(K_i, I_j) < tau; in (0, 1]")
-      .def_property_readonly("rule", [](const PySelector& s) { return s.args().rule; },
-                             "previous (eq. 6: I_{j-1} becomes the key image) or current (Algorithm 1: I_j)")
-      .def_property_readonly("features", [](const PySelector& s) { return s.args().features; }, "the descriptor's name")
-      .def_property_readonly("estimator", [](const PySelector& s) { return s.args().estimator; },
-                             "the F-matrix method: magsac, ransac, lmeds or 8point")
+      .def_property_readonly(
+          "rule", [](const PySelector& s) { return std::string(to_string(s.options().rule)); },
+          "previous (eq. 6: I_{j-1} becomes the key image) or current (Algorithm 1: I_j)")
+      .def_property_readonly(
+          "features", [](const PySelector& s) { return std::string(to_string(s.stack().descriptor)); },
+          "the descriptor's name")
+      .def_property_readonly(
+          "estimator", [](const PySelector& s) { return std::string(to_string(s.stack().method)); },
+          "the F-matrix method: magsac, ransac, lmeds or 8point")
       .def("__repr__", [](const PySelector& s) {
-        return "<vmap.KeyframeSelector " + s.args().features + " + mutual NN + " + s.args().estimator + ", tau " +
-               std::to_string(s.options().tau) + ", " + std::to_string(s.map().keys.size()) + " key images>";
+        return "<vmap.KeyframeSelector " + std::string(to_string(s.stack().descriptor)) + " + mutual NN + " +
+               std::string(to_string(s.stack().method)) + ", tau " + std::to_string(s.options().tau) + ", " +
+               std::to_string(s.map().keys.size()) + " key images>";
       });
 
   m.def("sweep", &sweep, py::arg("source"), py::arg("taus") = SweepOptions{}.taus, py::kw_only(),

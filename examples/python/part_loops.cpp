@@ -1,9 +1,24 @@
 // Loop closure from Python: vmap.detect_loops (one run over a sequence, the run of
 // `vmap loops`), vmap.LoopDetector (the same detector fed one frame at a time) and
 // vmap.evaluate (precision, recall, recall at 100 % precision and the PR curve against a
-// ground-truth matrix or poses, the figures `vmap loops --gt / --gt-poses` prints).
+// ground-truth matrix or poses, the figures `vmap loops --gt / --gt-poses` prints). The
+// run, the detector and the evaluation are the library's (vmap/runtime/loops.hpp,
+// vmap/runtime/loop_detector.hpp), which also checks every option; this part reads the
+// Python arguments into them.
 
-#include <chrono>
+#include "bindings.hpp"
+
+#include <vmap/hooks/precomputed_detections.hpp>
+#include <vmap/io/poses.hpp>
+#include <vmap/lcd/evaluation.hpp>
+#include <vmap/lcd/loop_detector.hpp>
+#include <vmap/lcd/loop_engine.hpp>
+#include <vmap/lcd/place_decision.hpp>
+#include <vmap/runtime/loop_detector.hpp>
+#include <vmap/runtime/loops.hpp>
+#include <vmap/runtime/option_names.hpp>
+#include <vmap/runtime/vocabulary.hpp>
+
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -16,21 +31,9 @@
 #include <string>
 #include <utility>
 #include <vector>
-#include <vmap/hooks/precomputed_detections.hpp>
-#include <vmap/io/poses.hpp>
-#include <vmap/lcd/evaluation.hpp>
-#include <vmap/lcd/loop_detector.hpp>
-#include <vmap/lcd/loop_engine.hpp>
-#include <vmap/lcd/place_decision.hpp>
-
-#include "bindings.hpp"
-#include "common/lcd_run.hpp"
-#include "common/policies.hpp"
 
 namespace vmap::python {
 namespace {
-
-namespace ex = vmap::examples;
 
 // ---------------------------------------------------------------------------------------
 // Arguments
@@ -39,39 +42,7 @@ bool is_path(const py::handle& h) { return py::isinstance<py::str>(h) || py::has
 
 std::string path_of(const py::handle& h) { return py::str(py::module_::import("os").attr("fspath")(h)); }
 
-CandidateIndex parse_rank(const std::string& rank) {
-  if (rank == "tree") return CandidateIndex::tree;
-  if (rank == "tree_ranked") return CandidateIndex::tree_ranked;
-  if (rank == "bow") return CandidateIndex::bow;
-  if (rank == "all") return CandidateIndex::brute_force;
-  fail("rank: unknown '" + rank + "' (choose tree, tree_ranked, bow or all)");
-}
-
-/// The name `vmap loops` prints for a candidate source (--rank's values).
-std::string rank_name(CandidateIndex c) { return c == CandidateIndex::brute_force ? "all" : std::string(to_string(c)); }
-
-ex::DescriptorChoice descriptor_choice(const std::string& features, int nfeatures, const std::string& model,
-                                       const std::string& refine_model) {
-  if (nfeatures < 1 || static_cast<unsigned long long>(nfeatures) > ex::max_nfeatures)
-    fail("nfeatures must be in [1, " + std::to_string(ex::max_nfeatures) + "], got " + std::to_string(nfeatures));
-  return {features, nfeatures, model, refine_model};
-}
-
-ex::VocabularyChoice vocabulary_choice(std::size_t words, int depth, std::uint64_t seed) {
-  ex::VocabularyChoice v;
-  v.words = words;
-  v.depth = depth;
-  v.seed = seed;
-  if (depth < 1 || depth > 16) fail("depth must be in [1, 16], got " + std::to_string(depth));
-  if (words < 2) fail("words must be >= 2, got " + std::to_string(words));
-  if (v.branching() > BinaryVocabularyTree::max_branching)
-    fail("words=" + std::to_string(words) + " with depth=" + std::to_string(depth) + " needs a branching above " +
-         std::to_string(BinaryVocabularyTree::max_branching) + "; raise depth or lower words");
-  return v;
-}
-
-/// The loop engine's options from the keyword arguments, checked as the engine checks
-/// them, so a bad value fails before any frame is read.
+/// The loop engine's options from the keyword arguments (checked by the library).
 struct EngineArgs {
   std::size_t window, min_candidates, top_k;
   double min_bow_score;
@@ -82,12 +53,11 @@ struct EngineArgs {
   int spread_grid;
   double full_spread, ambiguity_ratio, label_min_score;
 
-  [[nodiscard]] LoopOptions options(CandidateIndex index) const {
+  [[nodiscard]] LoopOptions options() const {
     LoopOptions o;
     o.labels.min_score = static_cast<float>(label_min_score);
     o.window = window;
     o.min_candidates = min_candidates;
-    o.index = index;
     o.top_k = top_k;
     o.min_bow_score = min_bow_score;
     o.temporal_consistency = temporal_consistency;
@@ -100,30 +70,14 @@ struct EngineArgs {
     o.decision.spread_grid = spread_grid;
     o.decision.full_spread = full_spread;
     o.decision.ambiguity_ratio = ambiguity_ratio;
-    const auto in01 = [](double x) { return std::isfinite(x) && x >= 0.0 && x <= 1.0; };
-    const auto need = [](bool ok, const std::string& what, double got) {
-      if (!ok) fail(what + ", got " + std::string(py::repr(py::float_(got))));
-    };
-    need(min_candidates >= 1, "min_candidates must be >= 1", static_cast<double>(min_candidates));
-    need(top_k >= 1 || !ranks(index), "top_k must be >= 1", static_cast<double>(top_k));
-    need(std::isfinite(min_bow_score) && min_bow_score >= 0, "min_bow_score must be finite and >= 0", min_bow_score);
-    need(temporal_consistency <= 1000, "temporal_consistency must be <= 1000",
-         static_cast<double>(temporal_consistency));
-    need(in01(left_ratio), "left_ratio must be in [0, 1]", left_ratio);
-    need(in01(min_confidence), "min_confidence must be in [0, 1]", min_confidence);
-    need(min_inliers >= 0, "min_inliers must be >= 0", min_inliers);
-    need(std::isfinite(chance_inlier_rate) && chance_inlier_rate > 0 && chance_inlier_rate < 1,
-         "chance_inlier_rate must be in (0, 1)", chance_inlier_rate);
-    need(std::isfinite(half_significance) && half_significance > 0, "half_significance must be > 0", half_significance);
-    need(spread_grid >= 1 && spread_grid <= 64, "spread_grid must be in 1..64", spread_grid);
-    need(in01(full_spread), "full_spread must be in [0, 1]", full_spread);
-    need(in01(ambiguity_ratio), "ambiguity_ratio must be in [0, 1]", ambiguity_ratio);
-    need(in01(label_min_score), "label_min_score must be in [0, 1]", label_min_score);
-    // The engine's own check as well, so an option it gains is never left unchecked.
-    LoopEngine<BruteForceMatcher, FundamentalEstimator>::check_options(o, "LoopOptions");
     return o;
   }
 };
+
+/// The candidate source named by `rank`, else the default for what is given.
+CandidateIndex candidate_index(const std::optional<std::string>& rank, bool labels, bool vocabulary) {
+  return rank ? parse_option<CandidateIndex>(*rank, "rank", "") : default_candidate_index(labels, vocabulary);
+}
 
 /// A number of an index argument that must be a whole number >= 0.
 std::size_t whole(const py::object& h, const std::string& what) {
@@ -164,7 +118,7 @@ std::vector<Detection> detections_of(const py::handle& rows, const std::string& 
 /// `labels` of detect_loops: a detections file, several (pooled), or per-frame detections.
 std::optional<PrecomputedDetections> labels_of(const py::object& labels) {
   if (labels.is_none()) return std::nullopt;
-  if (is_path(labels)) return ex::load_labels({path_of(labels)});
+  if (is_path(labels)) return load_labels({path_of(labels)});
   if (!py::isinstance<py::sequence>(labels))
     fail("labels: a detections file, a list of them, or one list of (label, score, x, y, w, h) per frame; got " +
          std::string(py::repr(labels)));
@@ -176,7 +130,7 @@ std::optional<PrecomputedDetections> labels_of(const py::object& labels) {
       if (!is_path(f)) fail("labels: a list of files holds " + std::string(py::repr(f)));
       files.emplace_back(path_of(f));
     }
-    return ex::load_labels(files);
+    return load_labels(files);
   }
   std::vector<std::vector<Detection>> per_frame;
   for (std::size_t k = 0; k < py::len(seq); ++k)
@@ -184,51 +138,14 @@ std::optional<PrecomputedDetections> labels_of(const py::object& labels) {
   return PrecomputedDetections(per_frame);
 }
 
-/// progress(stage, done, total), with the GIL, from a thread that released it.
-using Progress = std::function<void(const char*, std::size_t, std::size_t)>;
-
-Progress progress_of(const py::object& progress) {
+/// progress(stage, done, total) with the GIL, from the run that released it.
+std::function<void(LoopStage, std::size_t, std::size_t)> progress_of(const py::object& progress) {
   if (progress.is_none()) return {};
   if (!PyCallable_Check(progress.ptr())) fail("progress must be callable as progress(stage, done, total)");
-  return [progress](const char* stage, std::size_t done, std::size_t total) {
+  return [progress](LoopStage stage, std::size_t done, std::size_t total) {
     py::gil_scoped_acquire held;
-    progress(stage, done, total);
+    progress(std::string(to_string(stage)), done, total);
   };
-}
-
-// ---------------------------------------------------------------------------------------
-// Results
-
-/// One loop `vmap loops` reports (its --json "loops" entries).
-struct LoopEdge {
-  std::size_t query = 0, match = 0;
-  std::string query_name, match_name;
-  double query_time = 0.0, match_time = 0.0;
-  double confidence = 0.0;
-  int inliers = 0, matches = 0;
-  double inlier_ratio = 0.0, significance = 0.0, spread = 0.0, bow_score = 0.0;
-};
-
-/// What detect_loops returns: the run, and the frames' names and times.
-struct PyLoopRun {
-  ex::LoopRun run;
-  std::vector<std::string> names;
-  std::vector<double> times;
-  std::size_t skipped = 0;
-  LoopOptions options;
-  std::vector<LoopEdge> loops;
-};
-
-std::vector<LoopEdge> loop_edges(const ex::LoopRun& run, const std::vector<std::string>& names,
-                                 const std::vector<double>& times) {
-  std::vector<LoopEdge> out;
-  for (const LoopResult& r : run.results) {
-    if (!r.loop()) continue;
-    const std::size_t q = r.frame, m = *r.best;
-    out.push_back({q, m, names[q], names[m], times[q], times[m], r.confidence, r.evidence.inliers, r.evidence.matches,
-                   r.evidence.inlier_ratio, r.evidence.significance, r.evidence.spread, r.evidence.bow_score});
-  }
-  return out;
 }
 
 /// The evaluation's view of a run: N x 3 float64 (query, match or -1, score).
@@ -247,251 +164,144 @@ py::array_t<double> score_array(const std::vector<LoopScore>& scores) {
 // ---------------------------------------------------------------------------------------
 // detect_loops
 
-PyLoopRun detect_loops(const py::object& source, const std::string& features, int nfeatures, const std::string& model,
-                       const std::string& refine_model, const py::object& labels,
-                       const std::optional<std::string>& rank, const py::object& vocabulary, std::size_t words,
-                       int depth, std::uint64_t seed, const EngineArgs& engine, double min_influence,
-                       double max_influence, const std::optional<std::vector<int>>& label_order, std::size_t sample,
-                       double time_offset, const py::object& progress) {
-  ex::LoopRunConfig c;
-  c.descriptor = descriptor_choice(features, nfeatures, model, refine_model);
-  c.influence = {.min_influence = min_influence, .max_influence = max_influence};
-  detail::check_influence_options(c.influence);
-  c.label_order = label_order.value_or(std::vector<int>{});
-  c.sample = sample;
+LoopRun detect_loops(const py::object& source, const std::string& features, int nfeatures, const std::string& model,
+                     const std::string& refine_model, const py::object& labels, const std::optional<std::string>& rank,
+                     const py::object& vocabulary, std::size_t words, int depth, std::uint64_t seed,
+                     const EngineArgs& engine, double min_influence, double max_influence,
+                     const std::optional<std::vector<int>>& label_order, std::size_t sample, double time_offset,
+                     const py::object& progress) {
+  LoopRunOptions o;
+  o.stack = policy_stack(features, nfeatures, model, refine_model);
+  o.influence = {.min_influence = min_influence, .max_influence = max_influence};
+  o.label_order = label_order.value_or(std::vector<int>{});
+  o.sample = sample;
   const std::optional<PrecomputedDetections> detections = labels_of(labels);
-  c.detector = engine.options(parse_rank(rank.value_or(detections ? "tree_ranked" : "bow")));
-  if (uses_labels(c.detector.index) && !detections)
-    fail("rank=" + rank_name(c.detector.index) +
-         " needs labels (a detections file or per-frame detections); rank='bow' or 'all' need none");
-  const ex::VocabularyChoice words_choice = vocabulary_choice(words, depth, seed);
-  std::optional<std::string> vocabulary_file;
+  o.detector = engine.options();
+  o.detector.index = candidate_index(rank, detections.has_value(), true);
+  check_candidate_source(o.detector.index, detections.has_value(), true);
+  o.vocabulary.learning = {.words = words, .depth = depth, .seed = seed};
   if (!vocabulary.is_none()) {
     if (!is_path(vocabulary))
       fail("vocabulary: a vocabulary file (of `vmap vocabulary`), got " + std::string(py::repr(vocabulary)));
-    vocabulary_file = path_of(vocabulary);
-    if (!std::filesystem::is_regular_file(*vocabulary_file))
-      fail("vocabulary: '" + *vocabulary_file + "' is not a file");
+    o.vocabulary.file = path_of(vocabulary);
   }
-  const Progress report = progress_of(progress);
+  o.validate();
+  const LoopRunCallbacks callbacks{.progress = progress_of(progress), .on_result = {}};
+  const PrecomputedDetections* given = detections ? &*detections : nullptr;
 
-  PyLoopRun out;
-  out.options = c.detector;
-  ex::SequenceFeatures seq;
-  // A path is read by the command line's own frame source; a list holds images (read in
-  // place: `held` keeps each array alive while the GIL is released, whatever happens to
-  // the list meanwhile) or Features already extracted.
-  std::vector<cv::Mat> images;
-  std::vector<py::object> held;
-  const bool from_path = is_path(source);
-  if (from_path) {
-    c.input = path_of(source);
-  } else {
-    if (!py::isinstance<py::sequence>(source))
-      fail("source: a video, an image folder, a list file or rgb.txt, or a list of images or Features; got " +
-           std::string(py::repr(source)));
-    const auto seq_in = py::reinterpret_borrow<py::sequence>(source);
-    c.input = "<list of " + std::to_string(py::len(seq_in)) + " frames>";
-    for (std::size_t k = 0; k < py::len(seq_in); ++k) {
-      const py::object item = seq_in[k];
-      if (py::isinstance<Features>(item)) {
-        seq.frames.push_back(item.cast<const Features&>());
-      } else if (py::isinstance<py::array>(item)) {
-        images.push_back(image_view(item.cast<py::array>(), "source[" + std::to_string(k) + "]"));
-        held.push_back(item);
-      } else {
-        fail("source[" + std::to_string(k) + "]: an image (NumPy array) or vmap.Features, got " +
-             std::string(py::repr(item)));
-      }
-      seq.names.push_back(std::to_string(k));
-      seq.times.push_back(static_cast<double>(k));
-    }
-    if (!images.empty() && !seq.frames.empty()) fail("source: give images or Features, not both");
-    if (py::len(seq_in) == 0) fail("source: an empty list of frames");
-  }
-
-  {
+  // A path is read by the library's frame source; a list holds images (read in place:
+  // `held` keeps each array alive while the GIL is released, whatever happens to the
+  // list meanwhile) or Features already extracted.
+  if (is_path(source)) {
+    const std::string input = path_of(source);
     py::gil_scoped_release unlocked;
-    if (from_path) {
-      seq = ex::extract_features(
-          c.input, c.descriptor,
-          [&](std::size_t done, std::size_t total) {
-            if (report) report("features", done, total);
-          },
-          time_offset);
-    } else if (!images.empty()) {
-      const auto t0 = std::chrono::steady_clock::now();
-      ex::with_descriptor(c.descriptor, [&](auto descriptor) {
-        for (const cv::Mat& image : images) {
-          seq.frames.push_back(descriptor.extract(image));
-          if (report) report("features", seq.frames.size(), images.size());
-        }
-      });
-      seq.seconds = ex::seconds_since(t0);
-    }
-    if (seq.frames.empty()) fail("source: no frames to detect loops in ('" + c.input.string() + "')");
-    if (seq.skipped > 0 && detections)
-      fail(std::to_string(seq.skipped) + " frame(s) of '" + c.input.string() +
-           "' could not be read; the labels are per frame, so they would be shifted");
-    std::shared_ptr<const AnyVocabulary> words_tree;
-    if (ranks(c.detector.index)) {
-      if (vocabulary_file) {
-        words_tree = std::make_shared<const AnyVocabulary>(AnyVocabulary::load(*vocabulary_file));
-      } else {
-        if (report) report("vocabulary", 0, 1);
-        words_tree = std::make_shared<const AnyVocabulary>(ex::learn_vocabulary(seq.frames, words_choice));
-        if (report) report("vocabulary", 1, 1);
-      }
-    }
-    const std::size_t total = seq.frames.size();
-    out.run =
-        ex::run_loops(c, seq, detections ? *detections : PrecomputedDetections{}, words_tree, [&](const LoopResult& r) {
-          if (report) report("loops", r.frame + 1, total);
-        });
+    return vmap::detect_loops(input, o, given, callbacks, {.time_offset = time_offset});
   }
-  out.names = std::move(seq.names);
-  out.times = std::move(seq.times);
-  out.skipped = seq.skipped;
-  out.loops = loop_edges(out.run, out.names, out.times);
-  return out;
+  if (!py::isinstance<py::sequence>(source))
+    fail("source: a video, an image folder, a list file or rgb.txt, or a list of images or Features; got " +
+         std::string(py::repr(source)));
+  const auto items = py::reinterpret_borrow<py::sequence>(source);
+  if (py::len(items) == 0) fail("source: an empty list of frames");
+  std::vector<cv::Mat> images;
+  std::vector<Features> given_features;
+  std::vector<py::object> held;
+  for (std::size_t k = 0; k < py::len(items); ++k) {
+    const py::object item = items[k];
+    if (py::isinstance<Features>(item)) {
+      given_features.push_back(item.cast<const Features&>());
+    } else if (py::isinstance<py::array>(item)) {
+      images.push_back(image_view(item.cast<py::array>(), "source[" + std::to_string(k) + "]"));
+      held.push_back(item);
+    } else {
+      fail("source[" + std::to_string(k) + "]: an image (NumPy array) or vmap.Features, got " +
+           std::string(py::repr(item)));
+    }
+  }
+  if (!images.empty() && !given_features.empty()) fail("source: give images or Features, not both");
+  py::gil_scoped_release unlocked;
+  const SequenceFeatures sequence =
+      images.empty()
+          ? SequenceFeatures::of(std::move(given_features), "<list of " + std::to_string(py::len(items)) + " frames>")
+          : extract_features(images, o.stack, [&](std::size_t done, std::size_t total) {
+              if (callbacks.progress) callbacks.progress(LoopStage::features, done, total);
+            });
+  return vmap::detect_loops(sequence, o, given, callbacks);
 }
 
 // ---------------------------------------------------------------------------------------
 // LoopDetector, one frame at a time
 
-/// The detector behind one type whatever the descriptor (whose matcher and estimator
-/// are chosen with it, as run_loops chooses them).
-class DetectorBase {
- public:
-  virtual ~DetectorBase() = default;
-  virtual LoopResult add(Features f, const std::vector<Detection>& detections) = 0;
-  virtual LoopResult push(const cv::Mat& image, const std::vector<Detection>& detections) = 0;
-  [[nodiscard]] virtual std::size_t frames() const = 0;
-  [[nodiscard]] virtual std::size_t verifications() const = 0;
-  [[nodiscard]] virtual bool stationary() const = 0;
-  [[nodiscard]] virtual std::size_t memory_bytes() const = 0;
-};
-
-template <class D>
-auto matcher_of(const D& d) {
-  return ex::matcher_for(d);
-}
-
-template <class D>
-auto estimator_of(const D& d, const ex::DescriptorChoice& choice) {
-  return ex::estimator_for(d, choice, FundamentalEstimator(ex::LoopRunConfig{}.estimator));
-}
-
-template <class D>
-class DetectorModel final : public DetectorBase {
- public:
-  using Detector = LoopDetector<D, decltype(matcher_of(std::declval<const D&>())),
-                                decltype(estimator_of(std::declval<const D&>(), ex::DescriptorChoice{}))>;
-
-  DetectorModel(D descriptor, const ex::DescriptorChoice& choice, LabelSchema schema, const LoopOptions& options,
-                const std::shared_ptr<const AnyVocabulary>& vocabulary)
-      : detector_(make(std::move(descriptor), choice, std::move(schema), options, vocabulary)) {}
-
-  LoopResult add(Features f, const std::vector<Detection>& detections) override {
-    return detector_.add(std::move(f), detections);
-  }
-  LoopResult push(const cv::Mat& image, const std::vector<Detection>& detections) override {
-    return detector_.push(image, detections);
-  }
-  [[nodiscard]] std::size_t frames() const override { return detector_.frames(); }
-  [[nodiscard]] std::size_t verifications() const override { return detector_.verifications(); }
-  [[nodiscard]] bool stationary() const override { return detector_.stationary(); }
-  [[nodiscard]] std::size_t memory_bytes() const override { return detector_.memory_bytes(); }
-
- private:
-  // The matcher and estimator are made from the descriptor before it moves into the
-  // detector: a descriptor need only be movable.
-  static Detector make(D descriptor, const ex::DescriptorChoice& choice, LabelSchema schema, const LoopOptions& options,
-                       const std::shared_ptr<const AnyVocabulary>& vocabulary) {
-    auto matcher = matcher_of(descriptor);
-    auto estimator = estimator_of(descriptor, choice);
-    return Detector(std::move(schema), std::move(descriptor), std::move(matcher), std::move(estimator), options,
-                    PlaceRanker(vocabulary, vocabulary ? vocabulary->scoring() : BowScoring::l1));
-  }
-
-  Detector detector_;
-};
-
+/// vmap.LoopDetector: the library's AnyLoopDetector behind a lock. Its calls release the
+/// GIL, so two Python threads could reach one detector; the mutex keeps its frames in
+/// order (taken after the GIL is let go: no deadlock).
 class PyLoopDetector {
  public:
   PyLoopDetector(const std::string& features, int nfeatures, const std::string& model, const std::string& refine_model,
                  const py::object& vocabulary, std::size_t words, int depth, std::uint64_t seed,
                  const std::optional<std::vector<int>>& label_order, const std::optional<std::string>& rank,
-                 const EngineArgs& engine) {
-    choice_ = descriptor_choice(features, nfeatures, model, refine_model);
-    const ex::VocabularyChoice words_choice = vocabulary_choice(words, depth, seed);
-    std::shared_ptr<const AnyVocabulary> words_tree;
-    std::vector<Features> learn_from;
-    if (!vocabulary.is_none()) {
-      if (is_path(vocabulary)) {
-        words_tree = std::make_shared<const AnyVocabulary>(AnyVocabulary::load(path_of(vocabulary)));
-      } else {
-        for (const py::handle f : vocabulary) {
-          if (!py::isinstance<Features>(f))
-            fail("vocabulary: a vocabulary file or a list of vmap.Features to learn one from; the list holds " +
-                 std::string(py::repr(f)));
-          learn_from.push_back(f.cast<const Features&>());
-        }
-        py::gil_scoped_release unlocked;
-        words_tree = std::make_shared<const AnyVocabulary>(ex::learn_vocabulary(learn_from, words_choice));
-      }
-    }
-    const bool have_labels = label_order && !label_order->empty();
-    const std::string default_rank =
-        words_tree ? (have_labels ? "tree_ranked" : "bow") : (have_labels ? "tree" : "all");
-    const LoopOptions options = engine.options(parse_rank(rank.value_or(default_rank)));
-    if (uses_labels(options.index) && !have_labels)
-      fail("rank=" + rank_name(options.index) + " needs label_order (the label ids of the tree, large objects first)");
-    if (ranks(options.index) && !words_tree)
-      fail("rank=" + rank_name(options.index) +
-           " ranks by bag of words: give vocabulary (a file, or a list of Features to learn one from)");
-    rank_ = rank_name(options.index);
-    LabelSchema schema(have_labels ? *label_order : std::vector<int>{});
-    detector_ = ex::with_descriptor(choice_, [&](auto descriptor) -> std::unique_ptr<DetectorBase> {
-      return std::make_unique<DetectorModel<decltype(descriptor)>>(std::move(descriptor), choice_, std::move(schema),
-                                                                   options, words_tree);
-    });
-    options_ = options;
-  }
+                 const EngineArgs& engine)
+      : detector_(make(features, nfeatures, model, refine_model, vocabulary, words, depth, seed, label_order, rank,
+                       engine)) {}
 
   LoopResult add(const py::object& frame, const py::object& detections) {
     const std::vector<Detection> found = detections_of(detections, "detections");
-    // The GIL is released for the work, so two Python threads could reach one detector;
-    // the mutex keeps its frames in order (taken after the GIL is let go: no deadlock).
     if (py::isinstance<Features>(frame)) {
       Features f = frame.cast<const Features&>();
       py::gil_scoped_release unlocked;
       const std::lock_guard<std::mutex> one_at_a_time(mutex_);
-      return detector_->add(std::move(f), found);
+      return detector_.add(std::move(f), found);
     }
     if (!py::isinstance<py::array>(frame))
       fail("add: an image (NumPy array) or vmap.Features, got " + std::string(py::repr(frame)));
     const cv::Mat view = image_view(frame.cast<py::array>(), "image");
     py::gil_scoped_release unlocked;
     const std::lock_guard<std::mutex> one_at_a_time(mutex_);
-    return detector_->push(view, found);
+    return detector_.push(view, found);
   }
 
-  // Read under the mutex: another thread may be adding a frame (without the GIL).
+  /// f(detector) under the mutex: another thread may be adding a frame (without the GIL).
   template <class F>
   auto read(F f) const {
     const std::lock_guard<std::mutex> one_at_a_time(mutex_);
-    return f(static_cast<const DetectorBase&>(*detector_));
+    return f(detector_);
   }
-  [[nodiscard]] const LoopOptions& options() const noexcept { return options_; }
-  [[nodiscard]] const std::string& rank() const noexcept { return rank_; }
-  [[nodiscard]] const ex::DescriptorChoice& choice() const noexcept { return choice_; }
 
  private:
-  ex::DescriptorChoice choice_;
-  LoopOptions options_;
-  std::string rank_;
-  std::unique_ptr<DetectorBase> detector_;
+  static AnyLoopDetector make(const std::string& features, int nfeatures, const std::string& model,
+                              const std::string& refine_model, const py::object& vocabulary, std::size_t words,
+                              int depth, std::uint64_t seed, const std::optional<std::vector<int>>& label_order,
+                              const std::optional<std::string>& rank, const EngineArgs& engine) {
+    const PolicyStack stack = policy_stack(features, nfeatures, model, refine_model);
+    const VocabularyLearning learning{.words = words, .depth = depth, .seed = seed};
+    std::shared_ptr<const AnyVocabulary> words_tree;
+    if (!vocabulary.is_none()) {
+      if (is_path(vocabulary)) {
+        words_tree = std::make_shared<const AnyVocabulary>(AnyVocabulary::load(path_of(vocabulary)));
+      } else {
+        std::vector<Features> learn_from;
+        for (const py::handle f : vocabulary) {
+          if (!py::isinstance<Features>(f))
+            fail("vocabulary: a vocabulary file or a list of vmap.Features to learn one from; the list holds " +
+                 std::string(py::repr(f)));
+          learn_from.push_back(f.cast<const Features&>());
+        }
+        learning.validate();
+        py::gil_scoped_release unlocked;
+        words_tree = std::make_shared<const AnyVocabulary>(learn_vocabulary(learn_from, learning));
+      }
+    }
+    const bool have_labels = label_order && !label_order->empty();
+    LoopOptions options = engine.options();
+    options.index = candidate_index(rank, have_labels, words_tree != nullptr);
+    check_candidate_source(options.index, have_labels, words_tree != nullptr,
+                           OptionNames{.style = OptionNames::Style::keyword,
+                                       .renamed = {{"labels", "label_order (the label ids of the tree, large objects first)"},
+                                                   {"vocabulary", "vocabulary (a file, or a list of Features to learn one from)"}}});
+    return AnyLoopDetector(stack, LabelSchema(have_labels ? *label_order : std::vector<int>{}), options,
+                           std::move(words_tree));
+  }
+
+  AnyLoopDetector detector_;
   mutable std::mutex mutex_;
 };
 
@@ -553,13 +363,6 @@ std::vector<CameraPose> poses_of_array(const py::object& poses) {
   return out;
 }
 
-/// The evaluation of one run (the figures `vmap loops` prints with a ground truth).
-struct Evaluation {
-  ex::LoopSummary summary;
-  double threshold = 0.5;
-  LoopGroundTruth gt;
-};
-
 /// Scores from `loops`: rows (query, match, score), match None or negative for a query
 /// without a candidate.
 std::vector<LoopScore> scores_of(const py::object& loops) {
@@ -581,49 +384,28 @@ std::vector<LoopScore> scores_of(const py::object& loops) {
   return out;
 }
 
-Evaluation evaluate(const py::object& loops, const py::object& ground_truth, const py::object& poses,
-                    double max_distance, double max_angle, std::optional<std::size_t> window,
-                    std::optional<double> min_confidence) {
+LoopEvaluation evaluate(const py::object& loops, const py::object& ground_truth, const py::object& poses,
+                        double max_distance, double max_angle, std::optional<std::size_t> window,
+                        std::optional<double> min_confidence) {
   if (ground_truth.is_none() == poses.is_none())
     fail("evaluate: give one of ground_truth (an N x N 0/1 matrix or its file) and poses");
-  if (!std::isfinite(max_distance) || max_distance <= 0) fail("max_distance must be finite and > 0");
-  if (!std::isfinite(max_angle) || max_angle <= 0 || max_angle > 180) fail("max_angle must be in (0, 180]");
-  const PyLoopRun* run = py::isinstance<PyLoopRun>(loops) ? &loops.cast<const PyLoopRun&>() : nullptr;
-  Evaluation e;
-  e.threshold =
+  const LoopRun* run = py::isinstance<LoopRun>(loops) ? &loops.cast<const LoopRun&>() : nullptr;
+  const double threshold =
       min_confidence.value_or(run ? run->options.decision.min_confidence : PlaceDecisionOptions{}.min_confidence);
-  if (!std::isfinite(e.threshold)) fail("min_confidence must be finite");
-  if (run && run->skipped > 0)
-    fail(std::to_string(run->skipped) +
-         " frame(s) of the run could not be read; the ground truth is per frame, so the evaluation would be shifted");
-  const std::size_t gap = window.value_or(run ? run->options.window : LoopOptions{}.window);
-  if (!ground_truth.is_none()) {
-    e.gt = ground_truth_of(ground_truth);
-  } else if (is_path(poses)) {
-    // One pose per frame: by order when the counts agree, else the nearest in time within
-    // 50 ms, as `vmap loops --gt-poses` associates them.
-    const std::string file = path_of(poses);
-    std::vector<CameraPose> all = load_camera_poses(file);
-    if (run) all = poses_for_frames(all, run->times, file, 0.05);
-    e.gt = ground_truth_from_poses(all, {.max_distance = max_distance, .max_angle_deg = max_angle, .window = gap});
-  } else {
-    e.gt = ground_truth_from_poses(poses_of_array(poses),
-                                   {.max_distance = max_distance, .max_angle_deg = max_angle, .window = gap});
-  }
-  if (run) {
-    if (e.gt.frames() != run->run.results.size())
-      fail(std::string(ground_truth.is_none() ? "poses" : "ground_truth") + ": covers " +
-           std::to_string(e.gt.frames()) + " frames but the run has " + std::to_string(run->run.results.size()));
-    e.summary = ex::summarize(run->run, e.gt, e.threshold);
-    return e;
-  }
-  const std::vector<LoopScore> scores = scores_of(loops);
-  e.summary.frames = e.gt.frames();
-  e.summary.loops_gt = e.gt.loop_frames();
-  e.summary.at_decision = evaluate_loops(scores, e.gt, e.threshold);
-  e.summary.curve = precision_recall_curve(scores, e.gt);
-  e.summary.at_full_precision = recall_at_full_precision(e.summary.curve);
-  return e;
+  const PoseLoopOptions by_pose{.max_distance = max_distance,
+                                .max_angle_deg = max_angle,
+                                .window = window.value_or(run ? run->options.window : LoopOptions{}.window)};
+  LoopGroundTruth gt;
+  if (!ground_truth.is_none())
+    gt = ground_truth_of(ground_truth);
+  else if (is_path(poses))
+    // One pose per frame of a run, as `vmap loops --gt-poses` associates them.
+    gt = ground_truth_from_poses(run ? frame_poses(path_of(poses), run->times) : load_camera_poses(path_of(poses)),
+                                 by_pose);
+  else
+    gt = ground_truth_from_poses(poses_of_array(poses), by_pose);
+  if (run) return evaluate_loop_run(*run, std::move(gt), threshold, ground_truth.is_none() ? "poses" : "ground_truth");
+  return evaluate_loop_scores(scores_of(loops), std::move(gt), threshold);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -632,26 +414,36 @@ Evaluation evaluate(const py::object& loops, const py::object& ground_truth, con
 py::object optional_index(const std::optional<std::size_t>& i) { return i ? py::cast(*i) : py::none(); }
 
 void bind_results(py::module_& m) {
-  py::class_<LoopEdge>(m, "Loop", "One loop found: query frame -> matched (older) frame, with its evidence.")
-      .def_readonly("query", &LoopEdge::query, "index of the query frame")
-      .def_readonly("match", &LoopEdge::match, "index of the older frame it closes a loop with")
-      .def_readonly("query_name", &LoopEdge::query_name, "the query frame's file name (its index for a list)")
-      .def_readonly("match_name", &LoopEdge::match_name)
-      .def_readonly("query_time", &LoopEdge::query_time, "the query frame's time, seconds")
-      .def_readonly("match_time", &LoopEdge::match_time)
-      .def_readonly("confidence", &LoopEdge::confidence,
+  py::class_<DetectedLoop>(m, "Loop", "One loop found: query frame -> matched (older) frame, with its evidence.")
+      .def_readonly("query", &DetectedLoop::query, "index of the query frame")
+      .def_readonly("match", &DetectedLoop::match, "index of the older frame it closes a loop with")
+      .def_readonly("query_name", &DetectedLoop::query_name, "the query frame's file name (its index for a list)")
+      .def_readonly("match_name", &DetectedLoop::match_name)
+      .def_readonly("query_time", &DetectedLoop::query_time, "the query frame's time, seconds")
+      .def_readonly("match_time", &DetectedLoop::match_time)
+      .def_readonly("confidence", &DetectedLoop::confidence,
                     "in [0, 1]: 1 - 2^(-significance / half_significance), "
                     "scaled down when the inliers are bunched")
-      .def_readonly("inliers", &LoopEdge::inliers, "matches the geometric model explains")
-      .def_readonly("matches", &LoopEdge::matches, "tentative correspondences given to the estimator")
-      .def_readonly("inlier_ratio", &LoopEdge::inlier_ratio, "inliers / matches")
-      .def_readonly("significance", &LoopEdge::significance, "-log10 P(at least `inliers` of `matches` fit by chance)")
-      .def_readonly("spread", &LoopEdge::spread, "fraction of grid cells with an inlier, the smaller view")
-      .def_readonly("bow_score", &LoopEdge::bow_score, "the match's bag-of-words score (0 when not ranked)")
-      .def("__repr__", [](const LoopEdge& l) {
+      .def_property_readonly(
+          "inliers", [](const DetectedLoop& l) { return l.evidence.inliers; }, "matches the geometric model explains")
+      .def_property_readonly(
+          "matches", [](const DetectedLoop& l) { return l.evidence.matches; },
+          "tentative correspondences given to the estimator")
+      .def_property_readonly(
+          "inlier_ratio", [](const DetectedLoop& l) { return l.evidence.inlier_ratio; }, "inliers / matches")
+      .def_property_readonly(
+          "significance", [](const DetectedLoop& l) { return l.evidence.significance; },
+          "-log10 P(at least `inliers` of `matches` fit by chance)")
+      .def_property_readonly(
+          "spread", [](const DetectedLoop& l) { return l.evidence.spread; },
+          "fraction of grid cells with an inlier, the smaller view")
+      .def_property_readonly(
+          "bow_score", [](const DetectedLoop& l) { return l.evidence.bow_score; },
+          "the match's bag-of-words score (0 when not ranked)")
+      .def("__repr__", [](const DetectedLoop& l) {
         char buf[200];
         std::snprintf(buf, sizeof buf, "<vmap.Loop %zu -> %zu confidence %.3f inliers %d of %d bow %.3f>", l.query,
-                      l.match, l.confidence, l.inliers, l.matches, l.bow_score);
+                      l.match, l.confidence, l.evidence.inliers, l.evidence.matches, l.evidence.bow_score);
         return std::string(buf);
       });
 
@@ -706,74 +498,66 @@ void bind_results(py::module_& m) {
                r.reason + ")" + (r.best ? ", best " + std::to_string(*r.best) : std::string()) + ">";
       });
 
-  py::class_<PyLoopRun>(m, "LoopRun",
-                        "The result of vmap.detect_loops: the loops, every frame's decision and the run's figures.")
-      .def_readonly("loops", &PyLoopRun::loops, "the accepted loops (vmap.Loop), in frame order")
+  py::class_<LoopRun>(m, "LoopRun",
+                      "The result of vmap.detect_loops: the loops, every frame's decision and the run's figures.")
+      .def_readonly("loops", &LoopRun::loops, "the accepted loops (vmap.Loop), in frame order")
+      .def_readonly("decisions", &LoopRun::results, "one vmap.LoopDecision per frame")
+      .def_property_readonly("frames", [](const LoopRun& r) { return r.results.size(); })
+      .def_readonly("names", &LoopRun::names, "per frame: its file name (its index for a list)")
+      .def_readonly("times", &LoopRun::times, "per frame: its time in seconds")
+      .def_readonly("skipped_frames", &LoopRun::skipped, "unreadable frames (not in the run)")
       .def_property_readonly(
-          "decisions", [](const PyLoopRun& r) { return r.run.results; }, "one vmap.LoopDecision per frame")
-      .def_property_readonly("frames", [](const PyLoopRun& r) { return r.run.results.size(); })
-      .def_readonly("names", &PyLoopRun::names, "per frame: its file name (its index for a list)")
-      .def_readonly("times", &PyLoopRun::times, "per frame: its time in seconds")
-      .def_readonly("skipped_frames", &PyLoopRun::skipped, "unreadable frames (not in the run)")
-      .def_property_readonly(
-          "rank", [](const PyLoopRun& r) { return rank_name(r.options.index); },
+          "rank", [](const LoopRun& r) { return std::string(to_string(r.options.index)); },
           "the candidate source: tree, tree_ranked, bow or all")
-      .def_property_readonly("min_confidence", [](const PyLoopRun& r) { return r.options.decision.min_confidence; })
-      .def_property_readonly("window", [](const PyLoopRun& r) { return r.options.window; })
-      .def_property_readonly("verifications", [](const PyLoopRun& r) { return r.run.verifications; })
+      .def_property_readonly("min_confidence", [](const LoopRun& r) { return r.options.decision.min_confidence; })
+      .def_property_readonly("window", [](const LoopRun& r) { return r.options.window; })
+      .def_readonly("verifications", &LoopRun::verifications)
+      .def_readonly("stationary", &LoopRun::stationary, "the camera never left its place: no frame is a revisit")
+      .def_readonly("seconds", &LoopRun::seconds, "feature extraction + the detector over the sequence")
       .def_property_readonly(
-          "stationary", [](const PyLoopRun& r) { return r.run.stationary; },
-          "the camera never left its place: no frame is a revisit")
-      .def_property_readonly(
-          "seconds", [](const PyLoopRun& r) { return r.run.seconds; },
-          "feature extraction + the detector over the sequence")
-      .def_property_readonly(
-          "labels_kept", [](const PyLoopRun& r) { return r.run.schema.labels(); },
+          "labels_kept", [](const LoopRun& r) { return r.schema.labels(); },
           "the label tree's labels, large objects first")
       .def_property_readonly(
-          "scores", [](const PyLoopRun& r) { return score_array(r.run.scores()); },
+          "scores", [](const LoopRun& r) { return score_array(r.scores()); },
           "the evaluation's view, N x 3 float64: query, best match (-1: none), score (the confidence\n"
           "of the decisions the threshold alone decides, accepted or unknown place; 0 otherwise)")
-      .def("__len__", [](const PyLoopRun& r) { return r.loops.size(); })
-      .def("__repr__", [](const PyLoopRun& r) {
-        return "<vmap.LoopRun " + std::to_string(r.run.results.size()) + " frames, " + std::to_string(r.loops.size()) +
-               " loops, rank " + rank_name(r.options.index) + ">";
+      .def("__len__", [](const LoopRun& r) { return r.loops.size(); })
+      .def("__repr__", [](const LoopRun& r) {
+        return "<vmap.LoopRun " + std::to_string(r.results.size()) + " frames, " + std::to_string(r.loops.size()) +
+               " loops, rank " + std::string(to_string(r.options.index)) + ">";
       });
 
-  py::class_<Evaluation>(
+  py::class_<LoopEvaluation>(
       m, "Evaluation",
       "Precision and recall of loop closure against ground truth (lcd/evaluation.hpp): each query\n"
       "proposes its best candidate; at threshold t a query scoring >= t is a detection, true when the\n"
       "ground truth marks (query, candidate). Positives are the query frames with a ground-truth loop.")
       .def_property_readonly(
-          "precision", [](const Evaluation& e) { return e.summary.at_decision.precision; },
+          "precision", [](const LoopEvaluation& e) { return e.at_threshold.precision; },
           "TP / (TP + FP) at `threshold` (1 when nothing is detected)")
       .def_property_readonly(
-          "recall", [](const Evaluation& e) { return e.summary.at_decision.recall; },
+          "recall", [](const LoopEvaluation& e) { return e.at_threshold.recall; },
           "TP / positives at `threshold` (0 when the ground truth has no loop)")
-      .def_property_readonly("true_positives", [](const Evaluation& e) { return e.summary.at_decision.true_positives; })
-      .def_property_readonly("false_positives",
-                             [](const Evaluation& e) { return e.summary.at_decision.false_positives; })
-      .def_property_readonly("false_negatives",
-                             [](const Evaluation& e) { return e.summary.at_decision.false_negatives; })
+      .def_property_readonly("true_positives", [](const LoopEvaluation& e) { return e.at_threshold.true_positives; })
+      .def_property_readonly("false_positives", [](const LoopEvaluation& e) { return e.at_threshold.false_positives; })
+      .def_property_readonly("false_negatives", [](const LoopEvaluation& e) { return e.at_threshold.false_negatives; })
+      .def_readonly("positives", &LoopEvaluation::positives, "query frames with a ground-truth loop")
+      .def_readonly("frames", &LoopEvaluation::frames)
+      .def_readonly("threshold", &LoopEvaluation::threshold, "the decision threshold precision and recall are taken at")
       .def_property_readonly(
-          "positives", [](const Evaluation& e) { return e.summary.loops_gt; }, "query frames with a ground-truth loop")
-      .def_property_readonly("frames", [](const Evaluation& e) { return e.gt.frames(); })
-      .def_readonly("threshold", &Evaluation::threshold, "the decision threshold precision and recall are taken at")
-      .def_property_readonly(
-          "recall_at_100_precision", [](const Evaluation& e) { return e.summary.at_full_precision.recall; },
+          "recall_at_100_precision", [](const LoopEvaluation& e) { return e.at_full_precision.recall; },
           "the best recall among the curve's points without a false positive")
       .def_property_readonly(
           "threshold_at_100_precision",
-          [](const Evaluation& e) -> py::object {
-            if (e.summary.at_full_precision.true_positives == 0) return py::none();
-            return py::float_(e.summary.at_full_precision.threshold);
+          [](const LoopEvaluation& e) -> py::object {
+            if (e.at_full_precision.true_positives == 0) return py::none();
+            return py::float_(e.at_full_precision.threshold);
           },
           "the lowest threshold that reaches recall_at_100_precision (None when every point has a false positive)")
       .def_property_readonly(
           "curve",
-          [](const Evaluation& e) {
-            const auto& c = e.summary.curve;
+          [](const LoopEvaluation& e) {
+            const auto& c = e.curve;
             py::array_t<double> out({static_cast<py::ssize_t>(c.size()), py::ssize_t{5}});
             auto v = out.mutable_unchecked<2>();
             for (std::size_t i = 0; i < c.size(); ++i) {
@@ -790,22 +574,22 @@ void bind_results(py::module_& m) {
           "distinct score of the queries that propose a loop, from the highest threshold to the lowest")
       .def_property_readonly(
           "ground_truth",
-          [](const Evaluation& e) {
-            const auto n = static_cast<py::ssize_t>(e.gt.frames());
+          [](const LoopEvaluation& e) {
+            const auto n = static_cast<py::ssize_t>(e.ground_truth.frames());
             py::array_t<bool> out({n, n});
             auto v = out.mutable_unchecked<2>();
             for (py::ssize_t q = 0; q < n; ++q)
               for (py::ssize_t j = 0; j < n; ++j)
-                v(q, j) = e.gt(static_cast<std::size_t>(q), static_cast<std::size_t>(j));
+                v(q, j) = e.ground_truth(static_cast<std::size_t>(q), static_cast<std::size_t>(j));
             return out;
           },
           "the N x N bool ground-truth matrix evaluated against (derived from the poses when given)")
-      .def("__repr__", [](const Evaluation& e) {
+      .def("__repr__", [](const LoopEvaluation& e) {
         char buf[200];
         std::snprintf(buf, sizeof buf,
                       "<vmap.Evaluation precision %.3f recall %.3f recall@100%%P %.3f (TP %zu, FP %zu, %zu positives)>",
-                      e.summary.at_decision.precision, e.summary.at_decision.recall, e.summary.at_full_precision.recall,
-                      e.summary.at_decision.true_positives, e.summary.at_decision.false_positives, e.summary.loops_gt);
+                      e.at_threshold.precision, e.at_threshold.recall, e.at_full_precision.recall,
+                      e.at_threshold.true_positives, e.at_threshold.false_positives, e.positives);
         return std::string(buf);
       });
 }
@@ -928,28 +712,43 @@ void bind(py::module_& m) {
            "or vmap.Features made by the same kind of descriptor), with its detections (label, score, x, y, w, h)\n"
            "for the label tree; the frame is then indexed.")
       .def_property_readonly(
-          "frames", [](const PyLoopDetector& d) { return d.read([](const DetectorBase& b) { return b.frames(); }); })
+          "frames", [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.frames(); }); })
       .def_property_readonly(
           "verifications",
-          [](const PyLoopDetector& d) { return d.read([](const DetectorBase& b) { return b.verifications(); }); },
+          [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.verifications(); }); },
           "verifications spent over all frames so far")
       .def_property_readonly(
           "stationary",
-          [](const PyLoopDetector& d) { return d.read([](const DetectorBase& b) { return b.stationary(); }); },
+          [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.stationary(); }); },
           "the camera never left its place (needs a vocabulary)")
       .def_property_readonly(
           "memory_bytes",
-          [](const PyLoopDetector& d) { return d.read([](const DetectorBase& b) { return b.memory_bytes(); }); },
+          [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.memory_bytes(); }); },
           "bytes held for the frames: keypoints, descriptors, label vectors, the ranker's index")
-      .def_property_readonly("rank", &PyLoopDetector::rank, "tree, tree_ranked, bow or all")
-      .def_property_readonly("features", [](const PyLoopDetector& d) { return d.choice().name; })
-      .def_property_readonly("window", [](const PyLoopDetector& d) { return d.options().window; })
+      .def_property_readonly(
+          "rank",
+          [](const PyLoopDetector& d) {
+            return d.read([](const AnyLoopDetector& b) { return std::string(to_string(b.options().index)); });
+          },
+          "tree, tree_ranked, bow or all")
+      .def_property_readonly(
+          "features",
+          [](const PyLoopDetector& d) {
+            return d.read([](const AnyLoopDetector& b) { return std::string(to_string(b.stack().descriptor)); });
+          },
+          "the descriptor's name")
+      .def_property_readonly(
+          "window", [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.options().window; }); })
       .def_property_readonly("min_confidence",
-                             [](const PyLoopDetector& d) { return d.options().decision.min_confidence; })
-      .def("__len__", [](const PyLoopDetector& d) { return d.read([](const DetectorBase& b) { return b.frames(); }); })
+                             [](const PyLoopDetector& d) {
+                               return d.read([](const AnyLoopDetector& b) { return b.options().decision.min_confidence; });
+                             })
+      .def("__len__", [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.frames(); }); })
       .def("__repr__", [](const PyLoopDetector& d) {
-        return "<vmap.LoopDetector " + d.choice().name + ", rank " + d.rank() + ", " +
-               std::to_string(d.read([](const DetectorBase& b) { return b.frames(); })) + " frames>";
+        return d.read([](const AnyLoopDetector& b) {
+          return "<vmap.LoopDetector " + std::string(to_string(b.stack().descriptor)) + ", rank " +
+                 std::string(to_string(b.options().index)) + ", " + std::to_string(b.frames()) + " frames>";
+        });
       });
 
   m.def("evaluate", &evaluate, py::arg("loops"), py::arg("ground_truth") = py::none(), py::kw_only(),

@@ -5,13 +5,13 @@
 
 #include "bindings.hpp"
 
-#include "common/vocabulary_files.hpp"
-
 #include <vmap/core/features.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/place/bow.hpp>
 #include <vmap/place/database.hpp>
 #include <vmap/place/vocabulary.hpp>
+#include <vmap/runtime/option_names.hpp>
+#include <vmap/runtime/vocabulary.hpp>
 
 #include <pybind11/stl/filesystem.h>
 
@@ -219,18 +219,6 @@ BowScoring scoring_named(const std::string& s) {
 // ---------------------------------------------------------------------------------------
 // Vocabularies.
 
-const char* weighting_name(BowWeighting w) {
-  // The names `vmap vocabulary convert` prints.
-  switch (w) {
-    case BowWeighting::tf_idf_l1: return "tf_idf_l1";
-    case BowWeighting::tf_idf_l2: return "tf_idf_l2";
-    case BowWeighting::idf_l1: return "idf_l1";
-    case BowWeighting::idf_l2: return "idf_l2";
-    case BowWeighting::fbow: return "fbow";
-  }
-  return "?";
-}
-
 using VocabularyPtr = std::shared_ptr<AnyVocabulary>;
 
 /// A vocabulary from bytes of any format vmap reads from memory (a gzipped DBoW2 YAML is
@@ -416,13 +404,11 @@ void bind(py::module_& m) {
           "is read from its file).")
       .def(
           "save",
-          [](const AnyVocabulary& v, const std::filesystem::path& path, std::optional<std::string> format) {
-            const std::string f = format.value_or(examples::vocabulary_format_of(path));
+          [](const AnyVocabulary& v, const std::filesystem::path& path, const std::optional<std::string>& format) {
+            const auto f = format ? std::optional(parse_option<VocabularyFileFormat>(*format, "format", "vocabulary format"))
+                                  : std::nullopt;
             py::gil_scoped_release unlocked;
-            if (f == "vmap")
-              v.save(path);
-            else
-              write_file_atomically(path, examples::vocabulary_file_bytes(v, f, "the vocabulary"));
+            save_vocabulary(v, path, f);
           },
           py::arg("path"), py::kw_only(), py::arg("format") = py::none(),
           "Writes the vocabulary to `path` atomically (a temporary file renamed over it): format 'vmap' (vmap's own),\n"
@@ -431,10 +417,11 @@ void bind(py::module_& m) {
       .def(
           "to_bytes",
           [](const AnyVocabulary& v, const std::string& format) {
+            const auto f = parse_option<VocabularyFileFormat>(format, "format", "vocabulary format");
             std::string bytes;
             {
               py::gil_scoped_release unlocked;
-              bytes = examples::vocabulary_file_bytes(v, format, "the vocabulary");
+              bytes = vocabulary_file_bytes(v, f, "the vocabulary");
             }
             return to_py_bytes(bytes);
           },
@@ -500,7 +487,7 @@ void bind(py::module_& m) {
                              "columns D of a descriptor (bytes for binary, floats for float)")
       .def_property_readonly("norm", [](const AnyVocabulary& v) { return v.binary() != nullptr ? "hamming" : "l2"; },
                              "how descriptors are compared: hamming or l2 (as Features.norm)")
-      .def_property_readonly("weighting", [](const AnyVocabulary& v) { return weighting_name(v.weighting()); },
+      .def_property_readonly("weighting", [](const AnyVocabulary& v) { return std::string(to_string(v.weighting())); },
                              "how transform weighs and normalises: tf_idf_l1 (vmap), tf_idf_l2, idf_l1, idf_l2 (DBoW2's\n"
                              "other weightings) or fbow (FBoW: summed in float, L2-normalised)")
       .def_property_readonly("scoring", [](const AnyVocabulary& v) { return to_string(v.scoring()); },
@@ -516,7 +503,7 @@ void bind(py::module_& m) {
       .def("__repr__", [](const AnyVocabulary& v) {
         return "<vmap.Vocabulary " + std::to_string(v.size()) + " words (branching " + std::to_string(v.branching()) +
                ", depth " + std::to_string(v.depth()) + "), " + (v.binary() != nullptr ? "binary" : "float") + " x " +
-               std::to_string(v.descriptor_cols()) + ", " + weighting_name(v.weighting()) + ">";
+               std::to_string(v.descriptor_cols()) + ", " + std::string(to_string(v.weighting())) + ">";
       });
 
   m.def(

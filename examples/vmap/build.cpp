@@ -19,8 +19,11 @@
 #include <vmap/matching/brute_force.hpp>
 #include <vmap/runtime/exports.hpp>
 #include <vmap/runtime/memory.hpp>
+#include <vmap/runtime/option_names.hpp>
 #include <vmap/runtime/policies.hpp>
 #include <vmap/runtime/recorder.hpp>
+#include <vmap/runtime/selector.hpp>
+#include <vmap/runtime/stack_choice.hpp>
 
 #include <nlohmann/json.hpp>
 
@@ -126,18 +129,15 @@ std::size_t weakest_pair(const vmap::VisualMap& map) {
 template <class Selector>
 cv::Mat pair_picture(const vmap::VisualMap& map, std::size_t i, Selector& sel, const std::string& what) {
   // Matches and verification are deterministic, so these are the ones the map records.
-  const auto& fe = sel.front_end();
   const auto& a = map.keys[i];
   const auto& b = map.keys[i + 1];
-  const vmap::Matches matches = fe.match(a.features, b.features);
-  vmap::PairScore s = fe.bound(a.features, b.features, matches);
-  fe.verify(a.features, b.features, matches, s);
+  const vmap::VerifiedPair p = vmap::verify_pair(sel, a.features, b.features);
   char caption[256];
   std::snprintf(caption, sizeof caption, "%s: K%zu-K%zu, frames %zu-%zu: %zu matches, %d inliers, S = %.3f",
-                what.c_str(), i, i + 1, a.frame_index, b.frame_index, matches.size(), s.verification.inliers,
-                map.pairs[i].similarity);
-  return ex::captioned(ex::draw_verified_matches(a.image, a.features, b.image, b.features, matches, s.verification),
-                       caption);
+                what.c_str(), i, i + 1, a.frame_index, b.frame_index, p.matches.size(),
+                p.score.verification.inliers, map.pairs[i].similarity);
+  return ex::captioned(
+      ex::draw_verified_matches(a.image, a.features, b.image, b.features, p.matches, p.score.verification), caption);
 }
 
 template <class Selector>
@@ -460,26 +460,22 @@ std::function<int()> setup(CLI::App& app) {
     if (pictures) out_dir.emplace(a.out, "--out", std::vector<std::filesystem::path>{a.input},
                                   std::vector<std::string>{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"});
     const vmap::SelectorOptions so{.tau = args->threshold, .rule = ex::parse_rule(a.rule), .keep_images = pictures};
-    const auto estimator = ex::make_estimator(a.estimator, camera);
+    const vmap::PolicyStack stack = a.stack(camera);
     const auto source = ex::source_options(a, true);
     auto src = vmap::FrameSource::open(a.input, source);
     if (pictures && src.kind() == vmap::SourceKind::video)
       src = vmap::FrameSource::open(a.input, ex::source_options(a, false));
     const auto expected = expected_frames(src, source);
-    return ex::with_descriptor(a.descriptor(), [&](auto descriptor) -> int {
-      const auto matcher = ex::matcher_for(descriptor);
-      auto verifier = ex::estimator_for(descriptor, a.descriptor(), estimator);
-      vmap::KeyframeSelector sel(std::move(descriptor), matcher, std::move(verifier), vmap::InlierRatio{}, so);
-      ex::Progress progress("vmap build", expected);
-      vmap::run_selector(src, sel, {.pipelined = !args->single_thread}, [&](const vmap::FrameResult&) {
-        progress.update(sel.map().frames, std::to_string(sel.map().keys.size()) + " key images");
-      });
-      const double seconds = progress.seconds();
-      progress.done(std::to_string(sel.map().keys.size()) + " key images, " + std::to_string(src.skipped().size()) +
-                    " skipped");
-      if (sel.map().frames == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
-      return report(*args, app, sel.map(), sel, src, sel.map().frames, seconds, out_dir, camera, std::nullopt);
+    vmap::AnySelector sel(stack, so, vmap::camera_name(stack, vmap::OptionNames::command_line()));
+    ex::Progress progress("vmap build", expected);
+    sel.run(src, {.pipelined = !args->single_thread}, [&](const vmap::FrameResult&) {
+      progress.update(sel.map().frames, std::to_string(sel.map().keys.size()) + " key images");
     });
+    const double seconds = progress.seconds();
+    progress.done(std::to_string(sel.map().keys.size()) + " key images, " + std::to_string(src.skipped().size()) +
+                  " skipped");
+    if (sel.map().frames == 0) vmap::detail::fail("'" + a.input + "' gave no frame in the requested range");
+    return report(*args, app, sel.map(), sel, src, sel.map().frames, seconds, out_dir, camera, std::nullopt);
   };
 }
 

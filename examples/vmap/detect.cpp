@@ -112,13 +112,7 @@ int run_detect(const DetectArgs& a, const CLI::App& app) {
   };
   std::vector<std::filesystem::path> files(a.images.begin(), a.images.end());
   std::optional<vmap::FrameSource> source;
-  if (!a.sequence.empty()) {
-    vmap::FrameSourceOptions so;
-    so.on_skip = [](const vmap::SkippedFrame& sk) {
-      std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", sk.index, sk.name.c_str(), sk.reason.c_str());
-    };
-    source.emplace(vmap::FrameSource::open(a.sequence, so));
-  }
+  if (!a.sequence.empty()) source.emplace(vmap::FrameSource::open(a.sequence, ex::reporting_skips()));
   std::size_t next_file = 0;
   auto next = [&]() -> std::optional<Item> {
     if (source) {

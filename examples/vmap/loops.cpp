@@ -18,10 +18,11 @@
 //
 // With --memory M instead of INPUT it prints the loop edges a saved visual memory holds
 // (`vmap build --memory`), evaluated over its key images with --gt / --gt-poses.
-#include "common/lcd_plot.hpp"
-#include "common/lcd_run.hpp"
 #include "common/cli_support.hpp"
+#include "common/lcd_plot.hpp"
 #include "common/memory_cli.hpp"
+#include "common/policies.hpp"
+#include "common/vocabulary_cli.hpp"
 #include "vmap/cli.hpp"
 
 #include <vmap/hooks/class_names.hpp>
@@ -31,6 +32,9 @@
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
 #include <vmap/lcd/evaluation.hpp>
+#include <vmap/runtime/loop_detector.hpp>
+#include <vmap/runtime/loops.hpp>
+#include <vmap/runtime/option_names.hpp>
 
 #include <nlohmann/json.hpp>
 
@@ -56,67 +60,22 @@ struct LoopsArgs {
   std::string detector;
   std::string model;
   std::string names;
-  std::string features_model;
-  std::string rank;  // empty: tree_ranked with labels, bow without
-  vmap::examples::VocabularyChoice vocabulary;
-  std::vector<int> label_order;
+  std::string rank;  // empty: tree_ranked with labels, bow without (vmap::default_candidate_index)
   bool json = false;
   bool verbose = false;
   std::string out;
   std::string memory;  // --memory M: the loop edges of a saved visual memory
   double time_offset = 0.0;
   bool edges = false;  // --memory: every loop edge instead of a summary
-  vmap::examples::LoopRunConfig config;
+  ex::DescriptorChoice descriptor;  // --features, --nfeatures, --features-model, --refine-model
+  vmap::LoopRunOptions options;
 };
 
-/// Runs the cv::dnn detector over every frame once; its detections feed both the eq. 5
-/// sample and the loop detector (the schema needs the sample before the first query).
-vmap::PrecomputedDetections detect_all(const LoopsArgs& a, double& seconds) {
-  auto detector = vmap::make_dnn_detector(vmap::parse_detector_format(a.detector),
-                                          {.model = a.model, .score_threshold = a.config.detector.labels.min_score});
-  auto source = vmap::FrameSource::open(a.input);
-  std::vector<std::vector<vmap::Detection>> per_frame;
-  ex::Progress progress("vmap loops: detector", source.total());
-  while (auto f = source.next()) {
-    per_frame.push_back(detector.detect(f->image));
-    progress.update(per_frame.size());
-  }
-  seconds = progress.seconds();
-  progress.done();
-  return vmap::PrecomputedDetections(per_frame);
-}
-
-vmap::CandidateIndex parse_rank(const std::string& rank) {
-  if (rank == "tree") return vmap::CandidateIndex::tree;
-  if (rank == "tree_ranked") return vmap::CandidateIndex::tree_ranked;
-  if (rank == "bow") return vmap::CandidateIndex::bow;
-  if (rank == "all") return vmap::CandidateIndex::brute_force;
-  ex::usage_error("--rank: unknown '" + rank + "' (choose tree, tree_ranked, bow or all)");
-}
-
-/// The ground truth over a memory's key images: (i, j) when the frames' ground truth
-/// marks (f_i, f_j) and j + window < i (the pairs the memory could find, as
-/// ground_truth_from_poses' window leaves out the near ones).
-template <class Memory>
-vmap::LoopGroundTruth key_ground_truth(const LoopsArgs& a, const Memory& mem) {
-  const auto& keys = mem.map().keys;
-  const std::size_t window = mem.options().loops.window;
-  if (!a.gt_poses.empty()) {
-    std::vector<double> times;
-    for (const auto& k : keys) times.push_back(k.timestamp);
-    const auto poses = vmap::poses_for_frames(vmap::load_camera_poses(a.gt_poses), times, a.gt_poses, 0.05, false);
-    return vmap::ground_truth_from_poses(poses,
-                                         {.max_distance = a.gt_distance, .max_angle_deg = a.gt_angle, .window = window});
-  }
-  const auto frames = vmap::LoopGroundTruth::load(a.gt);
-  for (const auto& k : keys)
-    if (k.frame_index >= frames.frames())
-      vmap::detail::fail("--gt: '" + a.gt + "' covers " + std::to_string(frames.frames()) + " frames, the memory has frame " +
-                         std::to_string(k.frame_index) + " (" + k.name + ")");
-  vmap::LoopGroundTruth gt(keys.size());
-  for (std::size_t i = 0; i < keys.size(); ++i)
-    for (std::size_t j = 0; j + window < i; ++j) gt.set(i, j, frames(keys[i].frame_index, keys[j].frame_index));
-  return gt;
+/// The names of `vmap loops`'s options in the library's messages: the descriptor's model
+/// is --features-model (--model is the detector's), and labels come from either source.
+vmap::OptionNames option_names() {
+  return vmap::OptionNames::command_line(
+      {{"model", "--features-model"}, {"labels", "--labels FILE or --detector NAME --model PATH"}});
 }
 
 /// `vmap loops --memory M [--gt MATRIX | --gt-poses POSES] [--json]`.
@@ -152,7 +111,12 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
     }
     // Each key image proposes its most confident edge, as each query frame proposes its
     // best candidate in the frame-level evaluation (lcd/evaluation.hpp).
-    const auto gt = key_ground_truth(a, mem);
+    const auto& keys = mem.map().keys;
+    const std::size_t window = mem.options().loops.window;
+    const auto gt = a.gt_poses.empty()
+                        ? vmap::key_image_ground_truth(vmap::LoopGroundTruth::load(a.gt), keys, window, "--gt: '" + a.gt + "'")
+                        : vmap::key_image_ground_truth(
+                              a.gt_poses, keys, {.max_distance = a.gt_distance, .max_angle_deg = a.gt_angle, .window = window});
     std::vector<vmap::LoopScore> scores(mem.key_images());
     for (std::size_t k = 0; k < scores.size(); ++k) scores[k].query = k;
     std::size_t true_edges = 0;
@@ -190,34 +154,30 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
 }
 
 int run(LoopsArgs& a, const CLI::App& app) {
-  auto& c = a.config;
-  c.input = a.input;
-  c.label_order = a.label_order;
+  auto& o = a.options;
+  const vmap::OptionNames cli = option_names();
   ex::current_inputs() = {a.input};
   const bool have_labels = !a.labels.empty() || !a.detector.empty();
-  if (a.rank.empty()) a.rank = have_labels ? "tree_ranked" : "bow";
-  c.detector.index = parse_rank(a.rank);
+  o.detector.index = a.rank.empty() ? vmap::default_candidate_index(have_labels, true)
+                                    : *vmap::from_string<vmap::CandidateIndex>(a.rank);
+  const std::string rank(vmap::to_string(o.detector.index));
   if (!a.gt.empty() && !a.gt_poses.empty()) ex::usage_error("give at most one of --gt MATRIX and --gt-poses POSES");
   if (!a.labels.empty() && !a.detector.empty()) ex::usage_error("give --labels or --detector, not both");
-  const bool uses_tree =
-      c.detector.index == vmap::CandidateIndex::tree || c.detector.index == vmap::CandidateIndex::tree_ranked;
-  if (!have_labels && uses_tree)
-    ex::usage_error("--rank " + a.rank +
-                    " needs labels: give --labels FILE or --detector NAME --model PATH (or --rank bow / all, which "
-                    "need none)");
+  ex::as_usage([&] { vmap::check_candidate_source(o.detector.index, have_labels, true, cli); });
+  const bool uses_tree = vmap::uses_labels(o.detector.index);
   if (!a.detector.empty() && a.model.empty()) ex::usage_error("--detector " + a.detector + " needs --model PATH");
   if (a.detector.empty() && !a.model.empty())
     ex::usage_error("--model is the detector's model: give --detector yolox|nanodet|fastestdet (the descriptor's "
                     "model is --features-model)");
-  c.descriptor.model = a.features_model;
-  if (a.vocabulary.file.empty()) a.vocabulary.check_usage();
+  o.stack = ex::stack_of(a.descriptor, "magsac", std::nullopt, cli);
+  ex::as_usage([&] { o.validate(cli); });
   // Every input, and every output checked against them, before any frame is read.
   std::vector<std::filesystem::path> inputs{a.input};
   for (const auto& [file, option] : {std::pair{a.gt, "--gt"}, std::pair{a.gt_poses, "--gt-poses"},
                                      std::pair{a.model, "--model"}, std::pair{a.names, "--names"},
-                                     std::pair{a.features_model, "--features-model"},
-                                     std::pair{c.descriptor.refine_model, "--refine-model"},
-                                     std::pair{a.vocabulary.file.string(), "--vocabulary"}})
+                                     std::pair{a.descriptor.model, "--features-model"},
+                                     std::pair{a.descriptor.refine_model, "--refine-model"},
+                                     std::pair{o.vocabulary.file.string(), "--vocabulary"}})
     if (!file.empty()) {
       ex::check_input_file(file, option);
       inputs.push_back(file);
@@ -237,71 +197,77 @@ int run(LoopsArgs& a, const CLI::App& app) {
   std::optional<vmap::LoopGroundTruth> gt;
   std::vector<vmap::CameraPose> frame_poses;  // with --gt-poses: one per frame, for loops.g2o
   if (!a.gt_poses.empty()) {
-    // One pose per frame: by order when the counts agree, else the nearest in time
-    // (TUM's 100 Hz groundtruth.txt against rgb.txt at 30 Hz). 50 ms rather than
-    // associate.py's 20 ms: fr1's ground truth has gaps of up to 49 ms (tum_fr1_rpy).
-    frame_poses = vmap::poses_for_frames(vmap::load_camera_poses(a.gt_poses), sequence.timestamps(), a.gt_poses, 0.05);
+    frame_poses = vmap::frame_poses(a.gt_poses, sequence.timestamps());
     gt = vmap::ground_truth_from_poses(
-        frame_poses, {.max_distance = a.gt_distance, .max_angle_deg = a.gt_angle, .window = c.detector.window});
+        frame_poses, {.max_distance = a.gt_distance, .max_angle_deg = a.gt_angle, .window = o.detector.window});
   } else if (!a.gt.empty()) {
     gt = vmap::LoopGroundTruth::load(a.gt, total);
   }
+  o.every_frame = gt.has_value();
 
-  vmap::PrecomputedDetections labels;
+  std::optional<vmap::PrecomputedDetections> labels;
   double detect_seconds = 0.0;
   if (!a.labels.empty()) {
-    labels = vmap::examples::load_labels({a.labels.begin(), a.labels.end()});
+    labels = vmap::load_labels({a.labels.begin(), a.labels.end()});
   } else if (!a.detector.empty()) {
-    labels = detect_all(a, detect_seconds);
+    auto detector = vmap::make_dnn_detector(vmap::parse_detector_format(a.detector),
+                                            {.model = a.model, .score_threshold = o.detector.labels.min_score});
+    auto source = vmap::FrameSource::open(a.input);
+    ex::Progress progress("vmap loops: detector", source.total());
+    labels = vmap::detect_labels(source, detector, [&](std::size_t done, std::size_t) { progress.update(done); });
+    detect_seconds = progress.seconds();
+    progress.done();
   }
   auto label_name = [&](int label) {
     return names.empty() ? std::to_string(label) : vmap::class_name(names, label);
   };
 
-  // A vocabulary file is read before any frame, so a bad one fails at once.
-  std::shared_ptr<const vmap::AnyVocabulary> vocabulary;
-  std::string vocabulary_note;
-  double vocabulary_s = 0.0;  // loading or learning it
-  if (vmap::ranks(c.detector.index) && !a.vocabulary.file.empty()) {
-    const auto t0 = std::chrono::steady_clock::now();
-    vocabulary = std::make_shared<const vmap::AnyVocabulary>(vmap::AnyVocabulary::load(a.vocabulary.file));
-    vocabulary_s = vmap::examples::seconds_since(t0);
-    vocabulary_note = "vocabulary " + a.vocabulary.file.string();
-  }
+  // Progress on stderr, one meter per stage; the skipped frames are listed as they come.
   std::optional<ex::Progress> extracting;
   extracting.emplace("vmap loops: features", total);
-  const auto features = vmap::examples::extract_features(
-      a.input, c.descriptor, [&](std::size_t done, std::size_t) { extracting->update(done); }, a.time_offset);
-  extracting->done(std::to_string(features.skipped) + " skipped");
-  if (features.skipped > 0 && (gt || have_labels))
-    vmap::detail::fail(std::to_string(features.skipped) + " frame(s) of '" + a.input +
-                       "' could not be read (listed above); the ground truth and the labels are per frame, so the "
-                       "evaluation would be shifted");
-  if (vmap::ranks(c.detector.index)) {
-    if (!vocabulary) {
+  std::optional<ex::Progress> looping;
+  std::size_t frames_read = 0, skipped = 0;
+  const auto end_extraction = [&] {
+    if (extracting) extracting->done(std::to_string(skipped) + " skipped");
+    extracting.reset();
+  };
+  vmap::LoopRunCallbacks callbacks;
+  callbacks.progress = [&](vmap::LoopStage stage, std::size_t done, std::size_t n) {
+    if (stage == vmap::LoopStage::features) {
+      frames_read = done;
+      extracting->update(done);
+    } else if (stage == vmap::LoopStage::vocabulary && done == 0) {
+      end_extraction();
       std::fprintf(stderr, "no --vocabulary: learning one on the sequence itself (%zu frames, branching %d, depth %d)\n",
-                   features.frames.size(), a.vocabulary.branching(), a.vocabulary.depth);
-      const auto t0 = std::chrono::steady_clock::now();
-      vocabulary = std::make_shared<const vmap::AnyVocabulary>(vmap::examples::learn_vocabulary(features.frames, a.vocabulary));
-      vocabulary_s = vmap::examples::seconds_since(t0);
-      vocabulary_note = "vocabulary learned on the sequence itself";
+                   frames_read, o.vocabulary.learning.branching(), o.vocabulary.learning.depth);
+    } else if (stage == vmap::LoopStage::loops) {
+      end_extraction();
+      if (!looping) looping.emplace("vmap loops", n);
+      looping->update(done);
     }
+  };
+  if (a.verbose)
+    callbacks.on_result = [](const vmap::LoopResult& r) {
+      std::fprintf(stderr, "frame %3zu  candidates %3zu  verified %3zu  best %4s  inliers %4d  confidence %.2f  %s (%s)\n",
+                   r.frame, r.candidates, r.verifications, r.best ? std::to_string(*r.best).c_str() : "-",
+                   r.evidence.inliers, r.confidence, std::string(vmap::to_string(r.status)).c_str(), r.reason.c_str());
+    };
+  vmap::FrameSourceOptions frame_options = ex::reporting_skips({.time_offset = a.time_offset});
+  frame_options.on_skip = [&, report = frame_options.on_skip](const vmap::SkippedFrame& sk) {
+    ++skipped;
+    report(sk);
+  };
+  const vmap::LoopRun result = vmap::detect_loops(a.input, o, labels ? &*labels : nullptr, callbacks, frame_options);
+  end_extraction();
+  if (looping) looping->done();
+  std::string vocabulary_note;
+  if (result.vocabulary) {
     char buf[120];
-    std::snprintf(buf, sizeof buf, " (%zu words, %.2f s)", vocabulary->size(), vocabulary_s);
-    vocabulary_note += buf;
+    std::snprintf(buf, sizeof buf, " (%zu words, %.2f s)", result.vocabulary->size(), result.vocabulary_seconds);
+    vocabulary_note = (result.vocabulary_learned ? std::string("vocabulary learned on the sequence itself")
+                                                 : "vocabulary " + o.vocabulary.file.string()) +
+                      buf;
   }
-
-  ex::Progress progress("vmap loops", features.frames.size());
-  std::size_t done = 0;
-  vmap::examples::LoopRun result =
-      vmap::examples::run_loops(c, features, labels, vocabulary, [&](const vmap::LoopResult& r) {
-        progress.update(++done);
-        if (!a.verbose) return;
-        std::fprintf(stderr, "frame %3zu  candidates %3zu  verified %3zu  best %4s  inliers %4d  confidence %.2f  %s (%s)\n",
-                     r.frame, r.candidates, r.verifications, r.best ? std::to_string(*r.best).c_str() : "-",
-                     r.evidence.inliers, r.confidence, std::string(vmap::to_string(r.status)).c_str(), r.reason.c_str());
-      });
-  progress.done();
   const std::size_t frames = result.results.size();
   const double fps = result.seconds > 0 ? static_cast<double>(frames) / result.seconds : 0.0;
 
@@ -309,29 +275,26 @@ int run(LoopsArgs& a, const CLI::App& app) {
   std::vector<vmap::LoopPair> pairs;
   std::string g2o_edges;
   std::vector<bool> g2o_vertex(frame_poses.size(), false);
-  for (const auto& r : result.results)
-    if (r.loop()) {
-      const std::size_t q = r.frame, m = *r.best;
-      pairs.push_back({q, m, vmap::nanoseconds_from_seconds(features.times[q]), vmap::nanoseconds_from_seconds(features.times[m]),
-                       features.names[q], features.names[m], r.evidence.inliers});
-      if (q < frame_poses.size() && m < frame_poses.size()) {
-        g2o_edges += vmap::g2o_edge_line(q, m, frame_poses[q], frame_poses[m]);
-        g2o_vertex[q] = g2o_vertex[m] = true;
-      }
-      loops.push_back({{"query", q},
-                       {"match", m},
-                       {"query_name", features.names[q]},
-                       {"match_name", features.names[m]},
-                       {"query_time", features.times[q]},
-                       {"match_time", features.times[m]},
-                       {"confidence", r.confidence},
-                       {"inliers", r.evidence.inliers},
-                       {"matches", r.evidence.matches},
-                       {"inlier_ratio", r.evidence.inlier_ratio},
-                       {"significance", r.evidence.significance},
-                       {"spread", r.evidence.spread},
-                       {"bow_score", r.evidence.bow_score}});
+  for (const vmap::DetectedLoop& l : result.loops) {
+    pairs.push_back(l.pair());
+    if (l.query < frame_poses.size() && l.match < frame_poses.size()) {
+      g2o_edges += vmap::g2o_edge_line(l.query, l.match, frame_poses[l.query], frame_poses[l.match]);
+      g2o_vertex[l.query] = g2o_vertex[l.match] = true;
     }
+    loops.push_back({{"query", l.query},
+                     {"match", l.match},
+                     {"query_name", l.query_name},
+                     {"match_name", l.match_name},
+                     {"query_time", l.query_time},
+                     {"match_time", l.match_time},
+                     {"confidence", l.confidence},
+                     {"inliers", l.evidence.inliers},
+                     {"matches", l.evidence.matches},
+                     {"inlier_ratio", l.evidence.inlier_ratio},
+                     {"significance", l.evidence.significance},
+                     {"spread", l.evidence.spread},
+                     {"bow_score", l.evidence.bow_score}});
+  }
   const bool stationary = result.stationary;
 
   // --out: the loops as a timestamp-pair list, and with --gt-poses as g2o edges between
@@ -355,12 +318,12 @@ int run(LoopsArgs& a, const CLI::App& app) {
                           {"input", ex::path_string(a.input)},
                           {"options", ex::options_json(app)},
                           {"frames", frames},
-                          {"skipped_frames", features.skipped},
-                          {"rank", a.rank},
+                          {"skipped_frames", result.skipped},
+                          {"rank", rank},
                           {"verifications", result.verifications},
                           {"seconds", result.seconds},
                           {"fps", fps},
-                          {"min_confidence", c.detector.decision.min_confidence},
+                          {"min_confidence", o.detector.decision.min_confidence},
                           {"stationary", stationary},
                           {"out", a.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(a.out))},
                           {"files", written},
@@ -369,24 +332,22 @@ int run(LoopsArgs& a, const CLI::App& app) {
       return 0;
     }
     std::printf("frames %zu (%zu skipped), candidates %s%s%s; %zu verifications (%.1f per frame), %.2f s (%.1f frames/s)\n",
-                frames, features.skipped, a.rank.c_str(), vocabulary_note.empty() ? "" : ", ", vocabulary_note.c_str(),
+                frames, result.skipped, rank.c_str(), vocabulary_note.empty() ? "" : ", ", vocabulary_note.c_str(),
                 result.verifications,
                 static_cast<double>(result.verifications) / static_cast<double>(std::max<std::size_t>(1, frames)),
                 result.seconds, fps);
     if (stationary) std::printf("the camera never left its place: no frame is a revisit\n");
-    std::printf("%zu loops (confidence >= %.2f):\n", loops.size(), c.detector.decision.min_confidence);
-    for (const auto& l : loops)
-      std::printf("  frame %4zu (%s) -> frame %4zu (%s)  confidence %.2f  inliers %4d of %4d  bow score %.3f\n",
-                  l["query"].get<std::size_t>(), l["query_name"].get<std::string>().c_str(),
-                  l["match"].get<std::size_t>(), l["match_name"].get<std::string>().c_str(),
-                  l["confidence"].get<double>(), l["inliers"].get<int>(), l["matches"].get<int>(),
-                  l["bow_score"].get<double>());
+    std::printf("%zu loops (confidence >= %.2f):\n", loops.size(), o.detector.decision.min_confidence);
+    for (const vmap::DetectedLoop& l : result.loops)
+      std::printf("  frame %4zu (%s) -> frame %4zu (%s)  confidence %.2f  inliers %4d of %4d  bow score %.3f\n", l.query,
+                  l.query_name.c_str(), l.match, l.match_name.c_str(), l.confidence, l.evidence.inliers,
+                  l.evidence.matches, l.evidence.bow_score);
     if (!written.empty()) std::printf("wrote %s\n", ex::written_files(a.out, written).c_str());
     return 0;
   }
 
-  const auto s = vmap::examples::summarize(result, *gt, c.detector.decision.min_confidence);
-  const auto agree = result.agreement(*gt, c.detector.window);
+  const vmap::LoopEvaluation s = vmap::evaluate_loop_run(result, *gt, o.detector.decision.min_confidence);
+  const auto agree = result.agreement(*gt, o.detector.window);
 
   if (out_dir) {
     std::string csv = "threshold,true_positives,false_positives,precision,recall\n";
@@ -400,10 +361,10 @@ int run(LoopsArgs& a, const CLI::App& app) {
     const std::filesystem::path p = std::filesystem::path(a.input).lexically_normal();
     char title[200];
     std::snprintf(title, sizeof title, "%s, %s: recall@100%%P %.3f, %zu verifications",
-                  (p.parent_path().filename() / p.filename()).string().c_str(), a.rank.c_str(),
+                  (p.parent_path().filename() / p.filename()).string().c_str(), rank.c_str(),
                   s.at_full_precision.recall, s.verifications);
     vmap::write_image_atomically(out_dir->operator/("pr.png"),
-                                 vmap::examples::draw_pr_curves({{s.curve, "vmap " + a.rank}}, title));
+                                 vmap::examples::draw_pr_curves({{s.curve, "vmap " + rank}}, title));
     out_dir->commit();
     written.push_back("pr.csv");
     written.push_back("pr.png");
@@ -416,19 +377,19 @@ int run(LoopsArgs& a, const CLI::App& app) {
                         {"input", ex::path_string(a.input)},
                         {"options", ex::options_json(app)},
                         {"frames", s.frames},
-                        {"skipped_frames", features.skipped},
-                        {"loops_gt", s.loops_gt},
-                        {"true_positives", s.at_decision.true_positives},
-                        {"false_positives", s.at_decision.false_positives},
-                        {"precision", ex::finite_or_null(s.at_decision.precision)},
-                        {"recall", ex::finite_or_null(s.at_decision.recall)},
+                        {"skipped_frames", result.skipped},
+                        {"loops_gt", s.positives},
+                        {"true_positives", s.at_threshold.true_positives},
+                        {"false_positives", s.at_threshold.false_positives},
+                        {"precision", ex::finite_or_null(s.at_threshold.precision)},
+                        {"recall", ex::finite_or_null(s.at_threshold.recall)},
                         {"recall_at_100_precision", ex::finite_or_null(s.at_full_precision.recall)},
                         {"verifications", s.verifications},
                         {"seconds", result.seconds},
                         {"fps", fps},
-                        {"rank", a.rank},
-                        {"top_k", c.detector.top_k},
-                        {"min_confidence", c.detector.decision.min_confidence},
+                        {"rank", rank},
+                        {"top_k", o.detector.top_k},
+                        {"min_confidence", o.detector.decision.min_confidence},
                         {"stationary", stationary},
                         {"threshold_at_100_precision", s.at_full_precision.true_positives > 0
                                                            ? nlohmann::json(s.at_full_precision.threshold)
@@ -446,32 +407,32 @@ int run(LoopsArgs& a, const CLI::App& app) {
     ex::print_json(j);
     return 0;
   }
-  std::printf("frames %zu, query frames with a ground-truth loop %zu\n", s.frames, s.loops_gt);
+  std::printf("frames %zu, query frames with a ground-truth loop %zu\n", s.frames, s.positives);
   if (uses_tree) {
     std::printf("labels (score >= %.2f, eq. 5 influence in [%.2f, %.2f]), large to small:\n",
-                static_cast<double>(c.detector.labels.min_score), c.influence.min_influence, c.influence.max_influence);
+                static_cast<double>(o.detector.labels.min_score), o.influence.min_influence, o.influence.max_influence);
     for (const auto& l : result.influence)
       std::printf("  %-14s  E = %.3f  mean area %8.0f px^2  %s\n", label_name(l.label).c_str(), l.influence,
                   l.mean_area, l.kept ? "kept" : "dropped");
-    std::printf("tree depth %zu, window %zu, m = %zu\n", result.schema.size(), c.detector.window,
-                c.detector.min_candidates);
+    std::printf("tree depth %zu, window %zu, m = %zu\n", result.schema.size(), o.detector.window,
+                o.detector.min_candidates);
     std::printf("label vectors: %zu distinct; %zu of %zu pairs have equal vectors (the tree verifies at least these, "
                 "<= %.1fx fewer than brute force); %zu of %zu query frames with a loop have a true loop frame of "
                 "their own vector\n",
                 agree.distinct_vectors, agree.leaf_pairs, agree.pairs, agree.max_reduction(), agree.reachable_queries,
                 agree.loop_queries);
   }
-  if (!vocabulary_note.empty()) std::printf("%s, top k %zu\n", vocabulary_note.c_str(), c.detector.top_k);
-  std::printf("candidates %s: %zu verifications (%.1f per frame), %.2f s (%.1f frames/s)%s\n", a.rank.c_str(),
+  if (!vocabulary_note.empty()) std::printf("%s, top k %zu\n", vocabulary_note.c_str(), o.detector.top_k);
+  std::printf("candidates %s: %zu verifications (%.1f per frame), %.2f s (%.1f frames/s)%s\n", rank.c_str(),
               s.verifications,
               static_cast<double>(s.verifications) / static_cast<double>(std::max<std::size_t>(1, frames)),
               result.seconds, result.seconds > 0 ? static_cast<double>(frames) / result.seconds : 0.0,
               detect_seconds > 0 ? "" : " (detections precomputed)");
   if (detect_seconds > 0) std::printf("detector: %.2f s\n", detect_seconds);
   if (stationary) std::printf("the camera never left its place: no frame is a revisit\n");
-  std::printf("at confidence >= %.2f: TP %zu, FP %zu, precision %.3f, recall %.3f\n", c.detector.decision.min_confidence,
-              s.at_decision.true_positives, s.at_decision.false_positives, s.at_decision.precision,
-              s.at_decision.recall);
+  std::printf("at confidence >= %.2f: TP %zu, FP %zu, precision %.3f, recall %.3f\n", o.detector.decision.min_confidence,
+              s.at_threshold.true_positives, s.at_threshold.false_positives, s.at_threshold.precision,
+              s.at_threshold.recall);
   if (!written.empty()) std::printf("wrote %s\n", ex::written_files(a.out, written).c_str());
   if (s.at_full_precision.true_positives > 0)
     std::printf("recall@100%%P %.3f (at confidence >= %.3f)\n", s.at_full_precision.recall, s.at_full_precision.threshold);
@@ -482,7 +443,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
 
 std::function<int()> setup(CLI::App& app) {
   auto a = std::make_shared<LoopsArgs>();
-  auto& d = a->config.detector;
+  auto& d = a->options.detector;
   app.add_option("input", a->input, "Frames: image folder, list file, video or TUM rgb.txt (or --memory M)");
   app.add_option("--gt", a->gt, "Ground-truth loop matrix (rows of 0/1, row = query frame)");
   app.add_option("--gt-poses", a->gt_poses, "Derive the ground truth from poses (TUM, KITTI or EuRoC data.csv; one a frame, or associated to the frames' times within 50 ms)");
@@ -504,7 +465,7 @@ std::function<int()> setup(CLI::App& app) {
                  "Candidates: tree (LFM-LCD), tree_ranked (the tree's leaf ranked by bag of words, top k verified), "
                  "bow (every older frame ranked, no labels) or all (every frame older than the window). Default: "
                  "tree_ranked with labels, bow without")
-      ->check(CLI::IsMember({"tree", "tree_ranked", "bow", "all"}));
+      ->check(CLI::IsMember({"tree", "tree_ranked", "bow", "all", "brute_force"}));
   app.add_option("--top-k", d.top_k, "tree_ranked / bow: verify this many best-ranked candidates")
       ->check(ex::count_in(1, 1000000));
   app.add_option("--min-bow-score", d.min_bow_score, "tree_ranked / bow: do not verify candidates scoring below this")
@@ -512,9 +473,9 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--temporal", d.temporal_consistency,
                  "Accept a loop only when this many previous frames matched a nearby place (0: off)")
       ->check(ex::count_in(0, 1000));
-  app.add_option("--vocabulary", a->vocabulary.file,
+  app.add_option("--vocabulary", a->options.vocabulary.file,
                  "tree_ranked / bow: a vocabulary from `vmap vocabulary` (default: learn one on the sequence)");
-  ex::add_vocabulary_options(app, a->vocabulary, "Vocabulary learned here: ");
+  ex::add_vocabulary_options(app, a->options.vocabulary.learning, "Vocabulary learned here: ");
   app.add_option("--window", d.window, "Frames this recent are never candidates")->check(ex::count_in(0, 1000000));
   app.add_option("--left-ratio", d.left_ratio,
                  "Revisit rule: a candidate's place was left when a frame in between scored below this fraction of "
@@ -528,21 +489,21 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--min-inliers", d.decision.min_inliers, "Below this many inliers a candidate is not weighed")
       ->check(ex::count_in(0, 1000000));
   app.add_option("--score", d.labels.min_score, "Detections below this score are ignored")->check(ex::real_in(0.0, 1.0));
-  app.add_option("--min-influence", a->config.influence.min_influence, "Drop labels present in fewer frames (eq. 5)")
+  app.add_option("--min-influence", a->options.influence.min_influence, "Drop labels present in fewer frames (eq. 5)")
       ->check(ex::real_in(0.0, 1.0));
-  app.add_option("--max-influence", a->config.influence.max_influence, "Drop labels present in more frames (eq. 5)")
+  app.add_option("--max-influence", a->options.influence.max_influence, "Drop labels present in more frames (eq. 5)")
       ->check(ex::real_in(0.0, 1.0));
-  app.add_option("--label-order", a->label_order, "Label ids from large to small objects (default: by mean box area)")
+  app.add_option("--label-order", a->options.label_order, "Label ids from large to small objects (default: by mean box area)")
       ->delimiter(',');
-  app.add_option("--sample", a->config.sample, "Frames whose labels form the eq. 5 sample (0: all)")
+  app.add_option("--sample", a->options.sample, "Frames whose labels form the eq. 5 sample (0: all)")
       ->check(ex::count_in(0, ex::max_frame_index));
-  app.add_option("--features", a->config.descriptor.name,
+  app.add_option("--features", a->descriptor.name,
                  "orb, akaze, sift, xfeat, xfeat-dense or xfeat-star (the last three need --features-model; xfeat-star "
                  "also --refine-model)");
-  app.add_option("--features-model", a->features_model, "Model file of a learned descriptor (xfeat, xfeat-dense, xfeat-star)");
-  app.add_option("--refine-model", a->config.descriptor.refine_model,
+  app.add_option("--features-model", a->descriptor.model, "Model file of a learned descriptor (xfeat, xfeat-dense, xfeat-star)");
+  app.add_option("--refine-model", a->descriptor.refine_model,
                  "xfeat-star: XFeat*'s refinement network (xfeat_fine.onnx), run once per verified pair");
-  app.add_option("--nfeatures", a->config.descriptor.features,
+  app.add_option("--nfeatures", a->descriptor.features,
                  "Keypoint budget per image (ORB, SIFT; top-k for XFeat), at most " + std::to_string(ex::max_nfeatures))
       ->check(ex::count_in(1, ex::max_nfeatures));
   app.add_option("--out", a->out,

@@ -6,23 +6,19 @@
 #include "common/policies.hpp"
 #include "vmap/cli.hpp"
 
-#include <vmap/geometry/calibrated.hpp>
-#include <vmap/geometry/fundamental.hpp>
-#include <vmap/io/calibration.hpp>
-#include <vmap/geometry/similarity.hpp>
 #include <vmap/io/atomic_file.hpp>
-#include <vmap/matching/brute_force.hpp>
+#include <vmap/io/image.hpp>
+#include <vmap/runtime/option_names.hpp>
+#include <vmap/runtime/pair.hpp>
+#include <vmap/runtime/stack_choice.hpp>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
-#include <optional>
 #include <string>
-#include <system_error>
 #include <vector>
 
 namespace {
@@ -40,75 +36,60 @@ struct MatchArgs {
 };
 
 int run(const MatchArgs& args, const CLI::App& app) {
-  using clock = std::chrono::steady_clock;
   ex::current_inputs() = {args.image_a, args.image_b};
   const auto camera = ex::load_camera_option(args.camera);
+  const vmap::PolicyStack stack = ex::stack_of(args.descriptor, args.estimator, camera);
   if (!args.out.empty()) ex::prepare_output_dir(args.out, "--out", {args.image_a, args.image_b}, {"matches.png"});
   const cv::Mat a_img = vmap::read_image(args.image_a);
   const cv::Mat b_img = vmap::read_image(args.image_b);
-  const vmap::Calibrated<vmap::FundamentalEstimator> estimator(
-      camera ? std::optional<vmap::Camera>(camera->camera) : std::nullopt,
-      vmap::FundamentalEstimator({.method = vmap::examples::parse_method(args.estimator), .threshold_px = args.epipolar_px}));
-  return vmap::examples::with_descriptor(args.descriptor, [&](auto descriptor) {
-    const auto matcher = ex::matcher_for(descriptor);
-    const auto verifier = ex::estimator_for(descriptor, args.descriptor, estimator);
-    const auto t0 = clock::now();
-    const vmap::Features a = descriptor.extract(a_img);
-    const vmap::Features b = descriptor.extract(b_img);
-    const auto t1 = clock::now();
-    const vmap::Matches m = matcher.match(a, b);
-    const auto t2 = clock::now();
-    const vmap::Verification v = verifier.verify(a, b, m);
-    const auto t3 = clock::now();
-    const double s = vmap::InlierRatio{}(a, b, v);
-    auto ms = [](auto d) { return std::chrono::duration<double, std::milli>(d).count(); };
-    auto sec = [](auto d) { return std::chrono::duration<double>(d).count(); };
-    std::vector<std::string> written;
-    if (!args.out.empty()) {
-      char caption[200];
-      std::snprintf(caption, sizeof caption, "%zu | %zu features, %zu matches, %d inliers, S = %.3f", a.size(), b.size(),
-                    m.size(), v.inliers, s);
-      vmap::write_image_atomically(std::filesystem::path(args.out) / "matches.png",
-                                   ex::captioned(ex::draw_verified_matches(a_img, a, b_img, b, m, v), caption));
-      written.push_back("matches.png");
-    }
-    if (args.json) {
-      nlohmann::json j = {{"command", "match"},
-                          {"inputs", {ex::path_string(args.image_a), ex::path_string(args.image_b)}},
-                          {"options", ex::options_json(app)},
-                          {"features_a", a.size()},
-                          {"features_b", b.size()},
-                          {"matches", m.size()},
-                          {"status", std::string(vmap::to_string(v.status))},
-                          {"inliers", v.inliers},
-                          {"similarity", ex::finite_or_null(s)},
-                          {"degenerate", v.degeneracy != vmap::Degeneracy::none},
-                          {"homography_inliers", v.homography_inliers},
-                          {"seconds", sec(t3 - t0)},
-                          {"extract_seconds", sec(t1 - t0)},
-                          {"match_seconds", sec(t2 - t1)},
-                          {"verify_seconds", sec(t3 - t2)},
-                          {"out", args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(args.out))},
-                          {"files", written}};
-      ex::print_json(j);
-    } else {
-      if (camera) std::printf("camera        %s\n", camera->file.string().c_str());
-      std::printf("features      %zu | %zu (%s)\n", a.size(), b.size(), args.descriptor.name.c_str());
-      std::printf("matches       %zu (mutual nearest neighbours)\n", m.size());
-      std::printf("verification  %s (%s, %.2f px)\n", std::string(vmap::to_string(v.status)).c_str(),
-                  args.estimator.c_str(), args.epipolar_px);
-      std::printf("inliers       %d\n", v.inliers);
-      std::printf("similarity    %.3f  (eq. 5: inliers / max(|D_a|, |D_b|))\n", s);
-      if (v.ok())
-        std::printf("degeneracy    %s (%d of the inliers fit one homography)\n",
-                    std::string(vmap::to_string(v.degeneracy)).c_str(), v.homography_inliers);
-      std::printf("time          extract %.1f ms, match %.1f ms, verify %.1f ms\n", ms(t1 - t0), ms(t2 - t1),
-                  ms(t3 - t2));
-    }
-    if (!args.out.empty() && !args.json)
-      std::printf("wrote         %s/matches.png (inliers green, outliers blue)\n", args.out.c_str());
-    return 0;
-  });
+  const vmap::PairCheck c = vmap::check_pair(stack, a_img, b_img, {.epipolar_px = args.epipolar_px},
+                                             vmap::camera_name(stack, vmap::OptionNames::command_line()));
+  const vmap::Verification& v = c.verification;
+  std::vector<std::string> written;
+  if (!args.out.empty()) {
+    char caption[200];
+    std::snprintf(caption, sizeof caption, "%zu | %zu features, %zu matches, %d inliers, S = %.3f", c.a.size(),
+                  c.b.size(), c.matches.size(), v.inliers, c.similarity);
+    vmap::write_image_atomically(std::filesystem::path(args.out) / "matches.png",
+                                 ex::captioned(ex::draw_verified_matches(a_img, c.a, b_img, c.b, c.matches, v), caption));
+    written.push_back("matches.png");
+  }
+  if (args.json) {
+    nlohmann::json j = {{"command", "match"},
+                        {"inputs", {ex::path_string(args.image_a), ex::path_string(args.image_b)}},
+                        {"options", ex::options_json(app)},
+                        {"features_a", c.a.size()},
+                        {"features_b", c.b.size()},
+                        {"matches", c.matches.size()},
+                        {"status", std::string(vmap::to_string(v.status))},
+                        {"inliers", v.inliers},
+                        {"similarity", ex::finite_or_null(c.similarity)},
+                        {"degenerate", v.degeneracy != vmap::Degeneracy::none},
+                        {"homography_inliers", v.homography_inliers},
+                        {"seconds", c.seconds()},
+                        {"extract_seconds", c.extract_seconds},
+                        {"match_seconds", c.match_seconds},
+                        {"verify_seconds", c.verify_seconds},
+                        {"out", args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(ex::path_string(args.out))},
+                        {"files", written}};
+    ex::print_json(j);
+  } else {
+    if (camera) std::printf("camera        %s\n", camera->file.string().c_str());
+    std::printf("features      %zu | %zu (%s)\n", c.a.size(), c.b.size(), args.descriptor.name.c_str());
+    std::printf("matches       %zu (mutual nearest neighbours)\n", c.matches.size());
+    std::printf("verification  %s (%s, %.2f px)\n", std::string(vmap::to_string(v.status)).c_str(),
+                args.estimator.c_str(), args.epipolar_px);
+    std::printf("inliers       %d\n", v.inliers);
+    std::printf("similarity    %.3f  (eq. 5: inliers / max(|D_a|, |D_b|))\n", c.similarity);
+    if (v.ok())
+      std::printf("degeneracy    %s (%d of the inliers fit one homography)\n",
+                  std::string(vmap::to_string(v.degeneracy)).c_str(), v.homography_inliers);
+    std::printf("time          extract %.1f ms, match %.1f ms, verify %.1f ms\n", 1e3 * c.extract_seconds,
+                1e3 * c.match_seconds, 1e3 * c.verify_seconds);
+  }
+  if (!args.out.empty() && !args.json)
+    std::printf("wrote         %s/matches.png (inliers green, outliers blue)\n", args.out.c_str());
+  return 0;
 }
 
 const bool registered = vmap::cli::add_command(

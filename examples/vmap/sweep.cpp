@@ -3,13 +3,14 @@
 // consecutive key images, and the quality (eq. 7); the best-quality row is marked.
 #include "common/cli_support.hpp"
 #include "common/keyframe_cli.hpp"
-#include "common/policies.hpp"
 #include "vmap/cli.hpp"
 
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/keyframe/sweep.hpp>
-#include <vmap/matching/brute_force.hpp>
+#include <vmap/runtime/option_names.hpp>
+#include <vmap/runtime/selector.hpp>
+#include <vmap/runtime/stack_choice.hpp>
 
 #include <nlohmann/json.hpp>
 
@@ -57,18 +58,14 @@ std::function<int()> setup(CLI::App& app) {
     const auto camera = ex::load_camera_option(a.camera);
     if (!a.out.empty()) ex::prepare_output_dir(a.out, "--out", {a.input}, {"sweep.csv"});
     auto src = vmap::FrameSource::open(a.input, ex::source_options(a, true));
-    const auto estimator = ex::make_estimator(a.estimator, camera);
+    const vmap::PolicyStack stack = a.stack(camera);
     ex::Progress progress("vmap sweep", src.total());
     const vmap::SweepOptions so{.taus = args->thresholds,
                                 .rule = ex::parse_rule(a.rule),
                                 .pipelined = !args->single_thread,
                                 .on_frame = [&progress](std::size_t done) { progress.update(done); }};
-    const vmap::SweepResult r = ex::with_descriptor(a.descriptor(), [&](auto descriptor) {
-      const auto matcher = ex::matcher_for(descriptor);
-      auto verifier = ex::estimator_for(descriptor, a.descriptor(), estimator);
-      return vmap::sweep_thresholds(src, std::move(descriptor), matcher, std::move(verifier),
-                                    vmap::InlierRatio{}, so);
-    });
+    const vmap::SweepResult r =
+        vmap::sweep_thresholds(src, stack, so, vmap::camera_name(stack, vmap::OptionNames::command_line()));
     const double seconds = progress.seconds();
     const std::size_t skipped = src.skipped().size();
     progress.done(std::to_string(r.rows.size()) + " thresholds, " + std::to_string(skipped) + " skipped");

@@ -10,12 +10,16 @@
 // Binary descriptors (orb, akaze) give a k-majority tree on Hamming distance, float ones
 // (sift, xfeat) a k-means tree on L2. Progress goes to stderr.
 #include "common/cli_support.hpp"
-#include "common/lcd_run.hpp"
-#include "common/vocabulary_files.hpp"
+#include "common/policies.hpp"
+#include "common/vocabulary_cli.hpp"
 #include "vmap/cli.hpp"
 
-#include <vmap/io/atomic_file.hpp>
 #include <vmap/place/vocabulary.hpp>
+#include <vmap/runtime/loops.hpp>
+#include <vmap/runtime/option_names.hpp>
+#include <vmap/runtime/vocabulary.hpp>
+
+#include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
@@ -26,49 +30,54 @@
 
 namespace {
 
+namespace ex = vmap::examples;
+
 struct VocabularyArgs {
   std::string input;
   std::string out;
   std::string convert_in;
   std::string convert_out;
-  vmap::examples::DescriptorChoice descriptor;
-  vmap::examples::VocabularyChoice vocabulary;
+  ex::DescriptorChoice descriptor;
+  vmap::VocabularyLearning learning;
 };
 
 int convert(const VocabularyArgs& a) {
   const auto t0 = std::chrono::steady_clock::now();
   const vmap::AnyVocabulary v = vmap::AnyVocabulary::load(a.convert_in);
-  const double load_s = vmap::examples::seconds_since(t0);
-  const std::filesystem::path out = a.convert_out;
-  const std::string format = vmap::examples::vocabulary_format_of(out);
-  vmap::write_file_atomically(out, vmap::examples::vocabulary_file_bytes(v, format, a.convert_in));
-  static const char* const weightings[] = {"tf_idf_l1", "tf_idf_l2", "idf_l1", "idf_l2", "fbow"};
+  const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const vmap::VocabularyFileFormat format = vmap::vocabulary_format_of(a.convert_out);
+  vmap::save_vocabulary(v, a.convert_out, format, a.convert_in);
   std::printf("%s: %zu words (branching %d, depth %d, weighting %s), %s, from %s (read in %.3f s)\n", a.convert_out.c_str(),
-              v.size(), v.branching(), v.depth(), weightings[static_cast<int>(v.weighting())],
-              format == "vmap" ? "vmap" : format == "fbow" ? "FBoW binary" : "ORB-SLAM2 text",
+              v.size(), v.branching(), v.depth(), std::string(vmap::to_string(v.weighting())).c_str(),
+              format == vmap::VocabularyFileFormat::vmap   ? "vmap"
+              : format == vmap::VocabularyFileFormat::fbow ? "FBoW binary"
+                                                           : "ORB-SLAM2 text",
               a.convert_in.c_str(), load_s);
   return 0;
 }
 
 int run(const VocabularyArgs& a) {
   if (a.input.empty() || a.out.empty())
-    throw vmap::examples::UsageError("learning needs FRAMES and --out (converting: vmap vocabulary convert INPUT OUTPUT)");
-  a.vocabulary.check_usage();
-  const int branching = a.vocabulary.branching();
-  std::optional<vmap::examples::Progress> progress;
-  const auto features = vmap::examples::extract_features(a.input, a.descriptor, [&](std::size_t done, std::size_t n) {
-    if (!progress) progress.emplace("vmap vocabulary: features", n);
-    progress->update(done);
-  });
+    ex::usage_error("learning needs FRAMES and --out (converting: vmap vocabulary convert INPUT OUTPUT)");
+  ex::as_usage([&] { a.learning.validate(vmap::OptionNames::command_line()); });
+  const vmap::PolicyStack stack = ex::stack_of(a.descriptor, "magsac", std::nullopt);
+  std::optional<ex::Progress> progress;
+  const auto features = vmap::extract_features(
+      a.input, stack,
+      [&](std::size_t done, std::size_t n) {
+        if (!progress) progress.emplace("vmap vocabulary: features", n);
+        progress->update(done);
+      },
+      ex::reporting_skips());
   if (progress) progress->done();
   std::size_t descriptors = 0;
   for (const auto& f : features.frames) descriptors += f.size();
   if (isatty(STDERR_FILENO) != 0)
     std::fprintf(stderr, "learning: %zu descriptors of %zu frames, branching %d, depth %d...\n", descriptors,
-                 features.frames.size(), branching, a.vocabulary.depth);
+                 features.frames.size(), a.learning.branching(), a.learning.depth);
   const auto t0 = std::chrono::steady_clock::now();
-  const vmap::AnyVocabulary v = vmap::examples::learn_vocabulary(features.frames, a.vocabulary);
-  const double learn_s = vmap::examples::seconds_since(t0);
+  const vmap::AnyVocabulary v = vmap::learn_vocabulary(features.frames, a.learning);
+  const double learn_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   v.save(a.out);
   std::printf("%s: %zu words (branching %d, depth %d, %s), learned from %zu frames in %.1f s (features %.1f s)\n",
               a.out.c_str(), v.size(), v.branching(), v.depth(),
@@ -81,14 +90,13 @@ std::function<int()> setup(CLI::App& app) {
   auto a = std::make_shared<VocabularyArgs>();
   app.add_option("FRAMES", a->input, "Frames: image folder, list file, video or TUM rgb.txt");
   app.add_option("--out", a->out, "The vocabulary file to write");
-  vmap::examples::add_vocabulary_options(app, a->vocabulary, "");
-  app.add_option("--seed", a->vocabulary.seed, "Seed of the sample and the clustering")->capture_default_str();
+  ex::add_vocabulary_options(app, a->learning, "");
+  app.add_option("--seed", a->learning.seed, "Seed of the sample and the clustering")->capture_default_str();
   app.add_option("--features", a->descriptor.name, "orb, akaze, sift or xfeat")->capture_default_str();
   app.add_option("--nfeatures", a->descriptor.features,
-                 "Keypoint budget per image (ORB, SIFT; top-k for XFeat), at most " +
-                     std::to_string(vmap::examples::max_nfeatures))
+                 "Keypoint budget per image (ORB, SIFT; top-k for XFeat), at most " + std::to_string(ex::max_nfeatures))
       ->capture_default_str()
-      ->check(vmap::examples::count_in(1, vmap::examples::max_nfeatures));
+      ->check(ex::count_in(1, ex::max_nfeatures));
   app.add_option("--model", a->descriptor.model, "--features xfeat: the XFeat ONNX model");
   auto* c = app.add_subcommand("convert", "Convert a vocabulary file (vmap, ORBvoc.txt, DBoW2 .yml/.yml.gz, FBoW) to vmap's "
                                           "format, or to ORBvoc text (OUTPUT *.txt) or FBoW (OUTPUT *.fbow)");

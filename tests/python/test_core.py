@@ -112,7 +112,7 @@ def test_float_descriptors(sample_frames):
 def test_unknown_descriptor_and_missing_model_raise_vmap_error():
     with pytest.raises(vmap.Error, match="unknown descriptor 'bogus'"):
         vmap.Descriptor("bogus")
-    with pytest.raises(vmap.Error, match="xfeat needs --model"):
+    with pytest.raises(vmap.Error, match="xfeat needs model"):
         vmap.Descriptor("xfeat")
 
 

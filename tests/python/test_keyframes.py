@@ -255,7 +255,7 @@ def test_bad_input_raises_vmap_error(sample_frames, sample_list, tmp_path):
         vmap.KeyframeSelector(estimator="magic")
     with pytest.raises(vmap.Error, match="unknown descriptor 'surf'"):
         vmap.KeyframeSelector("surf")
-    with pytest.raises(vmap.Error, match="needs --model"):
+    with pytest.raises(vmap.Error, match="needs model"):
         vmap.KeyframeSelector("xfeat")
     with pytest.raises(vmap.Error, match="unknown rule"):
         vmap.KeyframeSelector(rule="next")

@@ -105,7 +105,8 @@ class LoopRun:
     @property
     def skipped_frames(self) -> int: ...
     @property
-    def rank(self) -> str: ...
+    def rank(self) -> str:
+        """the candidate source: tree, tree_ranked, bow or all (brute force; rank="brute_force" reads too)"""
     @property
     def min_confidence(self) -> float: ...
     @property
@@ -194,7 +195,8 @@ class LoopDetector:
     @property
     def memory_bytes(self) -> int: ...
     @property
-    def rank(self) -> str: ...
+    def rank(self) -> str:
+        """the candidate source: tree, tree_ranked, bow or all (brute force; rank="brute_force" reads too)"""
     @property
     def features(self) -> str: ...
     @property

@@ -8,6 +8,7 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/core/names.hpp>
 #include <vmap/features/akaze.hpp>
 #include <vmap/features/orb.hpp>
 #include <vmap/features/sift.hpp>
@@ -38,6 +39,12 @@ enum class KeyRule : std::uint8_t {
   previous_frame,  ///< eq. 6: I_{j-1}, the last frame that still passed (the default)
   current_frame,   ///< Algorithm 1 as printed: I_j itself
 };
+
+/// previous (eq. 6), current (Algorithm 1) (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(KeyRule) noexcept {
+  return detail::NameTable<KeyRule, 2>{{{{KeyRule::previous_frame, "previous"}, {KeyRule::current_frame, "current"}}}};
+}
+[[nodiscard]] constexpr std::string_view to_string(KeyRule r) noexcept { return names_of(r).name(r); }
 
 struct SelectorOptions {
   /// tau: a new key image is taken when S(K_i, I_j) < tau; in (0, 1].

@@ -47,9 +47,11 @@ template <Descriptor Desc, Matcher Match, Estimator Estim, PlaceRanking Rank = P
 class LoopDetector {
  public:
   /// `ranker` may be left without a vocabulary for the tree and brute_force sources;
-  /// `model` says which geometric model the estimator fits (the evidence's chance rate).
+  /// `model` says which geometric model the estimator fits (its minimal sample enters the
+  /// evidence's significance); by default the engine's inference from the estimator's
+  /// type (place_model_of), so a detector and an engine given one estimator weigh alike.
   LoopDetector(LabelSchema schema, Desc descriptor, Match matcher, Estim estimator,
-               const LoopDetectorOptions& options = {}, Rank ranker = {}, PlaceModel model = PlaceModel::fundamental)
+               const LoopDetectorOptions& options = {}, Rank ranker = {}, PlaceModel model = place_model_of<Estim>())
       : descriptor_(std::move(descriptor)),
         engine_(std::move(matcher), std::move(estimator), options, std::move(ranker), std::move(schema), model) {}
 

@@ -31,6 +31,7 @@
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
+#include <vmap/core/names.hpp>
 #include <vmap/geometry/calibrated.hpp>
 #include <vmap/geometry/essential.hpp>
 #include <vmap/io/binary.hpp>
@@ -64,15 +65,17 @@ enum class CandidateIndex : std::uint8_t {
   brute_force,  ///< every frame older than the window
 };
 
-[[nodiscard]] constexpr std::string_view to_string(CandidateIndex c) noexcept {
-  switch (c) {
-    case CandidateIndex::tree: return "tree";
-    case CandidateIndex::tree_ranked: return "tree_ranked";
-    case CandidateIndex::bow: return "bow";
-    case CandidateIndex::brute_force: return "brute_force";
-  }
-  return "unknown";
+/// tree, tree_ranked, bow, all (core/names.hpp): the names `vmap loops --rank` and the
+/// Python module take. brute_force, the enumerator's own name, reads back too; `all` is
+/// the one written.
+[[nodiscard]] constexpr auto names_of(CandidateIndex) noexcept {
+  return detail::NameTable<CandidateIndex, 5>{{{{CandidateIndex::tree, "tree"},
+                                                {CandidateIndex::tree_ranked, "tree_ranked"},
+                                                {CandidateIndex::bow, "bow"},
+                                                {CandidateIndex::brute_force, "all"},
+                                                {CandidateIndex::brute_force, "brute_force"}}}};
 }
+[[nodiscard]] constexpr std::string_view to_string(CandidateIndex c) noexcept { return names_of(c).name(c); }
 
 /// The candidate sources that rank by bag-of-words score (and so need a ranker).
 [[nodiscard]] constexpr bool ranks(CandidateIndex c) noexcept {
@@ -84,7 +87,7 @@ enum class CandidateIndex : std::uint8_t {
   return c == CandidateIndex::tree || c == CandidateIndex::tree_ranked;
 }
 
-/// The most queries temporal consistency may ask to agree (LoopOptions).
+/// The most previous queries temporal consistency may ask for (LoopOptions).
 inline constexpr std::size_t max_temporal_consistency = 1000;
 
 /// The options of the loop engine, the same names for LoopDetector, VisualMemory and the
@@ -239,6 +242,30 @@ struct LoopEngineState {
   }
 };
 
+/// Every LoopOptions value the engine accepts; an Error naming `owner` ("LoopOptions") and
+/// the option otherwise. The engine checks its options when it is made; a front end checks
+/// them before any frame is read.
+inline void check_loop_options(const LoopOptions& o, std::string_view owner) {
+  detail::check_label_min_score(o.labels.min_score);
+  detail::check_place_decision_options(o.decision, owner);
+  detail::check(std::isfinite(o.min_bow_score) && o.min_bow_score >= 0,
+                [&] { return detail::option_name(owner, ".min_bow_score must be finite and >= 0"); });
+  detail::check(std::isfinite(o.left_ratio) && o.left_ratio >= 0 && o.left_ratio <= 1,
+                [&] { return detail::option_name(owner, ".left_ratio must be in [0, 1]"); });
+  detail::check(o.index <= CandidateIndex::brute_force,
+                [&] { return detail::option_name(owner, ".index is not a candidate source"); });
+  // The consistency counts queries in an int; a memory's reader applies this same check.
+  detail::check(o.temporal_consistency <= max_temporal_consistency, [&] {
+    return detail::option_name(owner, ".temporal_consistency must be <= 1000, got ") +
+           std::to_string(o.temporal_consistency);
+  });
+  if (ranks(o.index))
+    detail::check(o.top_k >= 1, [&] {
+      return detail::option_name(owner, ".top_k must be >= 1 for the ") + std::string(to_string(o.index)) +
+             " candidate source";
+    });
+}
+
 namespace detail {
 
 /// LoopOptions whole, as a saved memory keeps them (memory/detail/record_codecs.hpp):
@@ -266,28 +293,6 @@ inline void write_loop_options(BinaryWriter& w, const LoopOptions& o) {
   w.i32(d.spread_grid);
   w.f64(d.full_spread);
   w.f64(d.ambiguity_ratio);
-}
-
-/// LoopOptions that an engine can run, named by `owner` ("MemoryOptions.loops"): the one
-/// check of the constructors and of a saved memory's reader.
-inline void check_loop_options(const LoopOptions& o, std::string_view owner) {
-  check_label_min_score(o.labels.min_score);
-  check_place_decision_options(o.decision, owner);
-  check(std::isfinite(o.min_bow_score) && o.min_bow_score >= 0,
-        [&] { return option_name(owner, ".min_bow_score must be finite and >= 0"); });
-  check(std::isfinite(o.left_ratio) && o.left_ratio >= 0 && o.left_ratio <= 1,
-        [&] { return option_name(owner, ".left_ratio must be in [0, 1]"); });
-  check(o.index <= CandidateIndex::brute_force, [&] { return option_name(owner, ".index is not a candidate source"); });
-  // DBoW2's islands confirm a loop over a few queries; more than a thousand would hold
-  // every loop back for a whole run.
-  check(o.temporal_consistency <= max_temporal_consistency, [&] {
-    return option_name(owner, ".temporal_consistency must be at most ") + std::to_string(max_temporal_consistency) +
-           ", got " + std::to_string(o.temporal_consistency);
-  });
-  if (ranks(o.index))
-    check(o.top_k >= 1, [&] {
-      return option_name(owner, ".top_k must be >= 1 for the ") + std::string(to_string(o.index)) + " candidate source";
-    });
 }
 
 /// Reads write_loop_options()'s bytes, checked (check_loop_options) as `owner`.
@@ -367,7 +372,8 @@ class LoopEngine {
       });
   }
 
-  static void check_options(const LoopOptions& o, std::string_view owner) { detail::check_loop_options(o, owner); }
+  /// check_loop_options (an Error naming `owner` and the option).
+  static void check_options(const LoopOptions& o, std::string_view owner) { check_loop_options(o, owner); }
 
   /// Frame `frames()` (its features `f`, its label vector for the label sources): its
   /// loop decision against the frames before it, then it is indexed.

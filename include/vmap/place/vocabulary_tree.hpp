@@ -51,6 +51,7 @@
 // `depth` levels.
 
 #include <vmap/core/error.hpp>
+#include <vmap/core/names.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/binary.hpp>
 #include <vmap/place/bow.hpp>
@@ -150,6 +151,16 @@ enum class BowWeighting : std::uint8_t {
   idf_l2 = 3,     ///< the same, L2 (DBoW2 IDF / BINARY with L2_NORM)
   fbow = 4,       ///< FBoW: word weights summed in float in descriptor order, L2-normalised as FBoW does
 };
+
+/// tf_idf_l1, tf_idf_l2, idf_l1, idf_l2, fbow (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(BowWeighting) noexcept {
+  return detail::NameTable<BowWeighting, 5>{{{{BowWeighting::tf_idf_l1, "tf_idf_l1"},
+                                              {BowWeighting::tf_idf_l2, "tf_idf_l2"},
+                                              {BowWeighting::idf_l1, "idf_l1"},
+                                              {BowWeighting::idf_l2, "idf_l2"},
+                                              {BowWeighting::fbow, "fbow"}}}};
+}
+[[nodiscard]] constexpr std::string_view to_string(BowWeighting w) noexcept { return names_of(w).name(w); }
 
 /// The score that goes with a weighting: DBoW2's L1 score for L1-normalised vectors,
 /// its L2 score (FBoW's fBow::score too) for L2-normalised ones.

@@ -53,19 +53,32 @@ template <class D>
     return BruteForceMatcher({.mode = MatchMode::mutual});
 }
 
-/// The stack's estimator for a descriptor of type D, for `use`. `camera_name` names the
-/// camera in errors (e.g. its calibration file).
+/// `estimator` as a descriptor of type D verifies with it: XFeat's dense grid wraps it in
+/// XFeatRefined (XFeat*'s refinement when the stack names its network, else a pass
+/// through); every other descriptor takes it as it is.
+template <class D, class E>
+[[nodiscard]] auto verifier_for(const PolicyStack& s, E estimator) {
+  if constexpr (std::is_same_v<D, XFeatDenseDescriptor>)
+    return XFeatRefined<E>(s.descriptor == DescriptorKind::xfeat_star
+                               ? std::optional<XFeatFineOptions>(XFeatFineOptions{.model = s.refine_model})
+                               : std::nullopt,
+                           std::move(estimator));
+  else
+    return estimator;
+}
+
+/// The stack's estimator for a descriptor of type D with these F-matrix options (a
+/// caller's own threshold): the F-matrix on the stack's camera (Calibrated), behind
+/// verifier_for. `camera_name` names the camera in errors (e.g. its calibration file).
+template <class D>
+[[nodiscard]] auto estimator_for(const PolicyStack& s, const FundamentalOptions& options, const std::string& camera_name) {
+  return verifier_for<D>(s, Calibrated<FundamentalEstimator>(s.camera, FundamentalEstimator(options), camera_name));
+}
+
+/// The stack's estimator for a descriptor of type D, for `use`.
 template <class D>
 [[nodiscard]] auto estimator_for(const PolicyStack& s, StackUse use, const std::string& camera_name) {
-  Calibrated<FundamentalEstimator> calibrated(
-      s.camera, FundamentalEstimator(detail::stack_fundamental_options(s.method, use == StackUse::memory)), camera_name);
-  if constexpr (std::is_same_v<D, XFeatDenseDescriptor>)
-    return XFeatRefined<Calibrated<FundamentalEstimator>>(
-        s.descriptor == DescriptorKind::xfeat_star ? std::optional<XFeatFineOptions>(XFeatFineOptions{.model = s.refine_model})
-                                                   : std::nullopt,
-        std::move(calibrated));
-  else
-    return calibrated;
+  return estimator_for<D>(s, detail::stack_fundamental_options(s.method, use == StackUse::memory), camera_name);
 }
 
 /// Calls f(descriptor) with the Descriptor the stack names (validated first; a model

@@ -31,7 +31,7 @@ TEST_CASE("memory options: what a memory accepts it can load, and what it cannot
   auto o = small_memory_options();
   o.loops.temporal_consistency = 2000;
   CHECK(error_of([&] { (void)make_small_memory(o); }) ==
-        "MemoryOptions.loops.temporal_consistency must be at most 1000, got 2000");
+        "MemoryOptions.loops.temporal_consistency must be <= 1000, got 2000");
   o.loops.temporal_consistency = 1000;
   auto ok = make_small_memory(o);
   for (std::size_t i = 0; i < 12; ++i) ok.push(sample_frames()[i]);

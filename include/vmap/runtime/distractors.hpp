@@ -1,9 +1,13 @@
 #pragma once
 
-// Distractor key frames for the scale benchmark of loop closure: distinct real images
-// made from the frames of other sequences (seeded crops, scales, rotations, brightness
-// and contrast changes), so a place-recognition database can be filled with tens of
-// thousands of key frames that look like real ones but never show the query's places.
+// Distractor key frames for scale tests of loop closure: distinct real images made from
+// the frames of other sequences (seeded crops, scales, rotations, brightness and contrast
+// changes), so a place-recognition database can be filled with tens of thousands of key
+// frames that look like real ones but never show the query's places. Given to run_loops
+// (runtime/loops.hpp) as older key frames, a loop with one of them counts as false.
+//
+//   const auto sources = vmap::load_distractor_sources({"other/rgb.txt"});
+//   for (std::size_t i = 0; i < n; ++i) distractors.push_back(orb.extract(vmap::make_distractor(sources, i)));
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/frame_source.hpp>
@@ -12,13 +16,14 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <random>
 #include <string>
 #include <vector>
 
-namespace vmap::examples {
+namespace vmap {
 
 struct DistractorOptions {
   cv::Size size{256, 192};  ///< output image size (small: the benchmark extracts tens of thousands)
@@ -77,4 +82,4 @@ inline cv::Mat make_distractor(const std::vector<cv::Mat>& sources, std::size_t 
   return out;
 }
 
-}  // namespace vmap::examples
+}  // namespace vmap
