@@ -61,6 +61,7 @@ const char* kind_name(SourceKind k) {
     case SourceKind::tum_rgb: return "tum_rgb";
     case SourceKind::live: return "live";
     case SourceKind::euroc: return "euroc";
+    case SourceKind::bag: return "bag";
   }
   return "unknown";
 }
