@@ -150,7 +150,8 @@ inline std::vector<BagTopic> bag_topics(const MessageStream& s) {
 inline std::string describe_topics(const std::vector<BagTopic>& topics) {
   std::string out;
   for (const auto& t : topics)
-    out += (out.empty() ? "" : ", ") + t.name + " (" + t.type + ", " + std::to_string(t.messages) + " messages)";
+    out += (out.empty() ? "" : ", ") + t.name + " (" + t.type + ", " + std::to_string(t.messages) +
+           (t.messages == 1 ? " message)" : " messages)");
   return out.empty() ? "none" : out;
 }
 

@@ -43,7 +43,7 @@ inline constexpr std::string_view ros1_bag_magic = "#ROSBAG V2.0\n";
 /// The fields of a ROS 1 record header that the reader uses.
 struct Ros1Header {
   int op = -1;
-  std::optional<std::uint32_t> conn, size, count;
+  std::optional<std::uint32_t> conn, size, count, conn_count, chunk_count;
   std::optional<std::uint64_t> time, index_pos, chunk_pos, start_time, end_time;
   std::string compression, topic, type;
 };
@@ -97,6 +97,10 @@ inline bool parse_ros1_header(std::string_view h, Ros1Header& out, std::string& 
       ok = u32(out.size);
     } else if (name == "count") {
       ok = u32(out.count);
+    } else if (name == "conn_count") {
+      ok = u32(out.conn_count);
+    } else if (name == "chunk_count") {
+      ok = u32(out.chunk_count);
     } else if (name == "time") {
       ok = u64(out.time);
     } else if (name == "index_pos") {
@@ -142,11 +146,11 @@ class Ros1Bag final : public MessageStream {
     bool have_index = false;
     if (index_pos == 0) {
       warnings_.push_back(what + " has no index (index_pos 0: its recording was not closed); read through to list it");
-    } else if (index_pos < data_start_ || index_pos >= file_.size()) {
+    } else if (index_pos < data_start_ || index_pos > file_.size()) {
       warnings_.push_back(what + ": its index at byte " + std::to_string(index_pos) + " lies outside the file (" +
                           std::to_string(file_.size()) + " bytes): the file is truncated; read through to list it");
     } else {
-      have_index = read_index(index_pos);
+      have_index = read_index(index_pos, bag_header.head);
       if (have_index) data_end_ = index_pos;
     }
     if (!have_index) scan();
@@ -226,8 +230,9 @@ class Ros1Bag final : public MessageStream {
 
   /// Connections (0x07) and chunk infos (0x06) from index_pos to the end; false (with a
   /// warning) when they are damaged.
-  bool read_index(std::uint64_t pos) {
+  bool read_index(std::uint64_t pos, const Ros1Header& bag_header) {
     std::map<std::uint32_t, BagConnection> found;
+    std::vector<std::uint64_t> chunks;
     std::int64_t start = 0, end = 0;
     bool any = false;
     try {
@@ -254,6 +259,7 @@ class Ros1Bag final : public MessageStream {
             found[conn].id = conn;
             found[conn].messages += count;
           }
+          if (r.head.chunk_pos) chunks.push_back(*r.head.chunk_pos);
           if (count_in_chunk(r.head)) {
             const std::int64_t s = ros1_time_ns(*r.head.start_time), e = ros1_time_ns(*r.head.end_time);
             start = any ? std::min(start, s) : s;
@@ -265,6 +271,17 @@ class Ros1Bag final : public MessageStream {
       }
     } catch (const Error& e) {
       warnings_.push_back(std::string(e.what()) + "; read through to list the bag");
+      return false;
+    }
+    // The bag header's counts check the index: a damaged one is read through instead.
+    if (bag_header.chunk_count && *bag_header.chunk_count != chunks.size()) {
+      warnings_.push_back(file_.what() + ": its index lists " + std::to_string(chunks.size()) + " chunks, its header " +
+                          std::to_string(*bag_header.chunk_count) + "; read through to list it");
+      return false;
+    }
+    if (bag_header.conn_count && *bag_header.conn_count != found.size()) {
+      warnings_.push_back(file_.what() + ": its index lists " + std::to_string(found.size()) + " connections, its header " +
+                          std::to_string(*bag_header.conn_count) + "; read through to list it");
       return false;
     }
     for (auto& [id, c] : found) {
@@ -280,6 +297,8 @@ class Ros1Bag final : public MessageStream {
       end_ns_ = end;
       any_time_ = true;
     }
+    std::sort(chunks.begin(), chunks.end());
+    chunk_positions_ = std::move(chunks);
     indexed_ = true;
     return true;
   }
@@ -368,6 +387,14 @@ class Ros1Bag final : public MessageStream {
       Record r;
       std::string why;
       if (!read_record(pos_, r, why)) {
+        // With an index, reading resumes at the next chunk it lists.
+        const auto next_chunk = std::upper_bound(chunk_positions_.begin(), chunk_positions_.end(), pos_);
+        if (next_chunk != chunk_positions_.end() && *next_chunk < data_end_) {
+          warn(file_.what() + ": damaged at byte " + std::to_string(pos_) + " (" + why +
+               "); reading resumes at the next chunk, byte " + std::to_string(*next_chunk));
+          pos_ = *next_chunk;
+          continue;
+        }
         warn(file_.what() + ": truncated or damaged at byte " + std::to_string(pos_) + " (" + why +
              "); the messages before it were read");
         pos_ = data_end_;
@@ -440,6 +467,7 @@ class Ros1Bag final : public MessageStream {
   BagLimits limits_;
   std::uint64_t data_start_ = 0, data_end_ = 0;
   std::uint64_t pos_ = 0;
+  std::vector<std::uint64_t> chunk_positions_;  ///< from the index, sorted
   std::shared_ptr<const std::string> chunk_;
   std::size_t chunk_pos_ = 0;
   std::uint64_t chunk_offset_ = 0;
