@@ -6,6 +6,7 @@
 // the top-level record offsets of each container (to cut a bag at every record
 // boundary), and the messages of a bag as a list to compare.
 
+#include "support/errors.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/io/bag/bag.hpp>
@@ -23,6 +24,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <map>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -237,6 +239,42 @@ inline std::vector<ReadMessage> all_messages(detail::MessageStream& s) {
 inline std::vector<ReadMessage> all_messages(const std::filesystem::path& bag, const BagLimits& limits = {}) {
   auto s = detail::open_message_stream(bag, limits);
   return all_messages(*s);
+}
+
+/// Cutting `bag` at every record boundary: no crash, only vmap::Error, and exactly the
+/// messages of the records that end before the cut (the same bytes, in order).
+inline void check_cuts(const std::filesystem::path& bag, BagFormat format, const std::string& scratch_name) {
+  const auto dir = scratch_dir(scratch_name);
+  const auto bytes = read_bytes(bag);
+  const auto full = all_messages(bag);
+  const auto bounds = record_boundaries(bytes, format);
+  std::map<std::uint64_t, std::uint64_t> record_end;  // record start -> end
+  for (std::size_t i = 0; i + 1 < bounds.size(); ++i) record_end[bounds[i]] = bounds[i + 1];
+  const auto cut_file = dir / ("cut" + bag.extension().string());
+  std::size_t errors = 0;
+  for (std::uint64_t cut : bounds) {
+    if (cut == bytes.size()) continue;
+    CAPTURE(cut);
+    write_bytes(cut_file, std::string_view(bytes).substr(0, cut));
+    std::vector<ReadMessage> got;
+    const std::string e = error_of([&] { got = all_messages(cut_file); });
+    if (e != "no error") {
+      ++errors;
+      continue;
+    }
+    std::size_t expected = 0;
+    for (const auto& m : full) expected += record_end.at(m.offset) <= cut ? 1 : 0;
+    REQUIRE(got.size() == expected);
+    for (std::size_t i = 0; i < got.size(); ++i) CHECK(got[i] == full[i]);
+    // The reader says where the file ends.
+    if (expected > 0 && cut > 8) {
+      auto s = detail::open_message_stream(cut_file);
+      (void)all_messages(*s);
+      REQUIRE_FALSE(s->warnings().empty());
+    }
+  }
+  // Only a cut inside the first records (magic, bag header) may refuse the file.
+  CHECK(errors <= 2);
 }
 
 }  // namespace vmap::test

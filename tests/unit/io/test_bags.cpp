@@ -477,42 +477,6 @@ TEST_CASE("sizes read from a bag are checked before anything is allocated") {
 
 namespace {
 
-/// Cutting `bag` at every record boundary: no crash, only vmap::Error, and exactly the
-/// messages of the records that end before the cut (the same bytes, in order).
-void check_cuts(const fs::path& bag, vmap::BagFormat format, const std::string& scratch_name) {
-  const auto dir = vmap::test::scratch_dir(scratch_name);
-  const auto bytes = vmap::test::read_bytes(bag);
-  const auto full = vmap::test::all_messages(bag);
-  const auto bounds = vmap::test::record_boundaries(bytes, format);
-  std::map<std::uint64_t, std::uint64_t> record_end;  // record start -> end
-  for (std::size_t i = 0; i + 1 < bounds.size(); ++i) record_end[bounds[i]] = bounds[i + 1];
-  const auto cut_file = dir / ("cut" + bag.extension().string());
-  std::size_t errors = 0;
-  for (std::uint64_t cut : bounds) {
-    if (cut == bytes.size()) continue;
-    CAPTURE(cut);
-    vmap::test::write_bytes(cut_file, std::string_view(bytes).substr(0, cut));
-    std::vector<vmap::test::ReadMessage> got;
-    const std::string e = error_of([&] { got = vmap::test::all_messages(cut_file); });
-    if (e != "no error") {
-      ++errors;
-      continue;
-    }
-    std::size_t expected = 0;
-    for (const auto& m : full) expected += record_end.at(m.offset) <= cut ? 1 : 0;
-    REQUIRE(got.size() == expected);
-    for (std::size_t i = 0; i < got.size(); ++i) CHECK(got[i] == full[i]);
-    // The frame source delivers the same frames and names the byte where the file ends.
-    if (expected > 0 && cut > 8) {
-      auto s = vmap::detail::open_message_stream(cut_file);
-      (void)vmap::test::all_messages(*s);
-      REQUIRE_FALSE(s->warnings().empty());
-    }
-  }
-  // Only a cut inside the first records (magic, bag header) may refuse the file.
-  CHECK(errors <= 2);
-}
-
 /// Flipping one bit at `count` seeded places: no crash, only vmap::Error, and the
 /// messages of the records before the flipped byte delivered as they were.
 void check_flips(const fs::path& bag, vmap::BagFormat format, const std::string& scratch_name, int count) {
@@ -566,11 +530,11 @@ void check_flips(const fs::path& bag, vmap::BagFormat format, const std::string&
 TEST_CASE("each container cut at every record boundary ends with the messages before the cut") {
   for (const char* c : {"none", "bz2", "lz4"}) {
     CAPTURE(c);
-    check_cuts(vmap::test::ros1_test_bags() / ("encodings_" + std::string(c) + ".bag"), vmap::BagFormat::ros1,
+    vmap::test::check_cuts(vmap::test::ros1_test_bags() / ("encodings_" + std::string(c) + ".bag"), vmap::BagFormat::ros1,
                std::string("cut_ros1_") + c);
   }
   const auto bags = ros2_test_bags("cut_ros2");
-  for (std::size_t i = 1; i < bags.size(); ++i) check_cuts(bags[i], vmap::BagFormat::mcap, "cut_mcap");
+  for (std::size_t i = 1; i < bags.size(); ++i) vmap::test::check_cuts(bags[i], vmap::BagFormat::mcap, "cut_mcap");
   // A frame source over a cut bag: the frames before the cut, and a warning naming its
   // byte; the bag is cut where the chunk of the third rgb8 frame starts.
   const auto lz4_bag = vmap::test::ros1_test_bags() / "encodings_lz4.bag";

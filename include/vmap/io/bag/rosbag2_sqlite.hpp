@@ -23,6 +23,7 @@
 #include <cctype>
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <optional>
@@ -119,7 +120,8 @@ class Rosbag2Sqlite final : public MessageStream {
     std::map<std::tuple<std::string, std::string, std::string>, std::uint32_t> ids;
     bool any = false;
     for (std::size_t f = 0; f < files_.size(); ++f) {
-      sqlite::Database db(files_[f], sqlite::Access::read, "bag '" + files_[f].string() + "'");
+      check_length(files_[f]);
+      sqlite::Database db = open_db(files_[f]);
       auto& map = topic_maps_.emplace_back();
       auto topics = db.prepare("SELECT id, name, type, serialization_format FROM topics", "list its topics");
       while (topics.step()) {
@@ -189,7 +191,7 @@ class Rosbag2Sqlite final : public MessageStream {
  private:
   void open_file() {
     try {
-      db_ = std::make_unique<sqlite::Database>(files_[file_], sqlite::Access::read, "bag '" + files_[file_].string() + "'");
+      db_ = std::make_unique<sqlite::Database>(open_db(files_[file_]));
       // Only the rows of selected topics: the others' data (point clouds ...) is not read.
       std::string in;
       for (const auto& [row, id] : topic_maps_[file_])
@@ -203,6 +205,33 @@ class Rosbag2Sqlite final : public MessageStream {
       statement_.reset();
       db_.reset();
     }
+  }
+
+  /// A read-only connection that reads a file cut short up to where it ends: SQLite
+  /// refuses a file shorter than its header states unless writable_schema is on (which
+  /// lets a read-only connection read it page by page, the damage then an error at the
+  /// first missing page).
+  static sqlite::Database open_db(const std::filesystem::path& file) {
+    sqlite::Database db(file, sqlite::Access::read, "bag '" + file.string() + "'");
+    db.exec("PRAGMA writable_schema=ON", "read it");
+    return db;
+  }
+
+  /// A warning when the file is shorter than its SQLite header states (SQLite file
+  /// format, section 1.3: page size at byte 16, page count at byte 28, both big-endian).
+  void check_length(const std::filesystem::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    unsigned char h[32] = {};
+    in.read(reinterpret_cast<char*>(h), sizeof h);
+    if (in.gcount() != sizeof h) return;
+    std::uint64_t page = (std::uint64_t{h[16]} << 8) | h[17];
+    if (page == 1) page = 65536;
+    const std::uint64_t pages = (std::uint64_t{h[28]} << 24) | (std::uint64_t{h[29]} << 16) | (std::uint64_t{h[30]} << 8) | h[31];
+    std::error_code ec;
+    const auto size = std::filesystem::file_size(file, ec);
+    if (!ec && pages > 0 && page * pages > size)
+      warnings_.push_back("bag '" + file.string() + "' ends at byte " + std::to_string(size) + ", its SQLite header states " +
+                          std::to_string(page * pages) + " bytes: the file is truncated; its messages are read up to the end");
   }
 
   std::filesystem::path input_;
