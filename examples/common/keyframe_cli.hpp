@@ -4,6 +4,7 @@
 // benchmark): the policy choice from the command line, the F-matrix options and the
 // frame range.
 
+#include "common/bag_options.hpp"
 #include "common/cli_support.hpp"
 #include "common/policies.hpp"
 
@@ -59,7 +60,8 @@ inline void add_feature_options(CLI::App& app, std::string& features, std::strin
 }
 
 inline void add_keyframe_options(CLI::App& app, KeyframeArgs& a) {
-  app.add_option("input", a.input, "Video file, image folder, list of image paths, or TUM rgb.txt")->required();
+  app.add_option("input", a.input, "Video file, image folder, list of image paths, TUM rgb.txt, or a bag")->required();
+  add_bag_options(app);
   add_feature_options(app, a.features, a.model, a.nfeatures, a.refine_model);
   app.add_option("--estimator", a.estimator, "F-matrix estimation: magsac, ransac, lmeds or 8point");
   app.add_option("--rule", a.rule, "New key image: previous (eq. 6) or current (Algorithm 1) frame");

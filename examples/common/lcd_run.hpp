@@ -6,6 +6,7 @@
 // sequence) for the ranked candidate sources -> LoopDetector over every frame (after
 // optional distractor key frames) -> per-frame results, timings and the evaluation.
 
+#include "common/bag_options.hpp"
 #include "common/policies.hpp"
 
 #include <vmap/core/error.hpp>
@@ -62,7 +63,7 @@ inline SequenceFeatures extract_features(const std::filesystem::path& input, con
   so.on_skip = [](const SkippedFrame& sk) {
     std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", sk.index, sk.name.c_str(), sk.reason.c_str());
   };
-  auto source = FrameSource::open(input, so);
+  auto source = open_frames(input, so);
   const std::size_t total = source.total().value_or(0);
   const auto t0 = std::chrono::steady_clock::now();
   with_descriptor(choice, [&](auto descriptor) {

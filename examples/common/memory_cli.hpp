@@ -7,6 +7,7 @@
 // (memory/store.hpp) synced at every key image, and the JSON / text of key images,
 // localization answers and loop edges.
 
+#include "common/bag_options.hpp"
 #include "common/cli_support.hpp"
 #include "common/policies.hpp"
 
@@ -77,7 +78,8 @@ inline nlohmann::json stack_json(const MemoryStack& s) {
 
 /// A MemoryStack from the command line: model paths made absolute, so that a reader in
 /// another folder finds them.
-inline MemoryStack stack_of_args(DescriptorChoice d, std::string estimator, const std::string& camera_file) {
+inline MemoryStack stack_of_args(DescriptorChoice d, std::string estimator, const std::string& camera_file,
+                                  const std::string& input = {}) {
   std::error_code ec;
   for (std::string* path : {&d.model, &d.refine_model})
     if (!path->empty()) {
@@ -85,7 +87,7 @@ inline MemoryStack stack_of_args(DescriptorChoice d, std::string estimator, cons
       if (!ec) *path = abs.string();
     }
   (void)parse_method(estimator);  // an unknown method is refused before the memory is made
-  return {std::move(d), std::move(estimator), load_camera_option(camera_file)};
+  return {std::move(d), std::move(estimator), camera_option(camera_file, input)};
 }
 
 /// The stack a memory store records; the default stack when it records none. A note
@@ -281,10 +283,11 @@ inline std::string input_fingerprint(const std::string& input, const FrameSource
   std::error_code ec;
   const auto canonical = std::filesystem::weakly_canonical(input, ec);
   const auto paths = src.paths();
-  return nlohmann::json{{"input", ec ? input : canonical.string()},
-                        {"first_frame", paths.empty() ? std::string() : paths.front().filename().string()},
-                        {"stride", stride}}
-      .dump();
+  nlohmann::json j{{"input", ec ? input : canonical.string()},
+                   {"first_frame", paths.empty() ? std::string() : paths.front().filename().string()},
+                   {"stride", stride}};
+  if (const auto topic = src.bag_topic()) j["topic"] = topic->name;  // a bag: the topic read
+  return j.dump();
 }
 
 /// The note that records session s's input ("input" for the first, "input 1", ...).
@@ -646,14 +649,25 @@ struct MemoryQuery {
   double ms = 0.0;
 };
 
-/// Localizes each image (read in grey, as the memory's frames were); an unreadable image
-/// is a vmap::Error naming it.
+/// Localizes each image (read in grey, as the memory's frames were), and each frame of a
+/// bag given among them (named "BAG:topic@stamp"); an unreadable image is a vmap::Error
+/// naming it.
 template <class Memory>
 std::vector<MemoryQuery> localize_images(Memory& mem, const std::vector<std::string>& images,
                                          const PlaceDecisionOptions& decision) {
   std::vector<MemoryQuery> out;
   for (const auto& path : images) {
     current_inputs() = {path};
+    if (is_bag(path)) {
+      auto frames = open_frames(path, {.grey = true});
+      while (auto f = frames.next()) {
+        const auto t0 = std::chrono::steady_clock::now();
+        MemoryQuery q{path + ":" + f->name, mem.localize(f->image, &decision), 0.0};
+        q.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+        out.push_back(std::move(q));
+      }
+      continue;
+    }
     // Bounded like frame sources: a regular file, its pixels checked before decoding.
     cv::Mat img;
     try {

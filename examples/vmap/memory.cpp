@@ -57,7 +57,7 @@ int build(const MemoryArgs& a, const CLI::App& app) {
   vmap::FrameSourceOptions so{.start = a.start, .stride = a.stride, .grey = true, .time_offset = a.time_offset};
   if (a.end > 0) so.end = a.end;
   ex::MemoryStack stack;
-  if (!continued) stack = ex::stack_of_args({a.features, a.nfeatures, a.model, a.refine_model}, a.estimator, a.camera);
+  if (!continued) stack = ex::stack_of_args({a.features, a.nfeatures, a.model, a.refine_model}, a.estimator, a.camera, a.input);
   ex::prepare_memory_output(file, "--memory", {a.input}, continued, a.force);
   std::optional<vmap::MemoryStore> kept;
   if (continued) {
@@ -77,7 +77,7 @@ int build(const MemoryArgs& a, const CLI::App& app) {
       if (a.min_confidence) n.min_confidence = *a.min_confidence;
       fresh.emplace(ex::new_memory(n, std::move(descriptor), std::move(matcher), std::move(estimator)));
     }
-    auto src = vmap::FrameSource::open(a.input, so);
+    auto src = ex::open_frames(a.input, so);
     const std::string fingerprint = ex::input_fingerprint(a.input, src, so.stride);
     if (continued) {
       ex::record_input(*writer, how, fingerprint);
@@ -336,7 +336,8 @@ std::function<int()> setup(CLI::App& app) {
   auto a = std::make_shared<MemoryArgs>();
   app.require_subcommand(1);
   auto* b = app.add_subcommand("build", "Stream a sequence into a memory file (or --resume one)");
-  b->add_option("input", a->input, "Video, image folder, image list or TUM rgb.txt")->required();
+  b->add_option("input", a->input, "Video, image folder, image list, TUM rgb.txt or a bag")->required();
+  ex::add_bag_options(*b);
   b->add_option("--memory", a->out,
                 "Memory store written at every key image, or DIR/memory.vmdb for a folder (read first with --resume)")
       ->required();
@@ -371,7 +372,8 @@ std::function<int()> setup(CLI::App& app) {
                 "keypoints and a localized query gets its pose relative to the key image");
   auto* l = app.add_subcommand("localize", "The key image(s) each query image matches");
   l->add_option("memory", a->memory, "Memory file")->required();
-  l->add_option("images", a->images, "Query images")->required();
+  l->add_option("images", a->images, "Query images (or bags: each frame a query)")->required();
+  ex::add_bag_options(*l);
   l->add_flag("--json", a->json, "Print every answer as JSON");
   l->add_option("--min-confidence", a->min_confidence,
                 "Accept a key image at this place-decision confidence in [0, 1] (default: the memory's)")
