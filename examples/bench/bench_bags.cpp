@@ -6,12 +6,14 @@
 //     decoded either way, so the ratio is the cost of reading the container;
 //   - raw sensor_msgs/Image bags (TUM fr1_rpy's 60 frames, mono8) against decoding the
 //     same frames from their JPEG files (rgb.txt);
-//   - peak resident memory (VmHWM, reset through /proc/self/clear_refs before each read)
-//     of reading each bag, and of synthetic bags of the 60 raw frames written once and ten
-//     times over (ROS 1 with uncompressed chunks, rosbag2 sqlite3, MCAP with zstd chunks):
-//     a reader that holds one chunk at a time needs the same memory for both.
+//   - peak resident memory (VmHWM) of a process that reads each bag (this program run
+//     again with --peak-of, so that no earlier read's heap is counted), and of synthetic
+//     bags of the 60 raw frames written once and ten times over (ROS 1 with uncompressed
+//     chunks, rosbag2 sqlite3, MCAP with zstd chunks): a reader that holds one chunk at
+//     a time needs the same memory for both.
 //
 //   bench_bags [--shared DIR] [--runs N] [--scratch DIR]
+//   bench_bags --peak-of INPUT [--topic T]   (prints the peak in MiB)
 //
 // Frames are decoded to grey, as `vmap build` reads them, one thread, best of N runs
 // taken in turn (each configuration once per round).
@@ -27,6 +29,7 @@
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
+#include <stdio.h>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -45,8 +48,6 @@ double status_mib(const std::string& field) {
   return 0.0;
 }
 
-/// Resets VmHWM to the current resident size (Linux: "5" to /proc/self/clear_refs).
-void reset_peak() { std::ofstream("/proc/self/clear_refs") << "5"; }
 
 struct Config {
   std::string label;
@@ -204,6 +205,19 @@ void write_mcap(const fs::path& file, const std::string& topic, const std::vecto
   writer.close();
 }
 
+/// The peak resident memory (MiB) and frames of a fresh process that reads `c`.
+std::pair<double, std::size_t> peak_in_child(const std::string& self, const Config& c) {
+  std::string cmd = "'" + self + "' --peak-of '" + c.input.string() + "'";
+  if (!c.topic.empty()) cmd += " --topic '" + c.topic + "'";
+  FILE* p = ::popen(cmd.c_str(), "r");
+  if (p == nullptr) vmap::detail::fail("cannot run " + cmd);
+  double mib = 0;
+  std::size_t frames = 0;
+  const int got = std::fscanf(p, "%lf %zu", &mib, &frames);
+  if (::pclose(p) != 0 || got != 2) vmap::detail::fail("'" + cmd + "' failed");
+  return {mib, frames};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -214,8 +228,17 @@ int main(int argc, char** argv) {
   app.add_option("--shared", shared, "The shared data folder (data/bags, data/rtabmap_loop)");
   app.add_option("--runs", runs, "Rounds; each configuration's best time is kept")->check(CLI::Range(1, 100));
   app.add_option("--scratch", scratch, "Folder for the synthetic bags (about 1.3 GB)");
+  std::string peak_of, peak_topic;
+  app.add_option("--peak-of", peak_of, "Read INPUT, print the process's peak resident memory (MiB) and its frames");
+  app.add_option("--topic", peak_topic, "With --peak-of: the bag's topic");
   CLI11_PARSE(app, argc, argv);
   try {
+    if (!peak_of.empty()) {
+      const std::size_t n = read_all({"", peak_of, peak_topic});
+      std::printf("%.1f %zu\n", status_mib("VmHWM"), n);
+      return 0;
+    }
+    const std::string self = fs::read_symlink("/proc/self/exe").string();
     const fs::path bags = shared / "data/bags";
     const fs::path sample = fs::path(VMAP_SOURCE_DIR) / "examples/data/tum_fr1_rpy_60/rgb.txt";
     const std::vector<std::pair<Config, std::vector<Config>>> groups = {
@@ -253,16 +276,10 @@ int main(int argc, char** argv) {
     }
 
     // Peak memory: each shared bag, then synthetic bags 1x and 10x as long.
-    std::printf("\npeak resident memory while reading (VmHWM above the resident size before the read)\n");
-    const auto peak_of = [](const Config& c) {
-      reset_peak();
-      const double before = status_mib("VmRSS");
-      const std::size_t n = read_all(c);
-      return std::make_pair(n, status_mib("VmHWM") - before);
-    };
+    std::printf("\npeak resident memory of a process that reads the input (VmHWM)\n");
     for (const auto& c : all) {
-      const auto [n, mib] = peak_of(c);
-      std::printf("%-40s %5zu frames  +%7.1f MiB\n", c.label.c_str(), n, mib);
+      const auto [mib, n] = peak_in_child(self, c);
+      std::printf("%-40s %5zu frames  %7.1f MiB\n", c.label.c_str(), n, mib);
     }
     fs::create_directories(scratch);
     const std::string topic = "/cam0/image_raw";
@@ -276,8 +293,8 @@ int main(int argc, char** argv) {
       write_mcap(scratch / (tag + ".mcap"), topic, cdr, repeat);
       for (const char* ext : {".bag", ".db3", ".mcap"}) {
         const fs::path file = scratch / (tag + ext);
-        const auto [n, mib] = peak_of({tag, file, ""});
-        std::printf("%-8s %-5s %9.1f MB %5zu frames  +%7.1f MiB\n", tag.c_str(), ext,
+        const auto [mib, n] = peak_in_child(self, {tag, file, ""});
+        std::printf("%-8s %-5s %9.1f MB %5zu frames  %7.1f MiB\n", tag.c_str(), ext,
                     static_cast<double>(fs::file_size(file)) / 1e6, n, mib);
       }
     }

@@ -43,7 +43,8 @@ namespace vmap {
 /// A calibration found in a bag and where it came from.
 struct BagCamera {
   Camera camera;
-  std::string source;  ///< "bag 'x.bag', topic '/cam0/camera_info' (its first message)"
+  std::string topic;   ///< "/cam0/camera_info"
+  std::string source;  ///< "bag 'x.bag', topic '/cam0/camera_info' (its first CameraInfo)"
 };
 
 namespace detail {
@@ -242,7 +243,7 @@ inline std::optional<BagCamera> read_bag_camera(const std::filesystem::path& inp
     note = what + " gives no calibration: " + reason;
     return std::nullopt;
   }
-  return BagCamera{*camera, what + " (its first CameraInfo)"};
+  return BagCamera{*camera, info_topic, what + " (its first CameraInfo)"};
 }
 
 }  // namespace detail
