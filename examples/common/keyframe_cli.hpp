@@ -3,6 +3,7 @@
 // Options shared by `vmap build` and `vmap sweep`: the policy stack (common/policies.hpp),
 // the key-image rule and the frame range.
 
+#include "common/bag_options.hpp"
 #include "common/cli_support.hpp"
 #include "common/policies.hpp"
 
@@ -63,7 +64,8 @@ inline void add_feature_options(CLI::App& app, std::string& features, std::strin
 }
 
 inline void add_keyframe_options(CLI::App& app, KeyframeArgs& a) {
-  app.add_option("input", a.input, "Video file, image folder, list of image paths, or TUM rgb.txt")->required();
+  app.add_option("input", a.input, "Video file, image folder, list of image paths, TUM rgb.txt, or a bag")->required();
+  add_bag_options(app);
   add_feature_options(app, a.features, a.model, a.nfeatures, a.refine_model);
   app.add_option("--estimator", a.estimator, "F-matrix estimation: magsac, ransac, lmeds or 8point");
   app.add_option("--rule", a.rule, "New key image: previous (eq. 6) or current (Algorithm 1) frame");

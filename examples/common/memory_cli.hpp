@@ -7,6 +7,7 @@
 // localization answers and loop edges. The memory itself is the library's run-time layer
 // (include/vmap/runtime: AnyMemory, record, export_memory).
 
+#include "common/bag_options.hpp"
 #include "common/cli_support.hpp"
 
 #include <vmap/core/error.hpp>
@@ -38,41 +39,12 @@ namespace vmap::examples {
 inline constexpr std::size_t default_working_memory = 200;
 
 /// The stack of --features, --nfeatures, --model, --refine-model, --estimator and
-/// --camera: model paths made absolute (a reader in another folder finds them), a bad
-/// name or combination a usage error naming the option.
+/// --camera (or the CameraInfo of the bag `input`); a bad name or combination is a usage
+/// error naming the option. The memory records its model paths absolute (AnyMemory).
 inline PolicyStack stack_of_args(const std::string& features, int nfeatures, const std::string& model,
                                  const std::string& refine_model, const std::string& estimator,
-                                 const std::string& camera_file) {
-  PolicyStack s;
-  const auto kind = from_string<DescriptorKind>(features);
-  if (!kind)
-    usage_error("--features: unknown descriptor '" + features + "' (choose " + names_of(DescriptorKind{}).choices() + ")");
-  s.descriptor = *kind;
-  const auto method = from_string<RobustMethod>(estimator);
-  if (!method)
-    usage_error("--estimator: unknown method '" + estimator + "' (choose " + names_of(RobustMethod{}).choices() + ")");
-  s.method = *method;
-  s.features = nfeatures;
-  std::error_code ec;
-  const auto absolute = [&](const std::string& path) {
-    if (path.empty()) return path;
-    const auto a = std::filesystem::weakly_canonical(path, ec);
-    return ec ? path : a.string();
-  };
-  s.model = absolute(model);
-  s.refine_model = absolute(refine_model);
-  if (s.learned() && s.model.empty())
-    usage_error("--features " + features + " needs --model PATH (an XFeat ONNX export such as " +
-                (s.descriptor == DescriptorKind::xfeat ? "xfeat_320x224.onnx" : "xfeat_anysize.onnx") + ")");
-  if (s.descriptor == DescriptorKind::xfeat_star && s.refine_model.empty())
-    usage_error("--features xfeat-star needs --refine-model PATH (XFeat*'s refinement network, xfeat_fine.onnx)");
-  if (!s.learned()) s.model.clear();
-  if (s.descriptor != DescriptorKind::xfeat_star) s.refine_model.clear();
-  if (const auto camera = load_camera_option(camera_file)) {
-    s.camera = camera->camera;
-    s.camera_source = camera->file.string();
-  }
-  return s;
+                                 const std::string& camera_file, const std::string& input = {}) {
+  return stack_of({features, nfeatures, model, refine_model}, estimator, camera_option(camera_file, input));
 }
 
 /// The stack as JSON: what the memory is built with.
@@ -343,7 +315,8 @@ struct MemoryQuery {
 };
 
 /// The query images of `inputs`: each an image file, or a sequence (a folder, a list, a
-/// video) whose frames are queries in order. Read in grey, as the memory's frames were;
+/// video, a bag: named "BAG:topic@stamp") whose frames are queries in order. Read in
+/// grey, as the memory's frames were;
 /// an unreadable image given alone is an Error naming it, a sequence's unreadable frames
 /// are skipped and reported.
 inline std::vector<MemoryQuery> localize_queries(AnyMemory& mem, const std::vector<std::string>& inputs,
@@ -379,8 +352,9 @@ inline std::vector<MemoryQuery> localize_queries(AnyMemory& mem, const std::vect
     so.on_skip = [](const SkippedFrame& s) {
       std::fprintf(stderr, "vmap: skipping query %zu (%s): %s\n", s.index, s.name.c_str(), s.reason.c_str());
     };
-    auto src = FrameSource::open(input, so);
-    while (auto f = src.next()) answer(f->name, f->image);
+    auto src = open_frames(input, so);
+    const std::string prefix = is_bag(input) ? input + ":" : std::string();
+    while (auto f = src.next()) answer(prefix + f->name, f->image);
   }
   return out;
 }

@@ -22,8 +22,8 @@ namespace {
 class Frames {
  public:
   Frames(const std::string& source, bool grey, std::size_t start, std::optional<std::size_t> end, std::size_t stride,
-         std::optional<std::pair<int, int>> resize, double time_offset)
-      : source_(FrameSource::open(source, options(grey, start, end, stride, resize, time_offset))) {}
+         std::optional<std::pair<int, int>> resize, double time_offset, const std::string& topic, bool record_time)
+      : source_(FrameSource::open(source, options(grey, start, end, stride, resize, time_offset, topic, record_time))) {}
 
   py::tuple next() {
     std::optional<Frame> f;
@@ -39,7 +39,8 @@ class Frames {
 
  private:
   static FrameSourceOptions options(bool grey, std::size_t start, std::optional<std::size_t> end, std::size_t stride,
-                                    std::optional<std::pair<int, int>> resize, double time_offset) {
+                                    std::optional<std::pair<int, int>> resize, double time_offset,
+                                    const std::string& topic, bool record_time) {
     FrameSourceOptions o;
     o.grey = grey;
     o.start = start;
@@ -47,6 +48,8 @@ class Frames {
     o.stride = stride;
     if (resize) o.resize = cv::Size(resize->first, resize->second);
     o.time_offset = time_offset;
+    o.topic = topic;
+    o.record_time = record_time;
     return o;
   }
 
@@ -61,6 +64,7 @@ const char* kind_name(SourceKind k) {
     case SourceKind::tum_rgb: return "tum_rgb";
     case SourceKind::live: return "live";
     case SourceKind::euroc: return "euroc";
+    case SourceKind::bag: return "bag";
   }
   return "unknown";
 }
@@ -119,7 +123,7 @@ void bind(py::module_& m) {
       .def("__iter__", [](Frames& f) -> Frames& { return f; })
       .def("__next__", &Frames::next)
       .def_property_readonly("kind", [](const Frames& f) { return kind_name(f.source().kind()); },
-                             "video, image_folder, image_list, tum_rgb, live or euroc")
+                             "video, image_folder, image_list, tum_rgb, live, euroc or bag")
       .def_property_readonly("total", [](const Frames& f) { return f.source().total(); },
                              "frames in the underlying sequence when known (lists, folders, videos that report\n"
                              "a count), before start/end/stride; None for a camera")
@@ -133,6 +137,32 @@ void bind(py::module_& m) {
             return out;
           },
           "frames that could not be decoded and were skipped, as (index, name, reason)")
+      .def_property_readonly(
+          "topic", [](const Frames& f) -> std::optional<std::string> {
+            const auto t = f.source().bag_topic();
+            return t ? std::optional<std::string>(t->name) : std::nullopt;
+          },
+          "a bag's image topic read; None for other sources")
+      .def_property_readonly(
+          "camera",
+          [](const Frames& f) -> py::object {
+            const auto& c = f.source().camera();
+            if (!c) return py::none();
+            py::dict d;
+            d["lens"] = c->camera.lens == LensModel::fisheye ? "fisheye" : "pinhole";
+            d["fx"] = c->camera.fx;
+            d["fy"] = c->camera.fy;
+            d["cx"] = c->camera.cx;
+            d["cy"] = c->camera.cy;
+            d["distortion"] = c->camera.distortion;
+            d["image_size"] = py::make_tuple(c->camera.image_size.width, c->camera.image_size.height);
+            d["source"] = c->source;
+            return d;
+          },
+          "a bag's calibration from the CameraInfo topic beside the image topic, as a dict (lens, fx, fy, cx, cy,\n"
+          "distortion, image_size, source); None without one")
+      .def_property_readonly("warnings", [](const Frames& f) { return f.source().warnings(); },
+                             "damage found in a bag so far (a truncated file, a corrupt chunk), each naming its byte")
       .def("__repr__", [](const Frames& f) {
         const auto total = f.source().total();
         return "<vmap.Frames " + std::string(kind_name(f.source().kind())) + ", " +
@@ -143,14 +173,44 @@ void bind(py::module_& m) {
   m.def(
       "frames",
       [](const std::string& source, bool grey, std::size_t start, std::optional<std::size_t> end, std::size_t stride,
-         std::optional<std::pair<int, int>> resize, double time_offset) {
-        return Frames(source, grey, start, end, stride, resize, time_offset);
+         std::optional<std::pair<int, int>> resize, double time_offset, std::optional<std::string> topic, bool record_time) {
+        return Frames(source, grey, start, end, stride, resize, time_offset, topic.value_or(""), record_time);
       },
       py::arg("source"), py::kw_only(), py::arg("grey") = false, py::arg("start") = 0, py::arg("end") = py::none(),
-      py::arg("stride") = 1, py::arg("resize") = py::none(), py::arg("time_offset") = 0.0,
-      "Frames of a video file, an image folder, an image list, a TUM rgb.txt, a EuRoC mav0/cam0 folder or a camera\n"
-      "(\"0\"): an iterator of (image, timestamp, name), images as uint8 NumPy arrays (H x W grey or H x W x 3 BGR)\n"
-      "that view the decoded frame without a copy. start/end/stride pick frame indices; resize is (width, height).");
+      py::arg("stride") = 1, py::arg("resize") = py::none(), py::arg("time_offset") = 0.0, py::arg("topic") = py::none(),
+      py::arg("record_time") = false,
+      "Frames of a video file, an image folder, an image list, a TUM rgb.txt, a EuRoC mav0/cam0 folder, a robot bag\n"
+      "(ROS 1 .bag, rosbag2 .db3 or its folder, .mcap) or a camera (\"0\"): an iterator of (image, timestamp, name),\n"
+      "images as uint8 NumPy arrays (H x W grey or H x W x 3 BGR) that view the decoded frame without a copy.\n"
+      "start/end/stride pick frame indices; resize is (width, height). A bag: topic picks its image topic (needed\n"
+      "when it has several), record_time times frames by their record time instead of their header stamp.");
+
+  m.def(
+      "bag_info",
+      [](const std::string& bag) {
+        const BagInfo info = vmap::bag_info(bag);
+        py::list topics;
+        for (const auto& t : info.topics) {
+          py::dict d;
+          d["name"] = t.name;
+          d["type"] = t.type;
+          d["encoding"] = t.encoding;
+          d["messages"] = t.messages;
+          topics.append(d);
+        }
+        py::dict out;
+        out["format"] = std::string(to_string(info.format));
+        out["messages"] = info.messages;
+        out["start_ns"] = info.start_ns;
+        out["end_ns"] = info.end_ns;
+        out["indexed"] = info.indexed;
+        out["topics"] = topics;
+        out["warnings"] = info.warnings;
+        return out;
+      },
+      py::arg("bag"),
+      "What a robot bag holds: format, messages, start_ns / end_ns (record times), indexed, topics (name, type,\n"
+      "encoding, messages) and warnings (damage found).");
 
   m.def(
       "image_address", [](const py::array& image) { return reinterpret_cast<std::uintptr_t>(image_view(image, "image").data); },

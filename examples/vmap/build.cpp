@@ -85,8 +85,11 @@ void print_table(std::FILE* out, const vmap::VisualMap& map) {
 /// (libjpeg's grey decoding differs slightly from converting colour, and the key images
 /// must not depend on --out), so image files are read again in colour here; video
 /// frames were decoded in colour and converted exactly as the grey mode does.
+void reread_key_images(vmap::VisualMap& map, const std::string& input);
+
 void colour_key_images(vmap::VisualMap& map, const vmap::FrameSource& src) {
   if (src.kind() == vmap::SourceKind::video || src.kind() == vmap::SourceKind::live) return;
+  if (src.kind() == vmap::SourceKind::bag) return reread_key_images(map, src.input().string());
   const auto paths = src.paths();
   for (auto& k : map.keys) {
     cv::Mat colour = cv::imread(paths.at(k.frame_index).string(), cv::IMREAD_COLOR);
@@ -98,16 +101,22 @@ void colour_key_images(vmap::VisualMap& map, const vmap::FrameSource& src) {
 /// grey and whose pixels are kept only with --images png|jpeg: image files are read
 /// again in colour, a video is decoded again up to its last key image, and a live stream
 /// (which cannot be read again) keeps the memory's own pixels.
+/// The key images' frames read again in colour (a video, a bag), up to the last one.
+void reread_key_images(vmap::VisualMap& map, const std::string& input) {
+  if (map.keys.empty()) return;
+  std::map<std::size_t, vmap::KeyImage*> wanted;
+  for (auto& k : map.keys) wanted[k.frame_index] = &k;
+  vmap::FrameSourceOptions o;
+  o.end = map.keys.back().frame_index + 1;
+  o.grey = false;
+  auto again = ex::open_frames(input, o);
+  while (auto f = again.next())
+    if (const auto it = wanted.find(f->index); it != wanted.end()) it->second->image = f->image;
+}
+
 void key_pixels_for_pictures(vmap::VisualMap& map, const vmap::FrameSource& src, const std::string& input) {
-  if (src.kind() == vmap::SourceKind::video && !map.keys.empty()) {
-    std::map<std::size_t, vmap::KeyImage*> wanted;
-    for (auto& k : map.keys) wanted[k.frame_index] = &k;
-    vmap::FrameSourceOptions o;
-    o.end = map.keys.back().frame_index + 1;
-    o.grey = false;
-    auto again = vmap::FrameSource::open(input, o);
-    while (auto f = again.next())
-      if (const auto it = wanted.find(f->index); it != wanted.end()) it->second->image = f->image;
+  if (src.kind() == vmap::SourceKind::video) {
+    reread_key_images(map, input);
   } else {
     colour_key_images(map, src);
   }
@@ -311,7 +320,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   // folder is made), a continued one's as it recorded it (the stack's options then
   // conflict, check_continuable).
   vmap::PolicyStack stack;
-  if (!continued) stack = ex::stack_of_args(a.features, a.nfeatures, a.model, a.refine_model, a.estimator, a.camera);
+  if (!continued) stack = ex::stack_of_args(a.features, a.nfeatures, a.model, a.refine_model, a.estimator, a.camera, a.input);
   ex::prepare_memory_output(file, "--memory", inputs, continued, args.force);
   if (continued)
     ex::check_continuable(file, app, {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after",
@@ -335,7 +344,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   }
   auto so = ex::source_options(a, true);
   if (args.resume) so = ex::resume_range(*mem, so);
-  auto src = vmap::FrameSource::open(a.input, so);
+  auto src = ex::open_frames(a.input, so);
   const bool no_pixels = continued ? mem->options().images == vmap::ImageStorage::none : args.images == "none";
   if (out_dir && src.kind() == vmap::SourceKind::live && no_pixels)
     ex::usage_error("--out with --memory on a live source needs the memory's pixels (--images png or jpeg): a live "
@@ -453,7 +462,7 @@ std::function<int()> setup(CLI::App& app) {
     for (const char* o : {"--resume", "--session", "--save-every", "--working-memory", "--images", "--vocabulary",
                           "--vocabulary-after", "--min-confidence", "--poses", "--gcs"})
       if (app.get_option(o)->count() > 0) ex::usage_error(std::string(o) + " needs --memory DIR|FILE");
-    const auto camera = ex::load_camera_option(a.camera);
+    const auto camera = ex::camera_option(a.camera, a.input);
     const bool pictures = !a.out.empty();
     // Everything the command line can get wrong is refused before the first frame.
     std::optional<ex::OutputFolder> out_dir;
@@ -462,9 +471,9 @@ std::function<int()> setup(CLI::App& app) {
     const vmap::SelectorOptions so{.tau = args->threshold, .rule = ex::parse_rule(a.rule), .keep_images = pictures};
     const vmap::PolicyStack stack = a.stack(camera);
     const auto source = ex::source_options(a, true);
-    auto src = vmap::FrameSource::open(a.input, source);
+    auto src = ex::open_frames(a.input, source);
     if (pictures && src.kind() == vmap::SourceKind::video)
-      src = vmap::FrameSource::open(a.input, ex::source_options(a, false));
+      src = ex::open_frames(a.input, ex::source_options(a, false));
     const auto expected = expected_frames(src, source);
     vmap::AnySelector sel(stack, so, vmap::camera_name(stack, vmap::OptionNames::command_line()));
     ex::Progress progress("vmap build", expected);

@@ -1,6 +1,7 @@
 // `vmap detect`: run an ONNX object detector (YOLOX, NanoDet, FastestDet) through
 // cv::dnn on images or a sequence; print the detections, draw them, or store them
 // unfiltered in the precomputed-detections format for the loop-closure tools.
+#include "common/bag_options.hpp"
 #include "common/cli_support.hpp"
 #include "vmap/cli.hpp"
 
@@ -112,7 +113,7 @@ int run_detect(const DetectArgs& a, const CLI::App& app) {
   };
   std::vector<std::filesystem::path> files(a.images.begin(), a.images.end());
   std::optional<vmap::FrameSource> source;
-  if (!a.sequence.empty()) source.emplace(vmap::FrameSource::open(a.sequence, ex::reporting_skips()));
+  if (!a.sequence.empty()) source.emplace(ex::open_frames(a.sequence, ex::reporting_skips()));
   std::size_t next_file = 0;
   auto next = [&]() -> std::optional<Item> {
     if (source) {
@@ -212,6 +213,7 @@ int run_detect(const DetectArgs& a, const CLI::App& app) {
 std::function<int()> setup(CLI::App& app) {
   auto args = std::make_shared<DetectArgs>();
   app.add_option("images", args->images, "Image files; frame k is the k-th (0-based) file given");
+  ex::add_bag_options(app);
   app.add_option("--sequence", args->sequence,
                  "Instead of images: a folder (natural order), an image list, a TUM rgb.txt or a video");
   app.add_option("--detector", args->detector, "Output format of the model: yolox, nanodet or fastestdet")

@@ -3,6 +3,7 @@
 // (--room) or a real sequence with a pose file (--train ... --poses ...). With --memory M
 // IMAGE... it answers instead from a saved visual memory (`vmap build --memory`): the key
 // image(s) each query image matches (common/memory_cli.hpp).
+#include "common/bag_options.hpp"
 #include "common/cli_support.hpp"
 #include "common/error_stats.hpp"
 #include "common/memory_cli.hpp"
@@ -155,7 +156,7 @@ Sequence read_sequence(const std::string& images, const std::string& poses, cons
   so.on_skip = [](const vmap::SkippedFrame& sk) {
     std::fprintf(stderr, "vmap: skipping frame %zu (%s): %s\n", sk.index, sk.name.c_str(), sk.reason.c_str());
   };
-  auto src = vmap::FrameSource::open(images, so);
+  auto src = ex::open_frames(images, so);
   std::vector<double> stamps;
   while (auto f = src.next()) {
     out.images.push_back(f->image);
@@ -383,6 +384,7 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--query", s->query, "Query images (with --query-poses for their true poses)");
   app.add_option("--query-poses", s->query_poses, "True poses of the query images");
   ex::add_time_offset_option(app, s->time_offset);
+  ex::add_bag_options(app);
   app.add_flag("--every-other", s->every_other, "Train on the even frames of --train, localize the odd ones");
   app.add_option("--neurons", s->neurons, "GCS cells (the paper: 100, 200, 300), at most 5000 (training time grows with the square of the cells)")
       ->check(ex::count_in(3, 5000));
@@ -415,7 +417,7 @@ std::function<int()> setup(CLI::App& app) {
       ->check(ex::real_in(0.0, 1.0));
   return [s, &app] {
     if (!s->memory.empty()) {
-      ex::refuse_other_options(app, {"--memory", "IMAGE", "--json", "--min-confidence"}, "--memory");
+      ex::refuse_other_options(app, {"--memory", "IMAGE", "--json", "--min-confidence", "--topic", "--record-time"}, "--memory");
       if (s->images.empty()) ex::usage_error("--memory needs query images: vmap localize --memory M IMAGE...");
       return ex::localize_from_memory(vmap::memory_path(s->memory), "--memory", s->images, s->json, s->min_confidence);
     }

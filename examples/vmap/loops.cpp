@@ -192,7 +192,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
   const std::vector<std::string> names = a.names.empty() ? std::vector<std::string>{} : vmap::read_class_names(a.names);
 
   // The ground truth is checked against the sequence before any frame is processed.
-  const auto sequence = vmap::FrameSource::open(a.input, {.time_offset = a.time_offset});
+  const auto sequence = ex::open_frames(a.input, {.time_offset = a.time_offset});
   const std::size_t total = sequence.total().value_or(0);
   std::optional<vmap::LoopGroundTruth> gt;
   std::vector<vmap::CameraPose> frame_poses;  // with --gt-poses: one per frame, for loops.g2o
@@ -212,7 +212,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
   } else if (!a.detector.empty()) {
     auto detector = vmap::make_dnn_detector(vmap::parse_detector_format(a.detector),
                                             {.model = a.model, .score_threshold = o.detector.labels.min_score});
-    auto source = vmap::FrameSource::open(a.input);
+    auto source = ex::open_frames(a.input);
     ex::Progress progress("vmap loops: detector", source.total());
     labels = vmap::detect_labels(source, detector, [&](std::size_t done, std::size_t) { progress.update(done); });
     detect_seconds = progress.seconds();
@@ -252,7 +252,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
                    r.frame, r.candidates, r.verifications, r.best ? std::to_string(*r.best).c_str() : "-",
                    r.evidence.inliers, r.confidence, std::string(vmap::to_string(r.status)).c_str(), r.reason.c_str());
     };
-  vmap::FrameSourceOptions frame_options = ex::reporting_skips({.time_offset = a.time_offset});
+  vmap::FrameSourceOptions frame_options = ex::with_bag_options(a.input, ex::reporting_skips({.time_offset = a.time_offset}));
   frame_options.on_skip = [&, report = frame_options.on_skip](const vmap::SkippedFrame& sk) {
     ++skipped;
     report(sk);
@@ -444,7 +444,8 @@ int run(LoopsArgs& a, const CLI::App& app) {
 std::function<int()> setup(CLI::App& app) {
   auto a = std::make_shared<LoopsArgs>();
   auto& d = a->options.detector;
-  app.add_option("input", a->input, "Frames: image folder, list file, video or TUM rgb.txt (or --memory M)");
+  app.add_option("input", a->input, "Frames: image folder, list file, video, TUM rgb.txt or a bag (or --memory M)");
+  ex::add_bag_options(app);
   app.add_option("--gt", a->gt, "Ground-truth loop matrix (rows of 0/1, row = query frame)");
   app.add_option("--gt-poses", a->gt_poses, "Derive the ground truth from poses (TUM, KITTI or EuRoC data.csv; one a frame, or associated to the frames' times within 50 ms)");
   ex::add_time_offset_option(app, a->time_offset);

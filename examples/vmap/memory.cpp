@@ -232,7 +232,8 @@ std::function<int()> setup(CLI::App& app) {
   app.require_subcommand(1);
   auto* l = app.add_subcommand("localize", "The key image(s) each query image matches");
   l->add_option("memory", a->memory, "Memory store or .vmem file (a folder: DIR/memory.vmdb)")->required();
-  l->add_option("queries", a->queries, "Query images, or folders, lists or videos of query images")->required();
+  l->add_option("queries", a->queries, "Query images, or folders, lists, videos or bags of query images")->required();
+  ex::add_bag_options(*l);
   l->add_flag("--json", a->json, "Print every answer as JSON");
   l->add_option("--min-confidence", a->min_confidence,
                 "Accept a key image at this place-decision confidence in [0, 1] (default: the memory's)")

@@ -55,9 +55,9 @@ std::function<int()> setup(CLI::App& app) {
     const auto& a = args->common;
     ex::current_inputs() = {a.input};
     ex::check_range(a);
-    const auto camera = ex::load_camera_option(a.camera);
+    const auto camera = ex::camera_option(a.camera, a.input);
     if (!a.out.empty()) ex::prepare_output_dir(a.out, "--out", {a.input}, {"sweep.csv"});
-    auto src = vmap::FrameSource::open(a.input, ex::source_options(a, true));
+    auto src = ex::open_frames(a.input, ex::source_options(a, true));
     const vmap::PolicyStack stack = a.stack(camera);
     ex::Progress progress("vmap sweep", src.total());
     const vmap::SweepOptions so{.taus = args->thresholds,

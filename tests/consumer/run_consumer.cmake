@@ -14,6 +14,12 @@ run(${CMAKE_COMMAND} -S "${CONSUMER_SOURCE_DIR}" -B "${WORK_DIR}/build" -G "${GE
     "-DCMAKE_PREFIX_PATH=${prefix}" -DCMAKE_BUILD_TYPE=Release)
 run(${CMAKE_COMMAND} --build "${WORK_DIR}/build")
 run("${WORK_DIR}/build/vmap_consumer" "${SAMPLE_FRAMES}" "${WORK_DIR}/map.vmap")
+if(EXISTS "${WORK_DIR}/build/vmap_consumer_bags")
+  run("${WORK_DIR}/build/vmap_consumer_bags" "${WORK_DIR}/frames.mcap")
+  run("${WORK_DIR}/build/vmap_consumer_no_bags" "${WORK_DIR}/frames.mcap")
+elseif(VMAP_BAGS)
+  message(FATAL_ERROR "the installed package has no vmap::bags component (find_package(vmap COMPONENTS bags))")
+endif()
 # The Python package, when the build made one: installed beside the headers, it imports
 # from the prefix (the extension, its stubs and py.typed) and reads the sample frames.
 if(PYTHON_EXECUTABLE AND PYTHON_INSTALL_DIR)

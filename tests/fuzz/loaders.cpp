@@ -10,7 +10,9 @@
 
 #include <vmap/hooks/class_names.hpp>
 #include <vmap/hooks/precomputed_detections.hpp>
+#include <vmap/io/bag/bag.hpp>
 #include <vmap/io/calibration.hpp>
+#include <vmap/io/frame_source.hpp>
 #include <vmap/io/image.hpp>
 #include <vmap/io/poses.hpp>
 #include <vmap/keyframe/map_io.hpp>
@@ -42,6 +44,37 @@
 // Key images of at most 1 Mi pixels, 8 Mi together: a decoded image stays far below the
 // fuzzer's memory limit.
 inline constexpr vmap::MapLoadOptions fuzz_pixel_limits{.max_image_pixels = 1 << 20, .max_total_image_pixels = 1 << 23};
+
+// A robot bag (ROS 1, rosbag2 sqlite3, MCAP): written to a file of its own per process,
+// every message read through, then each image topic read as frames (small limits, so a
+// decoded image stays far below the fuzzer's memory limit).
+inline void fuzz_bag(std::string_view bytes, const char* extension) {
+  const std::filesystem::path p =
+      std::filesystem::temp_directory_path() / ("vmap_fuzz_bag_" + std::to_string(::getpid()) + extension);
+  std::filesystem::remove(p);
+  std::ofstream(p, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  const vmap::BagLimits limits{.max_chunk_bytes = 1 << 24, .max_header_bytes = 1 << 20};
+  try {
+    auto stream = vmap::detail::open_message_stream(p, limits);
+    vmap::detail::StreamMessage m;
+    while (stream->next(m)) {
+    }
+    for (const auto& t : vmap::detail::bag_topics(*stream)) {
+      if (!vmap::detail::is_image_type(t.type)) continue;
+      try {
+        auto frames = vmap::FrameSource::open(p, {.max_pixels = 1 << 20, .topic = t.name, .bag_limits = limits});
+        while (frames.next()) {
+        }
+        (void)frames.times_ns();
+      } catch (const vmap::Error&) {
+      }
+    }
+  } catch (...) {
+    std::filesystem::remove(p);
+    throw;
+  }
+  std::filesystem::remove(p);
+}
 
 // clang-format off
 VMAP_FUZZ_LOADER(map, { (void)vmap::deserialize_map(bytes, "fuzz", fuzz_pixel_limits); })
@@ -99,4 +132,7 @@ VMAP_FUZZ_LOADER(memory_store, {
   }
   remove_all();
 })
+VMAP_FUZZ_LOADER(ros1_bag, { fuzz_bag(bytes, ".bag"); })
+VMAP_FUZZ_LOADER(rosbag2_sqlite, { fuzz_bag(bytes, ".db3"); })
+VMAP_FUZZ_LOADER(mcap, { fuzz_bag(bytes, ".mcap"); })
 // clang-format on

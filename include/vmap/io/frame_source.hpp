@@ -16,7 +16,14 @@
 //     decimal point, such as TUM's 1305031229.528748.png, is seconds). Names numbered
 //     0, 1, 2, ... thus time their frames in seconds by their number;
 //   - any other folder or list: the frame's index;
-//   - a video: its position in seconds (0 for the first frame).
+//   - a video: its position in seconds (0 for the first frame);
+//   - a robot bag (io/bag/bag.hpp: ROS 1 `.bag`, rosbag2 `.db3` or its folder, `.mcap`):
+//     the header stamps of the image topic's messages (Frame::time_ns exact), or their
+//     record times with FrameSourceOptions::record_time. Frames are named
+//     `topic@stamp` (the stamp in nanoseconds) and indexed by their position among the
+//     topic's messages; FrameSourceOptions::topic picks the topic when the bag has
+//     several image topics, and camera() gives the calibration of a CameraInfo topic
+//     beside it.
 //
 // Unreadable frames are skipped, counted and reported (FrameSourceOptions::on_skip,
 // FrameSource::skipped()), never taken as the end of the sequence:
@@ -28,10 +35,17 @@
 //     container states; when a read fails before it, the frame is skipped and reading
 //     goes on. Without a stated count (or past it), `max_failed_reads` failed reads in a
 //     row end the video, and those trailing failures are not reported (they are the end
-//     of the stream, not frames).
+//     of the stream, not frames);
+//   - bags: a message whose image cannot be decoded (a corrupt or stub image, an
+//     encoding vmap does not read, a size outside the bounds). Damage to the bag itself
+//     (a truncated file, a corrupt chunk) is reported through
+//     FrameSourceOptions::on_warning and warnings(), naming the byte where it is; the
+//     frames before it are delivered.
 
 #include <vmap/core/error.hpp>
+#include <vmap/io/bag/bag.hpp>
 #include <vmap/io/detail/lines.hpp>
+#include <vmap/io/detail/natural_order.hpp>
 #include <vmap/io/files.hpp>
 #include <vmap/io/image.hpp>
 #include <vmap/io/timestamps.hpp>
@@ -53,6 +67,7 @@
 #include <functional>
 #include <system_error>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <string>
 #include <utility>
@@ -90,9 +105,14 @@ struct PendingFrame {
   std::int64_t time_ns = 0;    ///< Frame::time_ns, before the time offset
   std::filesystem::path path;  ///< the image file; empty for a video or camera frame
   cv::Mat image;               ///< the video or camera frame as read
+  /// A bag frame's serialized message, decoded by decode(): its bytes stay valid while
+  /// `message_owner` (the chunk or row they lie in) is held.
+  std::string_view message;
+  std::shared_ptr<const void> message_owner;
+  std::uint64_t message_offset = 0;  ///< where the message lies (BagFormat-dependent, for messages)
 };
 
-enum class SourceKind { video, image_folder, image_list, tum_rgb, live, euroc };
+enum class SourceKind { video, image_folder, image_list, tum_rgb, live, euroc, bag };
 
 struct FrameSourceOptions {
   std::size_t start = 0;                                     ///< first frame index read
@@ -115,37 +135,20 @@ struct FrameSourceOptions {
   /// Called for each unreadable frame inside a sequence before it is skipped;
   /// `FrameSource::skipped()` keeps the same list.
   std::function<void(const SkippedFrame&)> on_skip{};
+  /// A bag's image topic (empty: its only one; several are an Error listing them).
+  std::string topic{};
+  /// A bag's frames are timed by the messages' record times (when the recorder received
+  /// them) instead of their header stamps.
+  bool record_time = false;
+  /// Called with each damage found in a bag (a truncated file, a corrupt chunk: the text
+  /// names the byte), on the thread that reads the bag; `FrameSource::warnings()` keeps
+  /// the same list.
+  std::function<void(const std::string&)> on_warning{};
+  /// What a bag's reader may allocate at once.
+  BagLimits bag_limits{};
 };
 
 namespace detail {
-
-/// "img2.png" < "img10.png": digit runs compare by value, the rest byte-wise.
-inline bool natural_less(const std::string& a, const std::string& b) {
-  std::size_t i = 0, j = 0;
-  while (i < a.size() && j < b.size()) {
-    const auto ca = static_cast<unsigned char>(a[i]);
-    const auto cb = static_cast<unsigned char>(b[j]);
-    if (std::isdigit(ca) && std::isdigit(cb)) {
-      std::size_t ie = i, je = j;
-      while (ie < a.size() && std::isdigit(static_cast<unsigned char>(a[ie]))) ++ie;
-      while (je < b.size() && std::isdigit(static_cast<unsigned char>(b[je]))) ++je;
-      std::size_t iz = i, jz = j;  // skip leading zeros, then compare by length and digits
-      while (iz + 1 < ie && a[iz] == '0') ++iz;
-      while (jz + 1 < je && b[jz] == '0') ++jz;
-      if (ie - iz != je - jz) return ie - iz < je - jz;
-      const int c = a.compare(iz, ie - iz, b, jz, je - jz);
-      if (c != 0) return c < 0;
-      if (ie - i != je - j) return ie - i < je - j;  // "01" after "1": stable, total order
-      i = ie;
-      j = je;
-    } else {
-      if (ca != cb) return ca < cb;
-      ++i;
-      ++j;
-    }
-  }
-  return a.size() - i < b.size() - j;
-}
 
 inline bool is_image_file(const std::filesystem::path& p) {
   std::string ext = p.extension().string();
@@ -351,7 +354,10 @@ class FrameSource {
     s.input_ = input;
     s.options_ = std::move(options);
     s.next_index_ = s.options_.start;
-    if (std::filesystem::is_directory(input, ec) && std::filesystem::is_regular_file(input / "data.csv", ec) &&
+    if (is_bag(input)) {
+      s.kind_ = SourceKind::bag;
+      s.open_bag();
+    } else if (std::filesystem::is_directory(input, ec) && std::filesystem::is_regular_file(input / "data.csv", ec) &&
         std::filesystem::is_directory(input / "data", ec)) {
       s.kind_ = SourceKind::euroc;
       s.entries_ = detail::read_euroc_csv(input / "data.csv");
@@ -410,6 +416,7 @@ class FrameSource {
   /// The next frame of the sequence, in order, without decoding an image file (a video
   /// or camera frame is read here); nullopt at the end (or at options.end).
   [[nodiscard]] std::optional<PendingFrame> claim() {
+    if (kind_ == SourceKind::bag) return claim_bag();
     return kind_ == SourceKind::video || kind_ == SourceKind::live ? claim_video() : claim_image();
   }
   /// The claimed frame decoded, converted and resized as the options say, or the reason
@@ -420,7 +427,14 @@ class FrameSource {
     f.name = std::move(p.name);
     f.timestamp = p.timestamp + options_.time_offset;
     f.time_ns = p.time_ns + nanoseconds_from_seconds(options_.time_offset);
-    if (p.path.empty()) {  // a video or camera frame, checked when read
+    if (p.message_owner) {
+      std::string reason;
+      f.image = decode_bag_image(p.message, reason);
+      if (f.image.empty())
+        return SkippedFrame{p.index, f.name,
+                            detail::message_where(bag_->what, bag_->format, bag_->topic.name, p.message_offset) + " (" +
+                                bag_->topic.type + "): " + reason};
+    } else if (p.path.empty()) {  // a video or camera frame, checked when read
       if (options_.grey && p.image.channels() != 1)
         cv::cvtColor(p.image, f.image, p.image.channels() == 4 ? cv::COLOR_BGRA2GRAY : cv::COLOR_BGR2GRAY);
       else
@@ -467,6 +481,7 @@ class FrameSource {
   /// report a frame count), before start/end/stride.
   [[nodiscard]] std::optional<std::size_t> total() const noexcept {
     if (kind_ == SourceKind::live) return std::nullopt;
+    if (kind_ == SourceKind::bag) return static_cast<std::size_t>(bag_->topic.messages);
     if (kind_ != SourceKind::video) return entries_.size();
     return video_frames_ > 0 ? std::optional<std::size_t>(video_frames_) : std::nullopt;
   }
@@ -480,6 +495,10 @@ class FrameSource {
   /// rate: frame k at k / fps; empty for a live source or another video.
   [[nodiscard]] std::vector<double> timestamps() const {
     std::vector<double> out;
+    if (kind_ == SourceKind::bag) {
+      for (std::int64_t t : bag_times_ns()) out.push_back(seconds_of(t) + options_.time_offset);
+      return out;
+    }
     if (kind_ == SourceKind::video && video_frames_ > 0 && video_fps_ > 0) {
       // Frame k at k / fps: the times next() reports for a constant-rate video.
       for (std::size_t k = 0; k < video_frames_; ++k) out.push_back(static_cast<double>(k) / video_fps_ + options_.time_offset);
@@ -493,6 +512,11 @@ class FrameSource {
   [[nodiscard]] std::vector<std::int64_t> times_ns() const {
     std::vector<std::int64_t> out;
     const std::int64_t offset = nanoseconds_from_seconds(options_.time_offset);
+    if (kind_ == SourceKind::bag) {
+      out = bag_times_ns();
+      for (auto& t : out) t += offset;
+      return out;
+    }
     if (kind_ == SourceKind::video) {
       for (double t : timestamps()) out.push_back(nanoseconds_from_seconds(t));
       return out;
@@ -501,6 +525,21 @@ class FrameSource {
     for (const auto& e : entries_) out.push_back(e.time_ns + offset);
     return out;
   }
+  /// A bag's container (nullopt for other sources).
+  [[nodiscard]] std::optional<BagFormat> bag_format() const noexcept {
+    return bag_ ? std::optional<BagFormat>(bag_->format) : std::nullopt;
+  }
+  /// The bag topic read (its name, type and message count); nullopt for other sources.
+  [[nodiscard]] std::optional<BagTopic> bag_topic() const {
+    return bag_ ? std::optional<BagTopic>(bag_->topic) : std::nullopt;
+  }
+  /// The calibration of a bag's CameraInfo topic beside the image topic (io/bag/bag.hpp),
+  /// and where it came from; nullopt without one (see camera_note()).
+  [[nodiscard]] const std::optional<BagCamera>& camera() const noexcept { return camera_; }
+  /// Why a bag's CameraInfo topic gives no calibration; empty when it does or there is none.
+  [[nodiscard]] const std::string& camera_note() const noexcept { return camera_note_; }
+  /// Damage found in a bag so far (see FrameSourceOptions::on_warning).
+  [[nodiscard]] const std::vector<std::string>& warnings() const noexcept { return warnings_; }
   /// Image paths of a list, folder, TUM or EuRoC source (empty for a video).
   [[nodiscard]] std::vector<std::filesystem::path> paths() const {
     std::vector<std::filesystem::path> out;
@@ -679,12 +718,124 @@ class FrameSource {
     return std::nullopt;
   }
 
+  /// What a bag source keeps: the message stream and the topic read. Read-only after
+  /// open_bag() except `stream` and `position`, which only claim() uses.
+  struct BagState {
+    std::unique_ptr<detail::MessageStream> stream;
+    BagFormat format = BagFormat::ros1;
+    BagTopic topic;
+    detail::RosMessageKind message = detail::RosMessageKind::image;
+    std::vector<std::uint32_t> connections;
+    std::string what;           ///< "bag 'x.bag'"
+    std::size_t position = 0;   ///< messages of the topic read so far
+    std::size_t warnings_seen = 0;
+  };
+
+  static double seconds_of(std::int64_t ns) noexcept {
+    return ns < 0 ? -seconds_from_nanoseconds(static_cast<std::uint64_t>(-(ns + 1)) + 1) :
+                    seconds_from_nanoseconds(static_cast<std::uint64_t>(ns));
+  }
+
+  void open_bag() {
+    auto b = std::make_unique<BagState>();
+    b->stream = detail::open_message_stream(input_, options_.bag_limits);
+    b->format = b->stream->format();
+    b->what = "bag '" + input_.string() + "'";
+    const auto topics = detail::bag_topics(*b->stream);
+    b->topic = detail::choose_image_topic(topics, options_.topic, b->what);
+    b->message = detail::ros_message_kind(b->topic.type);
+    b->connections = detail::image_connections(*b->stream, b->topic);
+    b->stream->select(b->connections);
+    bag_ = std::move(b);
+    report_bag_warnings();
+    camera_ = detail::read_bag_camera(input_, topics, detail::camera_info_topic_for(bag_->topic.name),
+                                      options_.bag_limits, camera_note_);
+  }
+
+  void report_bag_warnings() {
+    const auto& w = bag_->stream->warnings();
+    for (; bag_->warnings_seen < w.size(); ++bag_->warnings_seen) {
+      warnings_.push_back(w[bag_->warnings_seen]);
+      if (options_.on_warning) options_.on_warning(warnings_.back());
+    }
+  }
+
+  /// The topic's frame times (header stamps or record times), by a pass of their own
+  /// over the bag (a message whose header cannot be read keeps its record time).
+  [[nodiscard]] std::vector<std::int64_t> bag_times_ns() const {
+    std::vector<std::int64_t> out;
+    auto stream = detail::open_message_stream(input_, options_.bag_limits);
+    stream->select(bag_->connections);
+    detail::StreamMessage m;
+    while (stream->next(m)) {
+      std::int64_t t = m.record_ns;
+      if (!options_.record_time) {
+        try {
+          t = detail::message_stamp(bag_->topic.encoding, m.bytes, bag_->what);
+        } catch (const Error&) {
+        }
+      }
+      out.push_back(t);
+    }
+    return out;
+  }
+
+  std::optional<PendingFrame> claim_bag() {
+    BagState& b = *bag_;
+    detail::StreamMessage m;
+    while (next_index_ < options_.end) {
+      const bool more = b.stream->next(m);
+      report_bag_warnings();
+      if (!more) return std::nullopt;
+      const std::size_t idx = b.position++;
+      if (idx < next_index_) continue;  // before start or between strides
+      next_index_ = detail::saturating_add(idx, options_.stride);
+      std::int64_t t = m.record_ns;
+      if (!options_.record_time) {
+        try {
+          t = detail::message_stamp(b.topic.encoding, m.bytes,
+                                    detail::message_where(b.what, b.format, b.topic.name, m.offset));
+        } catch (const Error& e) {
+          record(SkippedFrame{idx, b.topic.name + "@" + std::to_string(m.record_ns), e.what()});
+          continue;
+        }
+      }
+      PendingFrame f;
+      f.index = idx;
+      f.name = b.topic.name + "@" + std::to_string(t);
+      f.timestamp = seconds_of(t);
+      f.time_ns = t;
+      f.message = m.bytes;
+      f.message_owner = std::move(m.owner);
+      f.message_offset = m.offset;
+      return f;
+    }
+    return std::nullopt;
+  }
+
+  /// The image of a claimed bag message, or empty and the reason.
+  [[nodiscard]] cv::Mat decode_bag_image(std::string_view bytes, std::string& reason) const {
+    const detail::ImageBounds bounds{options_.max_pixels, options_.min_side};
+    try {
+      return detail::with_message_reader(bag_->topic.encoding, bytes, "the message", [&](auto& r, bool ros1) {
+        if (bag_->message == detail::RosMessageKind::image)
+          return detail::image_from_raw(detail::read_image_message(r, ros1), options_.grey, bounds, reason);
+        return detail::image_from_compressed(detail::read_compressed_image_message(r, ros1), options_.grey, bounds, reason);
+      });
+    } catch (const Error& e) {
+      reason = e.what();
+    } catch (const cv::Exception& e) {
+      reason = "OpenCV could not convert it: " + e.err;
+    }
+    return {};
+  }
+
   std::optional<PendingFrame> claim_image() {
     if (next_index_ >= options_.end || next_index_ >= entries_.size()) return std::nullopt;
     const std::size_t idx = next_index_;
     next_index_ = detail::saturating_add(next_index_, options_.stride);
     const auto& e = entries_[idx];
-    return PendingFrame{idx, e.path.filename().string(), e.timestamp, e.time_ns, e.path, {}};
+    return PendingFrame{idx, e.path.filename().string(), e.timestamp, e.time_ns, e.path, {}, {}, {}, 0};
   }
 
   [[nodiscard]] std::string size_reason(cv::Size s) const {
@@ -706,6 +857,10 @@ class FrameSource {
   std::size_t delivered_ = 0;
   std::optional<bool> live_capture_clock_;  ///< live input: time frames by the capture (else wall clock)
   std::vector<SkippedFrame> skipped_;
+  std::unique_ptr<BagState> bag_;
+  std::optional<BagCamera> camera_;
+  std::string camera_note_;
+  std::vector<std::string> warnings_;
 };
 
 }  // namespace vmap

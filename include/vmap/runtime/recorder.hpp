@@ -116,18 +116,20 @@ inline RecordResult record(AnyMemory& memory, FrameSource& src, const RecordOpti
 }
 
 /// What a memory records of the input a session was built from: the input's path (made
-/// absolute), its first frame's name (lists and folders) and the stride. A resumed run
-/// reads the same input (record_input refuses another).
+/// absolute), its first frame's name (lists and folders), the stride and, for a bag, the
+/// image topic read. A resumed run reads the same input (the command line refuses another).
 struct RecordedInput {
   std::string input;
   std::string first_frame;
   std::size_t stride = 1;
+  std::string topic{};  ///< a bag's image topic; empty for other inputs
 
   friend bool operator==(const RecordedInput&, const RecordedInput&) = default;
 
   /// "'rgb.txt' (first frame 'a.png', stride 1)": for messages.
   [[nodiscard]] std::string text() const {
-    return "'" + input + "' (first frame '" + first_frame + "', stride " + std::to_string(stride) + ")";
+    return "'" + input + "' (" + (topic.empty() ? std::string() : "topic " + topic + ", ") + "first frame '" +
+           first_frame + "', stride " + std::to_string(stride) + ")";
   }
 };
 
@@ -136,7 +138,9 @@ struct RecordedInput {
   std::error_code ec;
   const auto canonical = std::filesystem::weakly_canonical(input, ec);
   const auto paths = src.paths();
-  return {ec ? input : canonical.string(), paths.empty() ? std::string() : paths.front().filename().string(), stride};
+  const auto topic = src.bag_topic();
+  return {ec ? input : canonical.string(), paths.empty() ? std::string() : paths.front().filename().string(), stride,
+          topic ? topic->name : std::string()};
 }
 
 namespace detail {
@@ -173,10 +177,12 @@ inline std::string json_string(const std::string& s) {
     const auto* input = j.get("input");
     const auto* first = j.get("first_frame");
     const auto* stride = j.get("stride");
+    const auto* topic = j.get("topic");
     if (!input || input->kind != Kind::string) return RecordedInput{*note, {}, 0};
     out.input = input->string;
     if (first && first->kind == Kind::string) out.first_frame = first->string;
     if (stride && stride->kind == Kind::number && stride->number >= 0) out.stride = static_cast<std::size_t>(stride->number);
+    if (topic && topic->kind == Kind::string) out.topic = topic->string;
   } catch (const Error&) {
     return RecordedInput{*note, {}, 0};  // a note another program wrote as plain text
   }
@@ -199,7 +205,8 @@ inline std::string json_string(const std::string& s) {
 inline void set_session_input_of(MemoryStore& store, std::size_t session, const RecordedInput& input) {
   store.set_note(detail::session_input_note(session),
                  "{\"first_frame\":" + detail::json_string(input.first_frame) + ",\"input\":" +
-                     detail::json_string(input.input) + ",\"stride\":" + std::to_string(input.stride) + "}");
+                     detail::json_string(input.input) + ",\"stride\":" + std::to_string(input.stride) +
+                     (input.topic.empty() ? std::string() : ",\"topic\":" + detail::json_string(input.topic)) + "}");
 }
 
 /// Records `input` as the input of the memory's last session (a store's note; a no-op
