@@ -69,30 +69,6 @@ class PyMemory {
   std::thread::id owner_;  ///< the thread inside a call, while one runs
 };
 
-/// The stack of the constructor's keywords: an unknown name or a missing model file is a
-/// vmap.Error naming the keyword.
-PolicyStack stack_of(const std::string& features, int nfeatures, const std::string& model, const std::string& refine_model,
-                     const std::string& estimator, const std::optional<std::string>& camera) {
-  PolicyStack s;
-  s.descriptor = parse<DescriptorKind>(features, "features");
-  s.method = parse<RobustMethod>(estimator, "estimator");
-  s.features = nfeatures;
-  std::error_code ec;
-  const auto absolute = [&](const std::string& path) {
-    if (path.empty()) return path;
-    const auto a = fs::weakly_canonical(path, ec);
-    return ec ? path : a.string();
-  };
-  s.model = absolute(model);
-  s.refine_model = absolute(refine_model);
-  if (camera) {
-    s.camera = read_camera(*camera);
-    s.camera_source = *camera;
-  }
-  s.validate("VisualMemory");
-  return s;
-}
-
 MemoryOptions options_of(double tau, const std::string& rule, const std::string& images, std::size_t vocabulary_after,
                          double min_confidence) {
   MemoryOptions o;
@@ -322,7 +298,7 @@ void bind(py::module_& m) {
                        const std::string& images, const std::optional<std::string>& vocabulary,
                        std::size_t vocabulary_after, double min_confidence) {
              return std::make_unique<PyMemory>(AnyMemory::in_ram(
-                 stack_of(features, nfeatures, model, refine_model, estimator, camera),
+                 policy_stack(features, nfeatures, model, refine_model, estimator, camera),
                  options_of(tau, rule, images, vocabulary_after, min_confidence), vocabulary_of(vocabulary)));
            }),
            py::arg("features") = "orb", py::kw_only(), py::arg("nfeatures") = 1000, py::arg("model") = "",
@@ -342,7 +318,7 @@ void bind(py::module_& m) {
              const std::string& refine_model, const std::string& estimator, const std::optional<std::string>& camera,
              double tau, const std::string& rule, const std::string& images, const std::optional<std::string>& vocabulary,
              std::size_t vocabulary_after, double min_confidence, bool force, std::size_t working_memory) {
-            return create_memory(path, stack_of(features, nfeatures, model, refine_model, estimator, camera),
+            return create_memory(path, policy_stack(features, nfeatures, model, refine_model, estimator, camera),
                                  options_of(tau, rule, images, vocabulary_after, min_confidence), vocabulary_of(vocabulary),
                                  force, working_memory);
           },

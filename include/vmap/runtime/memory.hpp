@@ -281,10 +281,10 @@ class AnyMemory {
   /// A new memory store at `path` (refused when the file exists; its folder made when
   /// missing) of `stack`, with these options and vocabulary (empty: learned from the first
   /// key images). The stack's camera source is kept as the store's note "camera source".
-  [[nodiscard]] static AnyMemory create(const std::filesystem::path& path, const PolicyStack& stack,
+  [[nodiscard]] static AnyMemory create(const std::filesystem::path& path, const PolicyStack& given,
                                         const MemoryOptions& options = {}, AnyVocabulary vocabulary = {},
                                         const MemoryCreateOptions& how = {}) {
-    stack.validate();
+    const PolicyStack stack = recordable(given);
     AnyMemory out;
     out.stack_ = stack;
     if (path.has_parent_path()) {
@@ -308,9 +308,9 @@ class AnyMemory {
   }
 
   /// A memory in RAM (not kept anywhere until saved) of `stack`.
-  [[nodiscard]] static AnyMemory in_ram(const PolicyStack& stack, const MemoryOptions& options = {},
+  [[nodiscard]] static AnyMemory in_ram(const PolicyStack& given, const MemoryOptions& options = {},
                                         AnyVocabulary vocabulary = {}) {
-    stack.validate();
+    const PolicyStack stack = recordable(given);
     AnyMemory out;
     out.stack_ = stack;
     out.kind_ = MemoryKind::other;
@@ -495,6 +495,19 @@ class AnyMemory {
       detail::fail("memory '" + path.string() + "' is not a regular file (a folder, a device or a FIFO)");
     if (memory_kind(path) == MemoryKind::other)
       detail::fail("'" + path.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file)");
+  }
+
+  /// `s` checked, its model files named by absolute paths: the memory records the stack,
+  /// and a reader in another folder must find them.
+  static PolicyStack recordable(PolicyStack s) {
+    s.validate();
+    for (std::string* path : {&s.model, &s.refine_model})
+      if (!path->empty()) {
+        std::error_code ec;
+        const auto absolute = std::filesystem::weakly_canonical(*path, ec);
+        if (!ec) *path = absolute.string();
+      }
+    return s;
   }
 
   static std::string camera_name(const PolicyStack& s) {
