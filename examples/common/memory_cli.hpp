@@ -9,6 +9,7 @@
 
 #include "common/bag_options.hpp"
 #include "common/cli_support.hpp"
+#include "common/policies.hpp"
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/frame_source.hpp>

@@ -13,6 +13,7 @@
 // descriptors) own a reference to the cv::Mat they view, so they are not copied either.
 
 #include <vmap/core/error.hpp>
+#include <vmap/io/frame_source.hpp>
 #include <vmap/runtime/stack.hpp>
 
 #include <pybind11/numpy.h>
@@ -65,6 +66,12 @@ void bind_errors(py::module_& m);
 PolicyStack policy_stack(const std::string& features, int nfeatures, const std::string& model,
                          const std::string& refine_model, const std::string& estimator = "magsac",
                          const std::optional<std::string>& camera = std::nullopt);
+
+/// The frame source options of the keywords vmap.frames and VisualMemory.push_frames read
+/// alike (grey, start, end, stride, resize, time_offset, topic, record_time).
+FrameSourceOptions frame_options(bool grey, std::size_t start, std::optional<std::size_t> end, std::size_t stride,
+                                 std::optional<std::pair<int, int>> resize, double time_offset, const std::string& topic,
+                                 bool record_time);
 
 /// A cv::Mat over `a`'s pixels (see the top of this file); `what` names the argument in
 /// errors ("image"). The array must outlive the Mat (the caller holds it for the call).

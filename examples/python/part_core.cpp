@@ -16,6 +16,22 @@
 #include <string>
 
 namespace vmap::python {
+
+FrameSourceOptions frame_options(bool grey, std::size_t start, std::optional<std::size_t> end, std::size_t stride,
+                                 std::optional<std::pair<int, int>> resize, double time_offset, const std::string& topic,
+                                 bool record_time) {
+  FrameSourceOptions o;
+  o.grey = grey;
+  o.start = start;
+  o.end = end.value_or(std::numeric_limits<std::size_t>::max());
+  o.stride = stride;
+  if (resize) o.resize = cv::Size(resize->first, resize->second);
+  o.time_offset = time_offset;
+  o.topic = topic;
+  o.record_time = record_time;
+  return o;
+}
+
 namespace {
 
 /// The Python iterator over a FrameSource: (image, timestamp, name) per frame.
@@ -23,7 +39,7 @@ class Frames {
  public:
   Frames(const std::string& source, bool grey, std::size_t start, std::optional<std::size_t> end, std::size_t stride,
          std::optional<std::pair<int, int>> resize, double time_offset, const std::string& topic, bool record_time)
-      : source_(FrameSource::open(source, options(grey, start, end, stride, resize, time_offset, topic, record_time))) {}
+      : source_(FrameSource::open(source, frame_options(grey, start, end, stride, resize, time_offset, topic, record_time))) {}
 
   py::tuple next() {
     std::optional<Frame> f;
@@ -38,20 +54,6 @@ class Frames {
   [[nodiscard]] const FrameSource& source() const noexcept { return source_; }
 
  private:
-  static FrameSourceOptions options(bool grey, std::size_t start, std::optional<std::size_t> end, std::size_t stride,
-                                    std::optional<std::pair<int, int>> resize, double time_offset,
-                                    const std::string& topic, bool record_time) {
-    FrameSourceOptions o;
-    o.grey = grey;
-    o.start = start;
-    o.end = end.value_or(std::numeric_limits<std::size_t>::max());
-    o.stride = stride;
-    if (resize) o.resize = cv::Size(resize->first, resize->second);
-    o.time_offset = time_offset;
-    o.topic = topic;
-    o.record_time = record_time;
-    return o;
-  }
 
   FrameSource source_;
 };

@@ -418,9 +418,9 @@ void bind_results(py::module_& m) {
       .def_readonly("query", &DetectedLoop::query, "index of the query frame")
       .def_readonly("match", &DetectedLoop::match, "index of the older frame it closes a loop with")
       .def_readonly("query_name", &DetectedLoop::query_name, "the query frame's file name (its index for a list)")
-      .def_readonly("match_name", &DetectedLoop::match_name)
+      .def_readonly("match_name", &DetectedLoop::match_name, "the older frame's file name (its index for a list)")
       .def_readonly("query_time", &DetectedLoop::query_time, "the query frame's time, seconds")
-      .def_readonly("match_time", &DetectedLoop::match_time)
+      .def_readonly("match_time", &DetectedLoop::match_time, "the older frame's time, seconds")
       .def_readonly("confidence", &DetectedLoop::confidence,
                     "in [0, 1]: 1 - 2^(-significance / half_significance), "
                     "scaled down when the inliers are bunched")
@@ -463,18 +463,23 @@ void bind_results(py::module_& m) {
       .def_property_readonly(
           "second", [](const LoopResult& r) { return optional_index(r.second); },
           "the best other place, if verified, or None")
-      .def_readonly("second_confidence", &LoopResult::second_confidence)
+      .def_readonly("second_confidence", &LoopResult::second_confidence,
+                    "the confidence of the best other place (the ambiguity test compares the two)")
       .def_property_readonly(
           "inliers", [](const LoopResult& r) { return r.evidence.inliers; }, "of the best place")
       .def_property_readonly(
           "matches", [](const LoopResult& r) { return r.evidence.matches; }, "of the best place")
-      .def_property_readonly("inlier_ratio", [](const LoopResult& r) { return r.evidence.inlier_ratio; })
-      .def_property_readonly("significance", [](const LoopResult& r) { return r.evidence.significance; })
-      .def_property_readonly("spread", [](const LoopResult& r) { return r.evidence.spread; })
-      .def_property_readonly("bow_score", [](const LoopResult& r) { return r.evidence.bow_score; })
+      .def_property_readonly("inlier_ratio", [](const LoopResult& r) { return r.evidence.inlier_ratio; }, "inliers / matches")
+      .def_property_readonly("significance", [](const LoopResult& r) { return r.evidence.significance; },
+                             "-log10 of the probability that at least that many inliers come by chance")
+      .def_property_readonly("spread", [](const LoopResult& r) { return r.evidence.spread; },
+                             "the fraction of grid cells holding an inlier (the smaller of the two views)")
+      .def_property_readonly("bow_score", [](const LoopResult& r) { return r.evidence.bow_score; },
+                             "the bag-of-words score of the best place (0 without a vocabulary)")
       .def_readonly("candidates", &LoopResult::candidates, "frames the candidate source proposed")
-      .def_readonly("verifications", &LoopResult::verifications)
-      .def_readonly("failed_verifications", &LoopResult::failed_verifications)
+      .def_readonly("verifications", &LoopResult::verifications, "candidates verified by the F-matrix for this frame")
+      .def_readonly("failed_verifications", &LoopResult::failed_verifications,
+                    "verifications that found no model (too few matches or a degenerate fit)")
       .def_readonly("consistent_queries", &LoopResult::consistent_queries,
                     "earlier queries that agreed (temporal consistency)")
       .def_property_readonly(
@@ -502,16 +507,18 @@ void bind_results(py::module_& m) {
                       "The result of vmap.detect_loops: the loops, every frame's decision and the run's figures.")
       .def_readonly("loops", &LoopRun::loops, "the accepted loops (vmap.Loop), in frame order")
       .def_readonly("decisions", &LoopRun::results, "one vmap.LoopDecision per frame")
-      .def_property_readonly("frames", [](const LoopRun& r) { return r.results.size(); })
+      .def_property_readonly("frames", [](const LoopRun& r) { return r.results.size(); }, "frames the run decided on")
       .def_readonly("names", &LoopRun::names, "per frame: its file name (its index for a list)")
       .def_readonly("times", &LoopRun::times, "per frame: its time in seconds")
       .def_readonly("skipped_frames", &LoopRun::skipped, "unreadable frames (not in the run)")
       .def_property_readonly(
           "rank", [](const LoopRun& r) { return std::string(to_string(r.options.index)); },
           "the candidate source: tree, tree_ranked, bow or all")
-      .def_property_readonly("min_confidence", [](const LoopRun& r) { return r.options.decision.min_confidence; })
-      .def_property_readonly("window", [](const LoopRun& r) { return r.options.window; })
-      .def_readonly("verifications", &LoopRun::verifications)
+      .def_property_readonly("min_confidence", [](const LoopRun& r) { return r.options.decision.min_confidence; },
+                             "the confidence a loop needed")
+      .def_property_readonly("window", [](const LoopRun& r) { return r.options.window; },
+                             "frames just before a query that are never its candidates")
+      .def_readonly("verifications", &LoopRun::verifications, "F-matrix verifications over the whole run")
       .def_readonly("stationary", &LoopRun::stationary, "the camera never left its place: no frame is a revisit")
       .def_readonly("seconds", &LoopRun::seconds, "feature extraction + the detector over the sequence")
       .def_property_readonly(
@@ -538,11 +545,14 @@ void bind_results(py::module_& m) {
       .def_property_readonly(
           "recall", [](const LoopEvaluation& e) { return e.at_threshold.recall; },
           "TP / positives at `threshold` (0 when the ground truth has no loop)")
-      .def_property_readonly("true_positives", [](const LoopEvaluation& e) { return e.at_threshold.true_positives; })
-      .def_property_readonly("false_positives", [](const LoopEvaluation& e) { return e.at_threshold.false_positives; })
-      .def_property_readonly("false_negatives", [](const LoopEvaluation& e) { return e.at_threshold.false_negatives; })
+      .def_property_readonly("true_positives", [](const LoopEvaluation& e) { return e.at_threshold.true_positives; },
+                             "loops accepted that the ground truth has")
+      .def_property_readonly("false_positives", [](const LoopEvaluation& e) { return e.at_threshold.false_positives; },
+                             "loops accepted that the ground truth does not have")
+      .def_property_readonly("false_negatives", [](const LoopEvaluation& e) { return e.at_threshold.false_negatives; },
+                             "query frames with a ground-truth loop and no accepted one")
       .def_readonly("positives", &LoopEvaluation::positives, "query frames with a ground-truth loop")
-      .def_readonly("frames", &LoopEvaluation::frames)
+      .def_readonly("frames", &LoopEvaluation::frames, "query frames evaluated")
       .def_readonly("threshold", &LoopEvaluation::threshold, "the decision threshold precision and recall are taken at")
       .def_property_readonly(
           "recall_at_100_precision", [](const LoopEvaluation& e) { return e.at_full_precision.recall; },
@@ -712,7 +722,8 @@ void bind(py::module_& m) {
            "or vmap.Features made by the same kind of descriptor), with its detections (label, score, x, y, w, h)\n"
            "for the label tree; the frame is then indexed.")
       .def_property_readonly(
-          "frames", [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.frames(); }); })
+          "frames", [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.frames(); }); },
+          "frames pushed so far")
       .def_property_readonly(
           "verifications",
           [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.verifications(); }); },
@@ -738,11 +749,13 @@ void bind(py::module_& m) {
           },
           "the descriptor's name")
       .def_property_readonly(
-          "window", [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.options().window; }); })
+          "window", [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.options().window; }); },
+          "frames just before a query that are never its candidates")
       .def_property_readonly("min_confidence",
                              [](const PyLoopDetector& d) {
                                return d.read([](const AnyLoopDetector& b) { return b.options().decision.min_confidence; });
-                             })
+                             },
+                             "the confidence a loop needs")
       .def("__len__", [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.frames(); }); })
       .def("__repr__", [](const PyLoopDetector& d) {
         return d.read([](const AnyLoopDetector& b) {

@@ -369,14 +369,11 @@ void bind(py::module_& m) {
       .def(
           "push_frames",
           [](PyMemory& self, const std::string& source, bool grey, std::size_t start, std::optional<std::size_t> end,
-             std::size_t stride, const std::optional<std::string>& poses, const py::object& progress,
+             std::size_t stride, std::optional<std::pair<int, int>> resize, double time_offset,
+             const std::optional<std::string>& topic, bool record_time, const std::optional<std::string>& poses, const py::object& progress,
              std::size_t progress_every) {
-            FrameSourceOptions so;
-            so.grey = grey;
-            so.start = start;
-            if (end) so.end = *end;
-            so.stride = stride;
-            auto src = FrameSource::open(source, so);
+            auto src = FrameSource::open(source,
+                                         frame_options(grey, start, end, stride, resize, time_offset, topic.value_or(""), record_time));
             std::optional<FramePoses> frame_poses;
             if (poses) frame_poses.emplace(*poses, src);
             const ProgressHook hook(progress, progress_every);
@@ -393,9 +390,10 @@ void bind(py::module_& m) {
             });
           },
           py::arg("source"), py::kw_only(), py::arg("grey") = true, py::arg("start") = 0, py::arg("end") = py::none(),
-          py::arg("stride") = 1, py::arg("poses") = py::none(), py::arg("progress") = py::none(),
+          py::arg("stride") = 1, py::arg("resize") = py::none(), py::arg("time_offset") = 0.0, py::arg("topic") = py::none(),
+          py::arg("record_time") = false, py::arg("poses") = py::none(), py::arg("progress") = py::none(),
           py::arg("progress_every") = 50,
-          "Pushes every frame of a source (as vmap.frames reads it) in C++, with the frame's pose from a TUM\n"
+          "Pushes every frame of a source (as vmap.frames reads it, with the same keywords) in C++, with the frame's pose from a TUM\n"
           "or KITTI pose file when `poses` is given; progress(frames) is called every progress_every frames\n"
           "with the GIL held (Ctrl-C, or an exception it raises, stops the run there; what was pushed stays).\n"
           "Returns a PushSummary.")

@@ -517,7 +517,7 @@ void bind(py::module_& m) {
       "1 for equal directions, 0 for bags that share no word (or an empty one).");
 
   py::class_<Match>(m, "PlaceMatch", "One result of PlaceDatabase.query: an entry's id and its score; unpacks as (id, score).")
-      .def_readonly("id", &Match::id)
+      .def_readonly("id", &Match::id, "the entry's id (as add() gave it)")
       .def_readonly("score", &Match::score, "in (0, 1], of the database's scoring")
       .def("__iter__", [](const Match& r) { return py::iter(py::make_tuple(r.id, r.score)); })
       .def("__eq__", [](const Match& a, const Match& b) { return a == b; }, py::is_operator())

@@ -45,6 +45,24 @@ def test_push_frame_by_frame_equals_push_frames(sample_list, sample_frames):
     assert a.vocabulary_words > 0
 
 
+def test_push_frames_reads_as_vmap_frames_does(sample_list):
+    # The same keywords as vmap.frames: half-size frames, from frame 10, a time offset.
+    a = vmap.VisualMemory(vocabulary_after=5)
+    for img, t, n in vmap.frames(sample_list, grey=True, start=10, resize=(320, 240), time_offset=2.5):
+        assert img.shape == (240, 320)
+        a.push(img, timestamp=t, name=n)
+    b = vmap.VisualMemory(vocabulary_after=5)
+    summary = b.push_frames(sample_list, start=10, resize=(320, 240), time_offset=2.5)
+    assert summary.pushed == 50 and b.key_images == a.key_images
+    # push_frames keeps the source's frame indices; push() numbers its own frames from 0.
+    assert [f + 10 for f in key_frames(a)] == key_frames(b)
+    assert [k["timestamp"] for k in a.keys] == [k["timestamp"] for k in b.keys]
+    assert [k["name"] for k in a.keys] == [k["name"] for k in b.keys]
+    _, first_time, first_name = next(iter(vmap.frames(sample_list, start=10)))
+    assert b.keys[0]["name"] == first_name
+    assert b.keys[0]["timestamp"] == pytest.approx(first_time + 2.5, abs=1e-9)
+
+
 def test_store_round_trip_and_the_command_line_reads_it(tmp_path, sample_list, sample_frames, vmap_cli):
     path = tmp_path / "run.vmdb"
     with vmap.VisualMemory.create(str(path)) as mem:
@@ -197,7 +215,7 @@ def test_errors_name_the_input(tmp_path, sample_frames):
     mem = vmap.VisualMemory()
     with pytest.raises(vmap.Error, match=r"pose: an array of shape \(2,\)"):
         mem.push(sample_frames[0][0], pose=(1.0, 2.0))
-    with pytest.raises(vmap.Error, match="estimator: unknown name 'best'"):
+    with pytest.raises(vmap.Error, match="estimator: unknown method 'best'"):
         vmap.VisualMemory(estimator="best")
     with pytest.raises(vmap.Error, match="no key image 3"):
         mem.key_features(3)
