@@ -9,6 +9,7 @@
 //
 // Binary descriptors (orb, akaze) give a k-majority tree on Hamming distance, float ones
 // (sift, xfeat) a k-means tree on L2. Progress goes to stderr.
+#include "common/bag_options.hpp"
 #include "common/cli_support.hpp"
 #include "common/policies.hpp"
 #include "common/vocabulary_cli.hpp"
@@ -68,7 +69,7 @@ int run(const VocabularyArgs& a) {
         if (!progress) progress.emplace("vmap vocabulary: features", n);
         progress->update(done);
       },
-      ex::reporting_skips());
+      ex::with_bag_options(a.input, ex::reporting_skips()));
   if (progress) progress->done();
   std::size_t descriptors = 0;
   for (const auto& f : features.frames) descriptors += f.size();
@@ -88,7 +89,8 @@ int run(const VocabularyArgs& a) {
 
 std::function<int()> setup(CLI::App& app) {
   auto a = std::make_shared<VocabularyArgs>();
-  app.add_option("FRAMES", a->input, "Frames: image folder, list file, video or TUM rgb.txt");
+  app.add_option("FRAMES", a->input, "Frames: image folder, list file, video, TUM rgb.txt or a bag");
+  ex::add_bag_options(app);
   app.add_option("--out", a->out, "The vocabulary file to write");
   ex::add_vocabulary_options(app, a->learning, "");
   app.add_option("--seed", a->learning.seed, "Seed of the sample and the clustering")->capture_default_str();

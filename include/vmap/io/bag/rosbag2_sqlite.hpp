@@ -214,9 +214,6 @@ class Rosbag2Sqlite final : public MessageStream {
   static sqlite::Database open_db(const std::filesystem::path& file) {
     sqlite::Database db(file, sqlite::Access::read, "bag '" + file.string() + "'");
     db.exec("PRAGMA writable_schema=ON", "read it");
-    // Pages read through a memory map rather than copied into SQLite's page cache first:
-    // a message's blob spans several overflow pages.
-    db.exec("PRAGMA mmap_size=1073741824", "map it");
     return db;
   }
 
