@@ -163,9 +163,14 @@ inline void check_continuable(const std::filesystem::path& file, const CLI::App&
 }
 
 /// --resume of a memory whose last session was built from another input (path, first
-/// frame or stride) is refused with both named; a store without the record (written by
+/// frame or stride), or from a list or folder whose frames changed since, is refused
+/// with both named; a store without the record (written by
 /// the library, or converted) takes this run's.
-inline void check_same_input(AnyMemory& memory, const RecordedInput& input) {
+inline void check_same_input(AnyMemory& memory, const RecordedInput& input, const FrameSource& src) {
+  if (const auto why = changed_input(memory, src))
+    usage_error("--resume: the input '" + input.input + "' changed since the memory '" + memory.path().string() +
+                "' read it: " + *why + ". Give --session new to add this run as a new session, or start another "
+                "memory");
   const auto recorded = session_input(memory, memory.sessions().size() - 1);
   if (!recorded) {
     set_session_input(memory, input);

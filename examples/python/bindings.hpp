@@ -77,6 +77,11 @@ FrameSourceOptions frame_options(bool grey, std::size_t start, std::optional<std
 /// errors ("image"). The array must outlive the Mat (the caller holds it for the call).
 cv::Mat image_view(const py::array& a, const std::string& what);
 
+/// image_view's pixels in a buffer of their own: for the calls that release the GIL
+/// while they read the image, since another thread may then resize or free the array
+/// (NumPy's resize(refcheck=False) moves the buffer under any view of it).
+cv::Mat image_copy(const py::array& a, const std::string& what);
+
 /// An array viewing `m` without copying it: the array holds a reference to m's buffer.
 /// 2-D for one channel, 3-D (H x W x C) otherwise; uint8, uint16, int32, float32 or float64.
 py::array to_array(const cv::Mat& m);

@@ -74,6 +74,11 @@ cv::Mat image_view(const py::array& a, const std::string& what) {
       .clone();
 }
 
+cv::Mat image_copy(const py::array& a, const std::string& what) {
+  cv::Mat m = image_view(a, what);
+  return m.data == a.data() ? m.clone() : m;
+}
+
 py::array to_array(const cv::Mat& m) {
   py::dtype dtype;
   switch (m.depth()) {

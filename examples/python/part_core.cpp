@@ -95,7 +95,7 @@ class PyDescriptor {
         descriptor_(with_descriptor(stack_, [](auto d) { return AnyDescriptor(std::move(d)); })) {}
 
   Features extract(const py::array& image) {
-    const cv::Mat view = image_view(image, "image");
+    const cv::Mat view = image_copy(image, "image");
     py::gil_scoped_release unlocked;
     return descriptor_.extract(view);
   }

@@ -55,7 +55,7 @@ class PySelector {
   FrameResult push(const py::array& image, std::optional<double> timestamp, std::optional<std::string> name) {
     const Claim claim(owner_);
     Frame f;
-    f.image = image_view(image, "image");
+    f.image = image_copy(image, "image");
     // Numbered after the last frame pushed, as the library numbers a bare image.
     f.index = last_index_ ? *last_index_ + 1 : 0;
     f.timestamp = timestamp.value_or(static_cast<double>(f.index));
@@ -63,8 +63,6 @@ class PySelector {
     FrameResult r;
     {
       const py::gil_scoped_release unlocked;
-      // A kept key image must not alias the caller's array, which may change or go.
-      if (selector_.options().keep_images) f.image = f.image.clone();
       r = selector_.push(f);
     }
     last_index_ = f.index;

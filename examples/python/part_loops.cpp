@@ -253,7 +253,7 @@ class PyLoopDetector {
     }
     if (!py::isinstance<py::array>(frame))
       fail("add: an image (NumPy array) or vmap.Features, got " + std::string(py::repr(frame)));
-    const cv::Mat view = image_view(frame.cast<py::array>(), "image");
+    const cv::Mat view = image_copy(frame.cast<py::array>(), "image");
     py::gil_scoped_release unlocked;
     const std::lock_guard<std::mutex> one_at_a_time(mutex_);
     return detector_.push(view, found);

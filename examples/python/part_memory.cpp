@@ -18,6 +18,7 @@
 #include <vmap/runtime/recorder.hpp>
 #include <vmap/runtime/stack.hpp>
 
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
@@ -56,8 +57,8 @@ class PyMemory {
     const py::gil_scoped_release unlocked;
     const std::lock_guard lock(mutex_);
     struct Owner {
-      std::thread::id& id;
-      explicit Owner(std::thread::id& i) : id(i) { id = std::this_thread::get_id(); }
+      std::atomic<std::thread::id>& id;
+      explicit Owner(std::atomic<std::thread::id>& i) : id(i) { id = std::this_thread::get_id(); }
       ~Owner() { id = std::thread::id(); }
     } owner(owner_);
     return f(memory_);
@@ -66,7 +67,8 @@ class PyMemory {
  private:
   AnyMemory memory_;
   std::mutex mutex_;
-  std::thread::id owner_;  ///< the thread inside a call, while one runs
+  /// The thread inside a call, while one runs (read by other threads: atomic).
+  std::atomic<std::thread::id> owner_{};
 };
 
 MemoryOptions options_of(double tau, const std::string& rule, const std::string& images, std::size_t vocabulary_after,
@@ -117,7 +119,13 @@ OdometryPose pose_of(const py::object& pose) {
   if (pose.is_none()) return {};
   const auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(pose);
   if (!a) fail("pose: expected None, (x, y, theta) or a 4 x 4 / 3 x 4 matrix [R | t]");
-  if (a.ndim() == 1 && a.shape(0) == 3) return Pose2(a.at(0), a.at(1), a.at(2));
+  if (a.ndim() == 1 && a.shape(0) == 3) {
+    try {
+      return Pose2(a.at(0), a.at(1), a.at(2));
+    } catch (const Error& e) {
+      fail(std::string("pose: ") + e.what());
+    }
+  }
   if (a.ndim() == 2 && (a.shape(0) == 3 || a.shape(0) == 4) && a.shape(1) == 4) {
     cv::Matx33d R;
     cv::Vec3d t;
@@ -349,7 +357,7 @@ void bind(py::module_& m) {
           "push",
           [](PyMemory& self, const py::array& image, std::optional<double> timestamp,
              const std::optional<std::string>& name, const py::object& pose) {
-            const cv::Mat view = image_view(image, "image");
+            const cv::Mat view = image_copy(image, "image");
             const OdometryPose p = pose_of(pose);
             return self.locked([&](AnyMemory& mem) {
               Frame f;
@@ -384,6 +392,7 @@ void bind(py::module_& m) {
               if (frame_poses) o.poses = [&](const Frame& f) { return (*frame_poses)(f); };
               std::size_t pushed = 0;
               o.on_frame = [&](const AnyMemory&) { hook(++pushed); };
+              o.number_after_pushed = true;
               RecordResult r = record(mem, src, o);
               return PushSummary{r.pushed, mem.key_images() - keys_before, std::move(r.loops),
                                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()};
@@ -400,7 +409,7 @@ void bind(py::module_& m) {
       .def(
           "localize",
           [](PyMemory& self, const py::array& image, std::optional<double> min_confidence) {
-            const cv::Mat view = image_view(image, "image");
+            const cv::Mat view = image_copy(image, "image");
             return self.locked([&](AnyMemory& mem) {
               PlaceDecisionOptions d = mem.options().loops.decision;
               if (min_confidence) d.min_confidence = *min_confidence;

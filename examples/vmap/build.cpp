@@ -355,7 +355,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   const vmap::RecordedInput input = vmap::recorded_input(a.input, src, so.stride);
   if (continued) {
     if (args.resume) {
-      ex::check_same_input(*mem, input);
+      ex::check_same_input(*mem, input, src);
       ex::check_frames_left(*mem, src, so);
     } else {
       vmap::set_session_input(*mem, input);

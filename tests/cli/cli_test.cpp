@@ -460,6 +460,40 @@ TEST_CASE("cli: build --memory errors: mixed options, --resume without a memory,
   CHECK(std::count(bad.err.begin(), bad.err.end(), '\n') == 1);
 }
 
+TEST_CASE("cli: --resume of a list whose frames changed since (same path, first frame and stride) is refused") {
+  const fs::path dir = work_dir() / "resume_changed";
+  fs::create_directories(dir);
+  // The first 30 frames of the sample list, listed with absolute paths.
+  const fs::path rgb = fs::path(VMAP_TEST_SOURCE_DIR) / "examples/data/tum_fr1_rpy_60/rgb";
+  std::vector<fs::path> frames;
+  for (const auto& e : fs::directory_iterator(rgb)) frames.push_back(e.path());
+  std::sort(frames.begin(), frames.end());
+  const auto list_of = [&](std::size_t first, std::size_t n, std::size_t skip_from) {
+    std::string text;
+    for (std::size_t i = first, k = 0; k < n; ++i)
+      if (i < skip_from || i % 2 == 0) {
+        text += frames[i].string() + "\n";
+        ++k;
+      }
+    return text;
+  };
+  const fs::path list = dir / "frames.txt", mem = dir / "m.vmdb";
+  write(list, list_of(0, 30, 60));
+  REQUIRE(run_vmap({"build", list.string(), "--memory", mem.string(), "--end", "20"}).code == 0);
+  // The same first frame, the later frames every other one: the last key image's frame
+  // is another image now.
+  write(list, list_of(0, 30, 2));
+  usage_error({"build", list.string(), "--memory", mem.string(), "--resume"},
+              "--resume: the input '" + fs::weakly_canonical(list).string() + "' changed since the memory '" +
+                  mem.string() + "' read it: its frame ");
+  // Shorter than the memory's frames.
+  write(list, list_of(0, 12, 60));
+  usage_error({"build", list.string(), "--memory", mem.string(), "--resume"}, "it now has 12 frames");
+  // As it was: the run resumes.
+  write(list, list_of(0, 30, 60));
+  CHECK(run_vmap({"build", list.string(), "--memory", mem.string(), "--resume"}).code == 0);
+}
+
 TEST_CASE("cli: localize --memory answers every query with its place decision; --json lists every answer") {
   const auto& [file, built] = sample_memory();
   const auto keys = built["key_frames"].get<std::vector<std::size_t>>();

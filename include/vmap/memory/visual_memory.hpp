@@ -155,8 +155,8 @@ class VisualMemory {
     return push(frame, pose, detector.detect(frame.image));
   }
 
-  /// Pushes a bare image: its index is the number of frames pushed so far; the timestamp
-  /// defaults to that index.
+  /// Pushes a bare image: numbered after the last frame pushed (0 for the first); the
+  /// timestamp defaults to that number.
   MemoryStep push(const cv::Mat& image, std::optional<double> timestamp = {},
                   const OdometryPose& pose = detail::no_odometry_pose) {
     return push_frame(bare_frame(image, timestamp), pose, nullptr);
@@ -443,7 +443,7 @@ class VisualMemory {
   }
 
   Frame bare_frame(const cv::Mat& image, std::optional<double> timestamp) const {
-    return bare_frame(image, timestamp, frames());
+    return bare_frame(image, timestamp, last_index_ ? *last_index_ + 1 : 0);
   }
 
   MemoryStep push_frame(const Frame& frame, const OdometryPose& pose, const std::vector<Detection>* detections);

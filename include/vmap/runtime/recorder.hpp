@@ -75,6 +75,13 @@ struct RecordOptions {
   std::function<OdometryPose(const Frame&)> poses{};
   /// Called after each frame pushed, with the memory (e.g. for progress).
   std::function<void(const AnyMemory&)> on_frame{};
+  /// Numbers the frames after the last one the memory's current session holds (the
+  /// source's indices shifted by one offset, so its gaps stay): a second run into the
+  /// same session, or one that starts earlier in its source, then continues the session
+  /// instead of being refused for indices that go backwards. Off, frames keep the
+  /// source's indices, which line up with its ground truth (--resume reads on after the
+  /// last frame instead).
+  bool number_after_pushed = false;
 };
 
 /// What record() did.
@@ -95,8 +102,18 @@ inline RecordResult record(AnyMemory& memory, FrameSource& src, const RecordOpti
   using clock = std::chrono::steady_clock;
   RecordResult r;
   const auto seconds = [](clock::time_point t0) { return std::chrono::duration<double>(clock::now() - t0).count(); };
+  std::optional<std::size_t> shift;
   while (auto f = src.next()) {
     const OdometryPose pose = options.poses ? options.poses(*f) : OdometryPose{};
+    if (options.number_after_pushed) {
+      if (!shift) {
+        const auto& sessions = memory.sessions();
+        const bool fresh = sessions.empty() || sessions.back().first_frame == memory.frames();
+        const auto last = fresh ? std::nullopt : memory.last_frame_index();
+        shift = last && f->index <= *last ? *last + 1 - f->index : 0;
+      }
+      f->index += *shift;
+    }
     const auto t0 = clock::now();
     const std::size_t before = memory.syncs();
     const double synced_before = memory.sync_seconds();
@@ -141,6 +158,28 @@ struct RecordedInput {
   const auto topic = src.bag_topic();
   return {ec ? input : canonical.string(), paths.empty() ? std::string() : paths.front().filename().string(), stride,
           topic ? topic->name : std::string()};
+}
+
+/// For a run that resumes `memory` from `src`: why the source no longer holds the frames
+/// the memory read, or nullopt when it does (or cannot tell: a video, bag or camera has
+/// no names by index). The memory's last key image is compared, by name, with the frame
+/// the source now has at its index, so a list or folder edited since the run stopped
+/// (same path, first frame and stride, other frames later) is caught before its frames
+/// are numbered as if they followed the memory's.
+[[nodiscard]] inline std::optional<std::string> changed_input(const AnyMemory& memory, const FrameSource& src) {
+  const auto& keys = memory.map().keys;
+  if (keys.empty()) return std::nullopt;
+  const auto paths = src.paths();
+  if (paths.empty()) return std::nullopt;
+  const KeyImage& last = keys.back();
+  if (last.frame_index >= paths.size())
+    return "it now has " + std::to_string(paths.size()) + " frames, but the memory's key image '" + last.name +
+           "' is frame " + std::to_string(last.frame_index);
+  const std::string now = paths[last.frame_index].filename().string();
+  if (now != last.name)
+    return "its frame " + std::to_string(last.frame_index) + " is now '" + now + "', but the memory made key image '" +
+           last.name + "' from it";
+  return std::nullopt;
 }
 
 namespace detail {

@@ -1,7 +1,8 @@
 // Regressions of the memory's options, merge, push and answers: options a memory saves
 // are the options it loads (one check for both), merge compares every option, a push
 // that throws leaves the memory as it was, loop edges and answers name their model and
-// carry every verified candidate's figures.
+// carry every verified candidate's figures, and values a memory could not keep are refused
+// where they enter.
 #include "support/errors.hpp"
 #include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
@@ -13,6 +14,7 @@
 
 #include <doctest/doctest.h>
 
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -157,4 +159,71 @@ TEST_CASE("localization and loop edges: every verified candidate's figures and t
   CHECK(answered > 0);
   CHECK(!e.loops().empty());
   for (const auto& edge : e.loops()) CHECK(edge.link.model_kind == vmap::PlaceModel::essential);
+}
+
+TEST_CASE("memory push: a value the memory could not keep is refused where it enters, naming it") {
+  const auto o = small_memory_options();
+  auto mem = make_small_memory(o);
+  for (std::size_t i = 0; i < 10; ++i) mem.push(sample_frames()[i]);
+  const std::string before = mem.serialize();
+  const vmap::Frame& next = sample_frames()[10];
+  const auto refused = [&](vmap::Frame f, const vmap::OdometryPose& pose = {}) {
+    const std::string why = error_of([&] { mem.push(f, pose); });
+    CHECK(mem.serialize() == before);  // nothing changed
+    return why;
+  };
+  const std::string at = "VisualMemory::push: frame 10 ('" + next.name + "'): ";
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+
+  cv::Matx44d m = cv::Matx44d::eye();
+  m(0, 3) = nan;
+  CHECK(refused(next, cv::Affine3d(m)) == at + "the SE(3) pose is not finite");
+  m = cv::Matx44d::eye();
+  m(0, 0) = 2.0;  // a scaling, not a rotation
+  CHECK(refused(next, cv::Affine3d(m)).starts_with(at + "the SE(3) pose's 3x3 part is not a rotation (R^T R differs from I by 3"));
+  m = cv::Matx44d::eye();
+  m(2, 2) = -1.0;  // a reflection: orthonormal, det -1
+  CHECK(refused(next, cv::Affine3d(m)).find("det -1") != std::string::npos);
+
+  vmap::Frame f = next;
+  f.timestamp = inf;
+  CHECK(refused(f) == at + "the timestamp is not finite");
+  f.timestamp = nan;
+  CHECK(refused(f) == at + "the timestamp is not finite");
+  f = next;
+  f.name = std::string(5000, 'x');
+  CHECK(refused(f) == "VisualMemory::push: frame 10: the name is 5000 bytes long, more than the 4096 a memory keeps");
+  f.name = std::string("a\0b", 3);
+  CHECK(refused(f) == "VisualMemory::push: frame 10: the name holds a NUL character");
+  f = next;
+  f.index = 9;
+  CHECK(refused(f) == "VisualMemory::push: frame 9 ('" + next.name +
+                          "'): frame indices must increase within a session (the last frame pushed is 9; "
+                          "start_session() begins a new run)");
+  f.index = 5;
+  CHECK(refused(f).find("frame indices must increase") != std::string::npos);
+  f = next;
+  f.image = cv::Mat(1, (1 << 26) + 1, CV_8UC1, cv::Scalar(0));
+  CHECK(refused(f) == at + "the image has 67108865x1 pixels, more than the limit of 67108864");
+  f.image = cv::Mat();
+  CHECK(refused(f) == at + "the image is empty");
+
+  // A real rotation (30 degrees about z, as a text file's 7 digits give it) is taken.
+  const double c = 0.8660254, s = 0.5;
+  const cv::Affine3d turned(cv::Matx33d(c, -s, 0, s, c, 0, 0, 0, 1), cv::Vec3d(1, 2, 3));
+  mem.push(next, turned);
+  CHECK(mem.frames() == 11);
+  // A new session numbers its frames from wherever its run starts.
+  mem.start_session();
+  mem.push(sample_frames()[0]);
+  CHECK(mem.last_frame_index() == 0);
+  // A bare image follows the last frame pushed.
+  mem.push(sample_frames()[1].image);
+  CHECK(mem.last_frame_index() == 1);
+  // Every refused value left a memory that saves and loads.
+  const auto back = vmap::OrbVisualMemory::deserialize(mem.serialize(), "m.vmem", vmap::OrbDescriptor{},
+                                                       vmap::BruteForceMatcher{}, memory_estimator());
+  CHECK(back.frames() == 13);
+  CHECK(back.sessions().size() == 2);
 }

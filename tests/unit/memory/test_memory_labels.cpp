@@ -306,7 +306,11 @@ TEST_CASE("memory files v2: policies' options are checked on load; version 1 fil
   const auto reread = from_bytes(again, "again.vmem");
   CHECK(reread.map().key_indices() == old.map().key_indices());
   CHECK(reread.serialize() == again);
-  for (std::size_t i = 0; i < 10; ++i) old.push(frames[i]);
+  for (std::size_t i = 0; i < 10; ++i) {
+    vmap::Frame f = frames[i];
+    f.index = *old.last_frame_index() + 1;  // pushing on continues the file's run
+    old.push(f);
+  }
   CHECK(old.frames() == 10 + v1_any.frames());
 }
 

@@ -273,11 +273,15 @@ TEST_CASE("sessions: merging two memories equals building both runs into one; ot
   for (const auto& f : run2()) b.push(f);
   a.merge(std::move(b), "A", "B");
   CHECK(a.serialize() == whole.serialize());
-  // Pushing on continues the second run as the built memory would.
+  // Pushing on continues the second run as the built memory would (its frames numbered
+  // after the run's last: indices increase within a session).
   auto built = reload(whole);
+  REQUIRE(a.last_frame_index() == built.last_frame_index());
   for (std::size_t i = 0; i < 6; ++i) {
-    a.push(frames()[i]);
-    built.push(frames()[i]);
+    vmap::Frame f = frames()[i];
+    f.index = *a.last_frame_index() + 1;
+    a.push(f);
+    built.push(f);
   }
   CHECK(a.serialize() == built.serialize());
 

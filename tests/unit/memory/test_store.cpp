@@ -533,3 +533,42 @@ TEST_CASE("store: files that are not stores, other versions and damaged rows are
     CHECK(e != "no error");
   }
 }
+
+TEST_CASE("store: every row is checked: a flipped bit, a column that differs from its record, a loop row gone or twice") {
+  auto memory = make(options(vmap::ImageStorage::none));
+  for (std::size_t i = 0; i < 20; ++i) memory.push(frames()[i]);
+  memory.start_session();
+  for (std::size_t i = 0; i < 20; ++i) memory.push(frames()[i]);
+  REQUIRE(memory.loops().size() >= 2);
+  const fs::path file = fresh("rows.vmdb");
+  {
+    auto store = vmap::MemoryStore::create(file);
+    store.sync(memory);
+  }
+  const auto error_after = [&](const std::string& damage) {
+    const fs::path copy = fresh("rows_copy.vmdb");
+    fs::copy_file(file, copy);
+    raw_sql(copy, damage);
+    auto store = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read);
+    const std::string e = error_of([&] { (void)load(store); });
+    const std::string who = "memory '" + copy.string() + "' is corrupt: ";
+    REQUIRE(e.starts_with(who));
+    return e.substr(who.size());
+  };
+  // One bit of a key image's record (its pose or features): the row's CRC-32.
+  CHECK(error_after("UPDATE key_images SET record = CAST(substr(record, 1, 60) || CASE WHEN substr(record, 61, 1) = "
+                    "x'00' THEN x'01' ELSE x'00' END || substr(record, 62) AS BLOB) WHERE id = 3") ==
+        "the checksum of key image 3 does not match");
+  // The plain columns SQL readers see are compared with the record they repeat.
+  for (const char* column : {"frame_index = frame_index + 1", "timestamp = timestamp + 1", "time_ns = time_ns + 1",
+                             "name = 'other.png'"})
+    CHECK(error_after(std::string("UPDATE key_images SET ") + column + " WHERE id = 5") ==
+          "the columns of key image 5 do not match its record");
+  // Loop rows against the count the state records.
+  const std::string loops = std::to_string(memory.loops().size());
+  CHECK(error_after("DELETE FROM loops WHERE id = (SELECT max(id) FROM loops)").find(
+            std::to_string(memory.loops().size() - 1) + " loop edges") != std::string::npos);
+  CHECK(error_after("INSERT INTO loops SELECT id + 1000, from_key, to_key, inliers, confidence, record, crc FROM loops "
+                    "WHERE id = (SELECT max(id) FROM loops)") ==
+        "loop edge " + std::to_string(memory.loops().size() - 1 + 1000) + " where " + loops + " was expected");
+}

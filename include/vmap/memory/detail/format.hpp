@@ -20,9 +20,11 @@
 #include <opencv2/core/affine.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <variant>
@@ -157,6 +159,56 @@ inline void memory_write_pose(BinaryWriter& w, const OdometryPose& p) {
     for (int i = 0; i < 12; ++i) w.f64(p3->matrix.val[i]);
   } else {
     w.u8(0);
+  }
+}
+
+/// Largest deviation of an SE(3) pose's rotation from orthonormal (max |R^T R - I|)
+/// that a push accepts: poses read from text files keep 6-7 digits (KITTI's files give
+/// deviations near 1e-6), while anything else is not a rotation.
+inline constexpr double memory_rotation_tolerance = 1e-4;
+
+/// Checks a frame and its pose as they enter a memory, before anything changes: every
+/// value a push accepts is one the memory writes and reads back, so a bad value is an
+/// Error naming it here instead of a sync that fails, or a memory that no longer opens,
+/// later. `last_in_session` is the last frame index pushed into the current session.
+/// (A Frame's fields, io/frame_source.hpp, given one by one: this header stays light.)
+struct PushedFrame {
+  const cv::Mat& image;
+  std::size_t index;
+  const std::string& name;
+  double timestamp;
+};
+inline void check_pushed_frame(const PushedFrame& f, const OdometryPose& pose,
+                               std::optional<std::size_t> last_in_session) {
+  const auto fail_with = [&](const std::string& what) {
+    const bool named = !f.name.empty() && f.name.size() <= 256 && f.name.find('\0') == std::string::npos;
+    fail("VisualMemory::push: frame " + std::to_string(f.index) + (named ? " ('" + f.name + "')" : std::string()) +
+         ": " + what);
+  };
+  if (f.image.empty()) fail_with("the image is empty");
+  if (static_cast<std::uint64_t>(f.image.total()) > default_max_image_pixels)
+    fail_with("the image has " + std::to_string(f.image.cols) + "x" + std::to_string(f.image.rows) +
+              " pixels, more than the limit of " + std::to_string(default_max_image_pixels));
+  if (f.index > memory_max_frames) fail_with("the frame index is above 2^40");
+  if (last_in_session && f.index <= *last_in_session)
+    fail_with("frame indices must increase within a session (the last frame pushed is " +
+              std::to_string(*last_in_session) + "; start_session() begins a new run)");
+  if (!std::isfinite(f.timestamp)) fail_with("the timestamp is not finite");
+  if (f.name.size() > map_max_string)
+    fail_with("the name is " + std::to_string(f.name.size()) + " bytes long, more than the " +
+              std::to_string(map_max_string) + " a memory keeps");
+  if (f.name.find('\0') != std::string::npos) fail_with("the name holds a NUL character");
+  // (A Pose2 is finite by construction.)
+  if (const auto* p3 = std::get_if<cv::Affine3d>(&pose)) {
+    for (int i = 0; i < 12; ++i)
+      if (!std::isfinite(p3->matrix.val[i])) fail_with("the SE(3) pose is not finite");
+    const cv::Matx33d R = p3->rotation();
+    const cv::Matx33d e = R.t() * R - cv::Matx33d::eye();
+    double worst = 0.0;
+    for (int i = 0; i < 9; ++i) worst = std::max(worst, std::abs(e.val[i]));
+    if (worst > memory_rotation_tolerance || cv::determinant(R) <= 0.0)
+      fail_with("the SE(3) pose's 3x3 part is not a rotation (R^T R differs from I by " + std::to_string(worst) +
+                ", det " + std::to_string(cv::determinant(R)) + ")");
   }
 }
 

@@ -356,7 +356,8 @@ MemoryStep VisualMemory<D, M, E, S>::push_frame(const Frame& frame, const Odomet
                    (with ? " comes with detections, but the memory's frames had none"
                          : " comes without detections, but the memory's frames had them (give an empty list when "
                            "nothing was detected)"));
-    // Scores are checked before anything changes, so a bad detection leaves the memory as it was.
+    // Values are checked before anything changes, so a bad one leaves the memory as it was.
+    detail::check_pushed_frame({frame.image, frame.index, frame.name, frame.timestamp}, pose, sessions_.back().first_frame == frames() ? std::nullopt : last_index_);
     if (with) (void)present_labels(*detections, options_.loops.labels.min_score);
     PushCheckpoint mark = checkpoint();
     try {
