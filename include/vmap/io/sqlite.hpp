@@ -13,7 +13,9 @@
 // the file, whichever process it is in. flock and SQLite's own POSIX locks do not
 // interact on Linux; the descriptor holding the flock stays open until after SQLite
 // closed the file, so SQLite's locks are never dropped by a close() of ours. Readers
-// (Access::read) take no lock and see the last committed transaction.
+// (Access::read) take no lock and see the last committed transaction; where they cannot
+// create SQLite's index file beside the database (read-only media), they read it as
+// immutable, which nothing can then change either.
 //
 // Threads: a Database and the Statements prepared on it may be used from any thread, by
 // one thread at a time. The connection is opened with SQLITE_OPEN_NOMUTEX (SQLite's
@@ -29,6 +31,7 @@
 #include <sys/file.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
@@ -39,6 +42,41 @@
 #include <utility>
 
 namespace vmap::sqlite {
+
+namespace detail {
+
+/// SQLite's message for the last error on `db`, with what to do where SQLite's own words
+/// do not say it.
+[[nodiscard]] inline std::string message_of(sqlite3* db) {
+  std::string why = db ? sqlite3_errmsg(db) : "not open";
+  if (db && sqlite3_extended_errcode(db) == SQLITE_READONLY_ROLLBACK) {
+    const char* file = sqlite3_db_filename(db, "main");
+    const std::string name = file && *file ? file : "the database";
+    why += " (a rollback journal '" + name + "-journal' lies beside it, left by a program that stopped while "
+           "writing the file without a write-ahead log, and only a writer may roll it back: open the memory once "
+           "to write, e.g. sqlite3 '" + name + "' 'PRAGMA quick_check', or remove the journal if it is not this file's)";
+  }
+  return why;
+}
+
+/// `path` as an SQLite URI ("file:" and the path, bytes other than letters, digits and
+/// "/._-~" escaped as %HH), for the query parameters a plain file name cannot carry.
+[[nodiscard]] inline std::string uri_of(const std::filesystem::path& path, std::string_view query) {
+  static constexpr char hex[] = "0123456789ABCDEF";
+  std::string out = "file:";
+  for (const unsigned char c : path.string()) {
+    if (std::isalnum(c) || c == '/' || c == '.' || c == '_' || c == '-' || c == '~') {
+      out += static_cast<char>(c);
+    } else {
+      out += '%';
+      out += hex[c >> 4];
+      out += hex[c & 15];
+    }
+  }
+  return out + "?" + std::string(query);
+}
+
+}  // namespace detail
 
 enum class Access : std::uint8_t {
   read,   ///< an existing database, read-only; any number at once, also while one writes
@@ -61,12 +99,29 @@ class Database {
     if (access != Access::create && !exists) fail("does not exist");
     if (exists && !std::filesystem::is_regular_file(path, ec)) fail("is not a regular file");
     if (access != Access::read) lock(path, access == Access::create);
-    const int flags = access == Access::read ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE;
+    int flags = access == Access::read ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE;
+    std::string name = path.string();
+    if (access == Access::read && !folder_writable(path)) {
+      // A reader of a write-ahead-log database keeps its index in FILE-shm, which SQLite
+      // creates beside the file; where nothing can be created (read-only media, another
+      // user's folder) and no writer has left a log to apply, nothing can change the file
+      // either, so it is read as immutable. A log left there would be ignored: refused.
+      std::error_code e;
+      const auto wal = std::filesystem::path(name + "-wal");
+      const auto shm = std::filesystem::path(name + "-shm");
+      if (std::filesystem::exists(wal, e) && std::filesystem::file_size(wal, e) > 0 && !e)
+        fail("has a write-ahead log '" + wal.string() + "' to apply, but its folder cannot be written: copy the " +
+             "file and its -wal file into a folder that can, and read the copy");
+      if (!std::filesystem::exists(shm, e)) {
+        name = detail::uri_of(path, "immutable=1");
+        flags |= SQLITE_OPEN_URI;
+      }
+    }
     sqlite3* db = nullptr;
-    const int rc = sqlite3_open_v2(path.c_str(), &db, flags | SQLITE_OPEN_NOMUTEX, nullptr);
+    const int rc = sqlite3_open_v2(name.c_str(), &db, flags | SQLITE_OPEN_NOMUTEX, nullptr);
     db_ = db;
     if (rc != SQLITE_OK) {
-      const std::string why = db ? sqlite3_errmsg(db) : sqlite3_errstr(rc);
+      const std::string why = db ? detail::message_of(db) : sqlite3_errstr(rc);
       close();
       fail("cannot be opened: " + why);
     }
@@ -103,7 +158,9 @@ class Database {
     char* message = nullptr;
     const int rc = sqlite3_exec(db_, sql.c_str(), nullptr, nullptr, &message);
     if (rc != SQLITE_OK) {
-      const std::string why = message ? message : sqlite3_errstr(rc);
+      const std::string why = sqlite3_extended_errcode(db_) == SQLITE_READONLY_ROLLBACK ? detail::message_of(db_)
+                              : message                                               ? message
+                                                                                      : sqlite3_errstr(rc);
       sqlite3_free(message);
       fail(std::string(doing) + ": " + why);
     }
@@ -114,13 +171,20 @@ class Database {
 
   /// An Error "<what> <doing>: <SQLite's message>".
   [[noreturn]] void fail_sqlite(std::string_view doing) const {
-    fail(std::string(doing) + ": " + (db_ ? sqlite3_errmsg(db_) : "not open"));
+    fail(std::string(doing) + ": " + detail::message_of(db_));
   }
 
   /// An Error "<what> <message>".
   [[noreturn]] void fail(const std::string& message) const { vmap::detail::fail(what_ + " " + message); }
 
  private:
+  /// Whether this process may create files in `path`'s folder (a read-only mount, or a
+  /// folder of another user, says no).
+  static bool folder_writable(const std::filesystem::path& path) {
+    const std::filesystem::path folder = path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
+    return ::access(folder.c_str(), W_OK) == 0;
+  }
+
   void lock(const std::filesystem::path& path, bool create) {
     lock_fd_ = ::open(path.c_str(), O_RDWR | O_CLOEXEC | (create ? O_CREAT | O_EXCL : 0), 0644);
     if (lock_fd_ < 0) fail(std::string("cannot be opened for writing: ") + std::strerror(errno));
@@ -237,7 +301,7 @@ class Statement {
     if (rc != SQLITE_OK) fail_sqlite();
     return *this;
   }
-  [[noreturn]] void fail_sqlite() const { fail(sqlite3_errmsg(db_)); }
+  [[noreturn]] void fail_sqlite() const { fail(detail::message_of(db_)); }
   [[noreturn]] void fail(const std::string& message) const { vmap::detail::fail(what_ + " " + doing_ + ": " + message); }
   void expect(int c, int type, const char* name) const {
     if (sqlite3_column_type(stmt_, c) != type) type_error(c, name);

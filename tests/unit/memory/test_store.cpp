@@ -13,6 +13,10 @@
 
 #include <doctest/doctest.h>
 
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -571,4 +575,62 @@ TEST_CASE("store: every row is checked: a flipped bit, a column that differs fro
   CHECK(error_after("INSERT INTO loops SELECT id + 1000, from_key, to_key, inliers, confidence, record, crc FROM loops "
                     "WHERE id = (SELECT max(id) FROM loops)") ==
         "loop edge " + std::to_string(memory.loops().size() - 1 + 1000) + " where " + loops + " was expected");
+}
+
+TEST_CASE("store: a store in a folder the reader cannot write is read (as immutable); a stray journal is explained") {
+  auto memory = make(options(vmap::ImageStorage::none));
+  for (std::size_t i = 0; i < 12; ++i) memory.push(frames()[i]);
+  const fs::path file = fresh("read_only.vmdb");
+  {
+    auto store = vmap::MemoryStore::create(file);
+    store.sync(memory);
+  }
+  // A folder this process cannot write, as read-only media are: a child process reads
+  // the store as user 'nobody' when the tests run as root (root writes anywhere), or
+  // with the folder made read-only otherwise.
+  char tmpl[] = "/tmp/vmap-read-only-XXXXXX";
+  REQUIRE(::mkdtemp(tmpl) != nullptr);
+  const fs::path folder = tmpl;
+  fs::copy_file(file, folder / "m.vmdb");
+  ::chmod((folder / "m.vmdb").c_str(), 0644);
+  ::chmod(folder.c_str(), 0555);
+  const pid_t child = ::fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    int code = 0;
+    try {
+      if (::getuid() == 0 && (::setgid(65534) != 0 || ::setuid(65534) != 0)) ::_exit(3);
+      if (::access(folder.c_str(), W_OK) == 0) ::_exit(4);  // the folder is writable after all
+      auto store = vmap::MemoryStore::open(folder / "m.vmdb", vmap::sqlite::Access::read);
+      code = load(store).key_images() == memory.key_images() ? 0 : 1;
+    } catch (...) {
+      code = 2;
+    }
+    ::_exit(code);
+  }
+  int status = 0;
+  REQUIRE(::waitpid(child, &status, 0) == child);
+  CHECK(WIFEXITED(status));
+  CHECK(WEXITSTATUS(status) == 0);
+  CHECK(!fs::exists(folder / "m.vmdb-shm"));  // nothing was created there
+  ::chmod(folder.c_str(), 0755);
+  fs::remove_all(folder);
+
+  // A rollback journal beside a store (not vmap's: its stores use a write-ahead log)
+  // makes SQLite refuse readers; the message says why and what to do.
+  const fs::path journaled = fresh("journaled.vmdb");
+  fs::copy_file(file, journaled);
+  {
+    std::ofstream j(journaled.string() + "-journal", std::ios::binary);
+    j << std::string(4096, 'j');
+  }
+  const std::string e = error_of([&] {
+    auto store = vmap::MemoryStore::open(journaled, vmap::sqlite::Access::read);
+    (void)load(store);
+  });
+  CHECK(e.find("attempt to write a readonly database (a rollback journal '" + journaled.string() +
+               "-journal' lies beside it") != std::string::npos);
+  fs::remove(journaled.string() + "-journal");
+  auto store = vmap::MemoryStore::open(journaled, vmap::sqlite::Access::read);
+  CHECK(load(store).key_images() == memory.key_images());
 }
