@@ -5,10 +5,12 @@
 #include "bindings.hpp"
 
 #include <vmap/io/calibration.hpp>
+#include <vmap/io/image.hpp>
 #include <vmap/runtime/stack_choice.hpp>
 #include <vmap/version.hpp>
 
 #include <algorithm>
+#include <cstdint>
 #include <string>
 
 namespace vmap::python {
@@ -60,6 +62,12 @@ cv::Mat image_view(const py::array& a, const std::string& what) {
     fail(what + ": an array of shape " + std::string(py::str(a.attr("shape"))) + "; vmap reads H x W (grey) or H x W x C images with C = 1, 3 (BGR) or 4");
   if (a.shape(0) == 0 || a.shape(1) == 0) fail(what + ": an empty image (" + std::to_string(a.shape(0)) + " x " +
                                                 std::to_string(a.shape(1)) + ")");
+  // Bounded before any copy: a frame source's limit (io/image.hpp), which the library
+  // checks again where a frame enters a memory.
+  const auto pixels = static_cast<std::uint64_t>(a.shape(0)) * static_cast<std::uint64_t>(a.shape(1));
+  if (pixels > default_max_image_pixels)
+    fail(what + ": an image of " + std::to_string(a.shape(1)) + " x " + std::to_string(a.shape(0)) +
+         " pixels, more than the limit of " + std::to_string(default_max_image_pixels));
   const auto item = static_cast<py::ssize_t>(a.itemsize());
   // In place when each row's pixels are contiguous (cv::Mat has a row step, not a
   // column step) and the rows do not overlap; copied once otherwise.
