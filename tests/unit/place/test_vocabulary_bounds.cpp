@@ -53,7 +53,7 @@ const fs::path& dir() {
 /// "a: [[[[...]]]]" (or "{a: [[[...]]]}") nested `depth` brackets deep.
 std::string nested(std::size_t depth, bool in_map) {
   const std::string inner = std::string(depth, '[') + std::string(depth, ']');
-  return in_map ? "{a: " + inner + "}\n" : "%YAML:1.0\na: " + inner + "\n";
+  return in_map ? "%YAML:1.0\n{a: " + inner + "}\n" : "%YAML:1.0\na: " + inner + "\n";
 }
 
 }  // namespace
@@ -63,7 +63,8 @@ TEST_CASE("yaml_depth counts flow brackets, also when they open on one line of a
   CHECK(vmap::yaml_depth("a: [1, 2]\n") == 2);
   CHECK(vmap::yaml_depth("a: [[[1]]]\n") == 4);
   CHECK(vmap::yaml_depth("{a: [[1]]}\n") == 4);
-  CHECK(vmap::yaml_depth("a: [\n  [\n    [1]]]\n") == 4);  // brackets open across lines
+  CHECK(vmap::yaml_depth("a: [\n  [\n    [1]]]\n") == 4);  // brackets open across lines, under the key
+  CHECK(vmap::yaml_depth("a:\n  b: [\n [1]]\nc: 1\n") == 4);
   CHECK(vmap::yaml_depth("a: \"[[[[\"\n") == 1);           // quoted: not nesting
   CHECK(vmap::yaml_depth(nested(200000, false)) == 200001);
 }
