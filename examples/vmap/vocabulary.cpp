@@ -38,11 +38,14 @@ struct VocabularyArgs {
   std::string out;
   std::string convert_in;
   std::string convert_out;
+  bool force = false;          ///< learning: --out may replace an existing vocabulary
+  bool convert_force = false;  ///< convert: OUTPUT may replace an existing vocabulary
   ex::DescriptorChoice descriptor;
   vmap::VocabularyLearning learning;
 };
 
 int convert(const VocabularyArgs& a) {
+  vmap::check_vocabulary_output(a.convert_out, a.convert_force, std::filesystem::path(a.convert_in), "--force");
   const auto t0 = std::chrono::steady_clock::now();
   const vmap::AnyVocabulary v = vmap::AnyVocabulary::load(a.convert_in);
   const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -61,6 +64,8 @@ int run(const VocabularyArgs& a) {
   if (a.input.empty() || a.out.empty())
     ex::usage_error("learning needs FRAMES and --out (converting: vmap vocabulary convert INPUT OUTPUT)");
   ex::as_usage([&] { a.learning.validate(vmap::OptionNames::command_line()); });
+  // Before the frames are read: a refused --out is known at once, not after the learning.
+  vmap::check_vocabulary_output(a.out, a.force, std::nullopt, "--force");
   const vmap::PolicyStack stack = ex::stack_of(a.descriptor, "magsac", std::nullopt);
   std::optional<ex::Progress> progress;
   const auto features = vmap::extract_features(
@@ -92,6 +97,7 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("FRAMES", a->input, "Frames: image folder, list file, video, TUM rgb.txt or a bag");
   ex::add_bag_options(app);
   app.add_option("--out", a->out, "The vocabulary file to write");
+  app.add_flag("--force", a->force, "Replace an existing --out, only when it is a vocabulary vmap reads");
   ex::add_vocabulary_options(app, a->learning, "");
   app.add_option("--seed", a->learning.seed, "Seed of the sample and the clustering")->capture_default_str();
   app.add_option("--features", a->descriptor.name, "orb, akaze, sift or xfeat")->capture_default_str();
@@ -104,6 +110,8 @@ std::function<int()> setup(CLI::App& app) {
                                           "format, or to ORBvoc text (OUTPUT *.txt) or FBoW (OUTPUT *.fbow)");
   c->add_option("INPUT", a->convert_in, "Vocabulary file of any format vmap reads")->required()->check(CLI::ExistingFile);
   c->add_option("OUTPUT", a->convert_out, "File written (its extension chooses the format)")->required();
+  c->add_flag("--force", a->convert_force,
+              "Replace an existing OUTPUT, only when it is a vocabulary vmap reads (never INPUT, a memory or another file)");
   return [a, c] { return c->parsed() ? convert(*a) : run(*a); };
 }
 

@@ -27,6 +27,7 @@
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
+#include <iterator>
 #include <sstream>
 #include <string>
 #include <tuple>
@@ -703,6 +704,92 @@ TEST_CASE("cli: vocabulary without frames or convert without files are usage err
   const fs::path folder = work_dir();
   const Run r = run_vmap({"vocabulary", "convert", folder.string(), (folder / "x.vmapvoc").string()});
   CHECK(r.code != 0);
+}
+
+namespace {
+
+std::string file_bytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+/// A small binary vocabulary, learned on random descriptors (no frames to read).
+vmap::AnyVocabulary tiny_vocabulary() {
+  cv::Mat d(200, 32, CV_8UC1);
+  cv::randu(d, cv::Scalar(0), cv::Scalar(256));
+  return vmap::AnyVocabulary::learn({d}, {.branching = 3, .depth = 2, .seed = 1});
+}
+
+}  // namespace
+
+TEST_CASE("cli: vocabulary convert never replaces its input, a memory or any file but a vocabulary (--force)") {
+  const fs::path dir = work_dir() / "convert_outputs";
+  fs::create_directories(dir);
+  const auto v = tiny_vocabulary();
+  const fs::path voc = dir / "voc.vmapvoc", other = dir / "other.vmapvoc", fbow = dir / "voc.fbow";
+  v.save(voc);
+  v.save(other);
+  v.save(fbow);
+  // A gzipped DBoW2 file converted onto itself: refused, the file as it was.
+  const fs::path gz = dir / "d.yml.gz";
+  write(gz, "\x1f\x8b not really gzip, but the command must not touch it");
+  const fs::path memory = dir / "mem.vmdb";
+  write(memory, std::string("SQLite format 3") + '\0' + std::string(100, 'm'));
+  const fs::path notes = dir / "notes.txt";
+  write(notes, "10 my notes, which start with a number\n");
+  fs::create_symlink(voc, dir / "link.vmapvoc");
+  const std::string voc_bytes = file_bytes(voc), gz_bytes = file_bytes(gz), memory_bytes = file_bytes(memory),
+                    notes_bytes = file_bytes(notes);
+  const auto refused = [&](const std::vector<std::string>& args, const std::string& message) {
+    const Run r = run_vmap(args);
+    INFO("stderr: " << r.err);
+    CHECK(r.code == 1);
+    CHECK(r.err.find(message) != std::string::npos);
+  };
+  for (const bool force : {false, true}) {
+    CAPTURE(force);
+    const auto with = [&](std::vector<std::string> args) {
+      if (force) args.push_back("--force");
+      return args;
+    };
+    refused(with({"vocabulary", "convert", gz.string(), gz.string()}), "is the input file");
+    refused(with({"vocabulary", "convert", voc.string(), voc.string()}), "is the input file");
+    refused(with({"vocabulary", "convert", voc.string(), (dir / "link.vmapvoc").string()}), "is the input file");
+    refused(with({"vocabulary", "convert", fbow.string(), memory.string()}),
+            force ? "exists and is not a vocabulary vmap reads, so it is not replaced" : "already exists");
+    refused(with({"vocabulary", "convert", voc.string(), notes.string()}),
+            force ? "exists and is not a vocabulary vmap reads, so it is not replaced" : "already exists");
+    refused(with({"vocabulary", "convert", voc.string(), dir.string()}), "is a folder, expected a file");
+    refused(with({"vocabulary", "convert", voc.string(), "/dev/null"}), "is not a regular file");
+  }
+  refused({"vocabulary", "convert", voc.string(), other.string()}, "already exists; it is replaced only when asked to (--force)");
+  CHECK(file_bytes(voc) == voc_bytes);
+  CHECK(file_bytes(gz) == gz_bytes);
+  CHECK(file_bytes(memory) == memory_bytes);
+  CHECK(file_bytes(notes) == notes_bytes);
+  CHECK(fs::is_symlink(dir / "link.vmapvoc"));
+  // --force replaces another vocabulary (recognised by content, whatever its name).
+  const Run r = run_vmap({"vocabulary", "convert", fbow.string(), other.string(), "--force"});
+  INFO(r.err);
+  CHECK(r.code == 0);
+  CHECK(vmap::AnyVocabulary::load(other).size() == v.size());
+}
+
+TEST_CASE("cli: vocabulary --out follows the same rule, checked before any frame is read") {
+  const fs::path dir = work_dir() / "learn_outputs";
+  fs::create_directories(dir);
+  const fs::path memory = dir / "mem.vmdb";
+  write(memory, std::string("SQLite format 3") + '\0' + std::string(100, 'm'));
+  const std::string memory_bytes = file_bytes(memory);
+  for (const bool force : {false, true}) {
+    std::vector<std::string> args{"vocabulary", sample, "--out", memory.string(), "--words", "8", "--depth", "1"};
+    if (force) args.push_back("--force");
+    const Run r = run_vmap(args);
+    INFO(r.err);
+    CHECK(r.code == 1);
+    CHECK(r.err.find(force ? "exists and is not a vocabulary vmap reads" : "already exists") != std::string::npos);
+  }
+  CHECK(file_bytes(memory) == memory_bytes);
 }
 
 TEST_SUITE("data") {

@@ -76,6 +76,53 @@ inline void fuzz_bag(std::string_view bytes, const char* extension) {
   std::filesystem::remove(p);
 }
 
+// One row of a memory store, decoded as MemoryStore's reader decodes it (the record
+// codecs of memory/detail/record_codecs.hpp, then the check that nothing follows the
+// record): the first byte picks the row, the rest is its blob. Faster than a whole store
+// per input, and it reaches the codecs with the blob's bytes as they are, with no
+// checksum in the way.
+inline void fuzz_memory_record(std::string_view bytes) {
+  if (bytes.empty()) return;
+  namespace d = vmap::detail;
+  d::BinaryReader r(bytes.substr(1), "fuzz");
+  std::uint64_t pixels = 0;
+  const d::KeyReading how{fuzz_pixel_limits, pixels, nullptr, true};
+  switch (static_cast<unsigned char>(bytes[0]) % 9) {
+    case 0:
+      (void)d::read_key_record(r, vmap::memory_format_version, how);
+      r.expect_end("the key image");
+      break;
+    case 1:
+      (void)d::read_key_record(r, 4, {fuzz_pixel_limits, pixels, nullptr, false});
+      r.expect_end("the key image");
+      break;
+    case 2:
+      (void)d::read_key_pair(r, "verification status");
+      r.expect_end("the link");
+      break;
+    case 3:
+      (void)d::read_loop_record(r, vmap::memory_format_version, 64);
+      r.expect_end("the loop edge");
+      break;
+    case 4:
+      (void)d::read_selector_record(r, vmap::memory_format_version, how, 3);
+      break;
+    case 5:
+      (void)d::read_sessions_record(r, 64, 1000);
+      break;
+    case 6:
+      (void)d::read_vocabulary_record(r);
+      break;
+    case 7:
+      (void)d::read_memory_options(r);
+      break;
+    default:
+      (void)d::memory_read_detections(r);
+      r.expect_end("the detections");
+      break;
+  }
+}
+
 // clang-format off
 VMAP_FUZZ_LOADER(map, { (void)vmap::deserialize_map(bytes, "fuzz", fuzz_pixel_limits); })
 VMAP_FUZZ_LOADER(gcs, { (void)vmap::GcsXf::deserialize(bytes, "fuzz"); (void)vmap::Gcs2d::deserialize(bytes, "fuzz"); })
@@ -132,6 +179,8 @@ VMAP_FUZZ_LOADER(memory_store, {
   }
   remove_all();
 })
+// One row of a memory store (fuzz_memory_record above).
+VMAP_FUZZ_LOADER(memory_records, { fuzz_memory_record(bytes); })
 VMAP_FUZZ_LOADER(ros1_bag, { fuzz_bag(bytes, ".bag"); })
 VMAP_FUZZ_LOADER(rosbag2_sqlite, { fuzz_bag(bytes, ".db3"); })
 VMAP_FUZZ_LOADER(mcap, { fuzz_bag(bytes, ".mcap"); })

@@ -96,9 +96,7 @@ inline float bilinear(const cv::Mat& map, float u, float v) noexcept {
 /// The input size (width, height) an ONNX file declares for a 1x3xHxW input; (0, 0)
 /// when its height and width are symbolic. Anything else is an Error naming the file.
 inline cv::Size xfeat_declared_size(const std::filesystem::path& model) {
-  std::ifstream in(model, std::ios::binary);
-  if (!in) fail("XFeat: cannot open the model file '" + model.string() + "'");
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bytes = read_model_file(model, "XFeat");
   const std::vector<std::int64_t> dims = onnx_first_input_shape(bytes);
   if (dims.size() != 4 || dims[1] != 3 || dims[2] > 8192 || dims[3] > 8192)
     fail("XFeat: model '" + model.string() +

@@ -188,6 +188,17 @@ struct ListEntry {
 /// Largest list file (one path a line) read; a million frames take ~50 MB.
 inline constexpr std::uintmax_t max_list_file_bytes = std::uintmax_t{64} << 20;
 
+/// Whether a line begins with a number that is not finite ("inf", "nan", "-inf") and a
+/// second token: a TUM line with a time no frame can have, refused rather than taken
+/// for an image path with a space.
+inline bool starts_with_non_finite_time(const std::string& line) {
+  const auto sp = line.find_first_of(" \t");
+  if (sp == std::string::npos || trim(line.substr(sp)).empty()) return false;
+  double t = 0;
+  const auto [ptr, ec] = std::from_chars(line.data(), line.data() + sp, t);
+  return ec == std::errc() && ptr == line.data() + sp && !std::isfinite(t);
+}
+
 /// "<timestamp> <path>" with a finite number first and one path token after: a TUM line.
 /// `ns` is the time in nanoseconds, exact for a plain decimal number.
 inline bool parse_tum_line(const std::string& line, double& t, std::string& path, std::int64_t* ns = nullptr) {
@@ -215,6 +226,10 @@ inline std::vector<ListEntry> read_list(const std::filesystem::path& file, Sourc
   if (lines.empty()) fail("frame source: list file '" + file.string() + "' names no image");
   double t0 = 0;
   std::string p0;
+  for (const auto& [line, no] : lines)
+    if (starts_with_non_finite_time(line))
+      fail("frame source: " + file.string() + ":" + std::to_string(no) + ": '" + line +
+           "' has a time that is not a finite number");
   const bool tum = parse_tum_line(lines.front().first, t0, p0);
   kind = tum ? SourceKind::tum_rgb : SourceKind::image_list;
   const auto base = file.parent_path();
@@ -239,11 +254,16 @@ inline std::vector<ListEntry> read_list(const std::filesystem::path& file, Sourc
 }
 
 /// An ASL / EuRoC camera `data.csv`: `timestamp [ns],filename` a line (a '#' header
-/// line first), the images in the `data/` folder beside it. Errors name "file:line".
+/// line first), the images in the `data/` folder beside it. Errors name "file:line". A
+/// file name must stay inside `data/` (no absolute path, no ".." step) and the times must
+/// strictly increase, as the recorder writes them: a name elsewhere would read a file the
+/// recording does not hold, and a repeated or earlier time is a damaged or edited list
+/// whose frames' order is unknown.
 inline std::vector<ListEntry> read_euroc_csv(const std::filesystem::path& file) {
   const std::string text = read_text_file(file, "frame source: EuRoC data.csv", max_list_file_bytes);
   const auto images = file.parent_path() / "data";
   std::vector<ListEntry> out;
+  std::size_t previous_line = 0;
   for_each_line(text, [&](std::string_view raw, std::size_t no) {
     const std::string line = trim(std::string(raw));
     if (line.empty() || line[0] == '#') return;
@@ -258,6 +278,17 @@ inline std::vector<ListEntry> read_euroc_csv(const std::filesystem::path& file) 
       fail(where + "'" + line + "' is not '<timestamp [ns]>,<file name>' (EuRoC data.csv)");
     if (ns > static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max()))
       fail(where + "timestamp " + std::to_string(ns) + " ns is beyond the year 2262");
+    const std::filesystem::path relative(name);
+    if (relative.is_absolute() || relative.has_root_path())
+      fail(where + "file name '" + name + "' is an absolute path; EuRoC names the images of its data/ folder");
+    for (const auto& step : relative)
+      if (step == "..") fail(where + "file name '" + name + "' leaves the data/ folder ('..')");
+    if (!out.empty() && static_cast<std::int64_t>(ns) <= out.back().time_ns)
+      fail(where + "timestamp " + std::to_string(ns) + " ns is " +
+           (static_cast<std::int64_t>(ns) == out.back().time_ns ? "the same as" : "before") + " line " +
+           std::to_string(previous_line) + "'s (" + std::to_string(out.back().time_ns) +
+           " ns); the times must increase");
+    previous_line = no;
     out.push_back({images / name, seconds_from_nanoseconds(ns), static_cast<std::int64_t>(ns)});
   });
   if (out.empty()) fail("frame source: EuRoC data.csv '" + file.string() + "' names no image");

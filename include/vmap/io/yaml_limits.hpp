@@ -28,11 +28,13 @@ inline constexpr std::size_t max_yaml_depth = 32;
 
 /// Nesting depth of YAML text: the indentation levels open at a line, plus its leading
 /// "- " markers, plus the "[" / "{" brackets open inside it; text inside quotes and
-/// comments is skipped. An over-estimate for odd but valid YAML is harmless here: it
-/// only has to stay below `max_yaml_depth` for real calibration and settings files.
+/// comments is skipped; brackets that span lines stay on top of the block levels open
+/// where they began. An over-estimate for odd but valid YAML is harmless here: it only
+/// has to stay below `max_yaml_depth` for real calibration and settings files.
 [[nodiscard]] inline std::size_t yaml_depth(std::string_view text) {
   std::size_t deepest = 0;
-  std::size_t flow = 0;             // open brackets, may span lines
+  std::size_t flow = 0;              // open brackets, may span lines
+  std::size_t block = 0;             // block levels open where the open brackets began
   std::vector<std::size_t> indents;  // indentation of the open block levels
   std::size_t i = 0;
   while (i < text.size()) {
@@ -41,7 +43,6 @@ inline constexpr std::size_t max_yaml_depth = 32;
     i = end + 1;
     std::size_t p = line.find_first_not_of(' ');
     if (p == std::string_view::npos || line[p] == '#' || line[p] == '\r' || line[p] == '%') continue;
-    std::size_t block = 0;
     if (flow == 0) {
       while (!indents.empty() && indents.back() >= p) indents.pop_back();
       indents.push_back(p);

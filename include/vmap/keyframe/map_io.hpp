@@ -198,6 +198,7 @@ void read_previous_score(BinaryReader& r, SelectorState<Item>& s) {
     r.corrupt("a deferred degeneracy on a score that is not verified or already has one");
   const std::uint32_t n = r.u32("inlier mask length");
   if (n != static_cast<std::uint32_t>(v.matches)) r.corrupt("the inlier mask's length is not the score's matches");
+  r.require_items(n, 1, "inlier mask length");  // the matches come from the same bytes: bound before allocating
   v.inlier_mask.resize(n);
   int inliers = 0;
   for (std::uint8_t& b : v.inlier_mask) {

@@ -575,7 +575,9 @@ class MemoryStore {
       MapLoadOptions limits;
       limits.decode_images = false;
       std::uint64_t pixels = 0;
-      return detail::read_key_record(r, reader->version >= 4 ? 5 : 4, {limits, pixels, nullptr, true}).key.features;
+      Features f = detail::read_key_record(r, reader->version >= 4 ? 5 : 4, {limits, pixels, nullptr, true}).key.features;
+      r.expect_end("the key image");  // a record is exactly as long as its contents
+      return f;
     };
   }
 

@@ -35,8 +35,10 @@
 #include <vmap/place/vocabulary_tree.hpp>
 
 #include <opencv2/core.hpp>
+#include <zlib.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <charconv>
 #include <cstdio>
@@ -59,6 +61,10 @@ enum class VocabularyFormat { vmap, orbslam_text, dbow2_yaml, fbow };
 
 /// Largest vocabulary file read (the ORB-SLAM2 ORBvoc.txt of 1M words is 145 MB).
 inline constexpr std::uint64_t max_vocabulary_file_bytes = std::uint64_t{4} << 30;
+
+/// Largest DBoW2 YAML text a gzipped vocabulary may decompress to. DBoW2's YAML of the
+/// 1M-word ORB vocabulary is about 400 MB; the text is held whole while OpenCV parses it.
+inline constexpr std::uint64_t max_vocabulary_yaml_bytes = std::uint64_t{1} << 30;  // 1 GiB
 
 namespace detail {
 
@@ -405,6 +411,60 @@ inline BinaryVocabularyTree import_dbow2_yaml(std::string_view text, const std::
       name);
 }
 
+namespace detail {
+
+/// The gzip data `compressed` (one or more members, as gzip writes and reads them)
+/// decompressed, counting the bytes as they come out: more than `max_bytes` is an Error
+/// as soon as it happens. The trailer's size field (ISIZE) is not trusted, as any writer
+/// can put any number there.
+inline std::string gunzip_bounded(std::string_view compressed, std::uint64_t max_bytes, const std::string& source) {
+  z_stream z{};
+  if (inflateInit2(&z, 15 + 16) != Z_OK) bad_vocabulary(source, "zlib cannot start decompressing");  // 16: gzip wrapper
+  struct End {
+    z_stream& z;
+    ~End() { inflateEnd(&z); }
+  } end{z};
+  std::string out;
+  std::array<char, 1 << 16> buf{};
+  std::size_t fed = 0;  // input handed to zlib so far (in pieces: avail_in is 32-bit)
+  for (;;) {
+    if (z.avail_in == 0 && fed < compressed.size()) {
+      const std::size_t n = std::min<std::size_t>(compressed.size() - fed, std::size_t{1} << 30);
+      z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(compressed.data() + fed));
+      z.avail_in = static_cast<uInt>(n);
+      fed += n;
+    }
+    z.next_out = reinterpret_cast<Bytef*>(buf.data());
+    z.avail_out = static_cast<uInt>(buf.size());
+    const int rc = inflate(&z, Z_NO_FLUSH);
+    const std::size_t got = buf.size() - z.avail_out;
+    if (out.size() + got > max_bytes)
+      bad_vocabulary(source, "decompresses to more than " + std::to_string(max_bytes) + " bytes (the limit)");
+    out.append(buf.data(), got);
+    if (rc == Z_STREAM_END) {
+      if (z.avail_in == 0 && fed == compressed.size()) return out;
+      if (inflateReset(&z) != Z_OK) bad_vocabulary(source, "zlib cannot go on to the next gzip member");
+      continue;
+    }
+    if (rc == Z_BUF_ERROR && z.avail_in == 0 && fed == compressed.size())
+      bad_vocabulary(source, "the gzip data is truncated");
+    if (rc != Z_OK && rc != Z_BUF_ERROR)
+      bad_vocabulary(source, std::string("not valid gzip data (") + (z.msg != nullptr ? z.msg : "zlib error") + ")");
+  }
+}
+
+}  // namespace detail
+
+/// Reads DBoW2's YAML vocabulary from the bytes of a gzipped file (.yml.gz). It is
+/// decompressed here, bounded by `max_vocabulary_yaml_bytes`, and the text gets the same
+/// checks as plain YAML before OpenCV parses it: OpenCV would decompress it while
+/// parsing, past every check of the text.
+inline BinaryVocabularyTree import_dbow2_yaml_gz(std::string_view compressed, const std::string& name = "<memory>") {
+  const std::string source = "DBoW2 YAML vocabulary '" + name + "'";
+  if (compressed.size() < 18) detail::bad_vocabulary(source, "too short to be gzip");
+  return import_dbow2_yaml(detail::gunzip_bounded(compressed, max_vocabulary_yaml_bytes, source), name);
+}
+
 /// Reads FBoW's binary vocabulary (fbow::Vocabulary::saveToFile; binary descriptors).
 inline BinaryVocabularyTree import_fbow(std::string_view bytes, const std::string& name = "<memory>") {
   const std::string source = "FBoW vocabulary '" + name + "'";
@@ -651,16 +711,8 @@ inline BinaryVocabularyTree import_binary_vocabulary(const std::filesystem::path
     case VocabularyFormat::dbow2_yaml:
       break;
   }
-  const std::string source = "DBoW2 YAML vocabulary '" + path.string() + "'";
   if (static_cast<unsigned char>(head[0]) != 0x1F) return import_dbow2_yaml(detail::read_whole_file(path), path.string());
-  // gzipped: OpenCV decompresses it while parsing. The gzip trailer's ISIZE (the
-  // uncompressed size mod 2^32) bounds what it will hold.
-  const std::string all = detail::read_whole_file(path);
-  if (all.size() < 18) detail::bad_vocabulary(source, "too short to be gzip");
-  std::uint32_t isize = 0;
-  for (int i = 0; i < 4; ++i) isize |= static_cast<std::uint32_t>(static_cast<unsigned char>(all[all.size() - 4 + static_cast<std::size_t>(i)])) << (8 * i);
-  if (isize > (1U << 30)) detail::bad_vocabulary(source, "decompresses to " + std::to_string(isize) + " bytes (limit 1 GiB)");
-  return detail::read_dbow2_storage([&](cv::FileStorage& fs) { fs.open(path.string(), cv::FileStorage::READ); }, path.string());
+  return import_dbow2_yaml_gz(detail::read_whole_file(path), path.string());
 }
 
 }  // namespace vmap

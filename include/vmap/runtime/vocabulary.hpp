@@ -32,6 +32,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <system_error>
 #include <vector>
 
 namespace vmap {
@@ -121,6 +122,42 @@ enum class VocabularyFileFormat : std::uint8_t {
     detail::fail(who + " is a float vocabulary; " +
                  (format == VocabularyFileFormat::fbow ? "FBoW" : "ORB-SLAM2 text") + " files hold binary ones");
   return format == VocabularyFileFormat::fbow ? fbow_bytes(*v.binary()) : orbslam_text(*v.binary());
+}
+
+/// Fails (an Error naming `out`) unless a vocabulary may be written to `out`, checked
+/// before anything is read or written (vmap vocabulary convert and learn, Python's save
+/// with overwrite). A save replaces the file whole, so it must never replace what the
+/// user did not mean to give up:
+///   - `out` that is the same file as `input` (also through links or another name) is
+///     refused: the input is what is being converted;
+///   - a folder, a FIFO, a device or a socket is refused without being opened;
+///   - an existing file is replaced only when `overwrite` is set AND it is itself a
+///     vocabulary vmap reads, recognised by its content (AnyVocabulary::load), whatever
+///     its name: a memory, an image or any other file is never replaced.
+/// `overwrite_option` names how the caller asks to overwrite ("--force") in the message.
+inline void check_vocabulary_output(const std::filesystem::path& out, bool overwrite,
+                                    const std::optional<std::filesystem::path>& input = std::nullopt,
+                                    const std::string& overwrite_option = "overwrite") {
+  const std::string name = "vocabulary output '" + out.string() + "'";
+  std::error_code ec;
+  const auto st = std::filesystem::status(out, ec);
+  if (!std::filesystem::exists(st)) return;  // a new file (or a link to one: the save makes it)
+  if (input) {
+    std::error_code same_ec;
+    if (std::filesystem::equivalent(*input, out, same_ec) && !same_ec)
+      detail::fail(name + " is the input file '" + input->string() + "'; write the vocabulary to another file");
+  }
+  if (std::filesystem::is_directory(st)) detail::fail(name + " is a folder, expected a file");
+  if (!std::filesystem::is_regular_file(st))
+    detail::fail(name + " is not a regular file (a device, FIFO or socket); it is not written to");
+  if (!overwrite)
+    detail::fail(name + " already exists; it is replaced only when asked to (" + overwrite_option +
+                 "), and only when it is a vocabulary");
+  try {
+    (void)AnyVocabulary::load(out);
+  } catch (const Error& e) {
+    detail::fail(name + " exists and is not a vocabulary vmap reads, so it is not replaced (" + e.what() + ")");
+  }
 }
 
 /// Writes `v` to `path` atomically (a temporary file renamed over it) in `format`, or the

@@ -80,6 +80,47 @@ TEST_CASE("EuRoC data.csv errors name the file and line") {
         "frame source: EuRoC data.csv '" + (dir / "data.csv").string() + "' names no image");
 }
 
+TEST_CASE("EuRoC data.csv: names outside data/ and times that do not increase are refused by file and line") {
+  const fs::path dir = vmap::test::scratch_dir("euroc_bounds_csv");
+  fs::create_directories(dir / "data");
+  const std::string csv = (dir / "data.csv").string();
+  const auto error = [&](const std::string& lines) {
+    std::ofstream(dir / "data.csv") << "#timestamp [ns],filename\n" << lines;
+    return vmap::test::error_of([&] { (void)vmap::FrameSource::open(dir); });
+  };
+  CHECK(error("100,a.png\n200,../../etc/passwd\n") ==
+        "frame source: " + csv + ":3: file name '../../etc/passwd' leaves the data/ folder ('..')");
+  CHECK(error("100,sub/../../b.png\n") == "frame source: " + csv + ":2: file name 'sub/../../b.png' leaves the data/ folder ('..')");
+  CHECK(error("100,/etc/passwd\n") ==
+        "frame source: " + csv + ":2: file name '/etc/passwd' is an absolute path; EuRoC names the images of its data/ folder");
+  CHECK(error("100,a.png\n100,b.png\n") ==
+        "frame source: " + csv + ":3: timestamp 100 ns is the same as line 2's (100 ns); the times must increase");
+  CHECK(error("100,a.png\n# a comment\n200,b.png\n150,c.png\n") ==
+        "frame source: " + csv + ":5: timestamp 150 ns is before line 4's (200 ns); the times must increase");
+  // Increasing times and plain names (a subfolder of data/ too) are read.
+  fs::create_directories(dir / "data" / "sub");
+  REQUIRE(cv::imwrite((dir / "data" / "a.png").string(), cv::Mat(4, 4, CV_8UC1, cv::Scalar(1))));
+  REQUIRE(cv::imwrite((dir / "data" / "sub" / "b.png").string(), cv::Mat(4, 4, CV_8UC1, cv::Scalar(2))));
+  std::ofstream(dir / "data.csv") << "#timestamp [ns],filename\n100,a.png\n200,sub/b.png\n";
+  const auto names = vmap::FrameSource::open(dir).paths();
+  REQUIRE(names.size() == 2);
+  CHECK(names[1] == dir / "data" / "sub/b.png");
+}
+
+TEST_CASE("TUM rgb.txt: a time that is not finite is refused by file and line, also on the first line") {
+  const fs::path dir = vmap::test::scratch_dir("tum_non_finite");
+  const std::string list = (dir / "rgb.txt").string();
+  for (const std::string& bad : {std::string("inf"), std::string("nan"), std::string("-inf"), std::string("NaN")}) {
+    CAPTURE(bad);
+    std::ofstream(dir / "rgb.txt") << "# timestamp filename\n" << bad << " rgb/0.png\n";
+    CHECK(vmap::test::error_of([&] { (void)vmap::FrameSource::open(dir / "rgb.txt"); }) ==
+          "frame source: " + list + ":2: '" + bad + " rgb/0.png' has a time that is not a finite number");
+    std::ofstream(dir / "rgb.txt") << "100.5 rgb/0.png\n" << bad << " rgb/1.png\n";
+    CHECK(vmap::test::error_of([&] { (void)vmap::FrameSource::open(dir / "rgb.txt"); }) ==
+          "frame source: " + list + ":2: '" + bad + " rgb/1.png' has a time that is not a finite number");
+  }
+}
+
 TEST_CASE("image folder names that are numbers are timestamps: unit by magnitude") {
   const cv::Mat img = vmap::test::textured_image(3, {32, 32});
   const auto folder = [&](const std::string& name, const std::vector<std::string>& files) {

@@ -634,3 +634,59 @@ TEST_CASE("store: a store in a folder the reader cannot write is read (as immuta
   auto store = vmap::MemoryStore::open(journaled, vmap::sqlite::Access::read);
   CHECK(load(store).key_images() == memory.key_images());
 }
+
+namespace {
+
+/// Appends `junk` to key image `id`'s record blob and writes the crc the store would
+/// have written for the padded row, as a program editing the file could: the checksum
+/// then holds, and only the record's own length can tell.
+void pad_key_record(const fs::path& p, std::int64_t id, const std::string& junk) {
+  sqlite3* db = nullptr;
+  REQUIRE(sqlite3_open(p.c_str(), &db) == SQLITE_OK);
+  sqlite3_stmt* q = nullptr;
+  REQUIRE(sqlite3_prepare_v2(db, "SELECT record, detections FROM key_images WHERE id = ?", -1, &q, nullptr) == SQLITE_OK);
+  sqlite3_bind_int64(q, 1, id);
+  REQUIRE(sqlite3_step(q) == SQLITE_ROW);
+  const auto blob = [&](int c) {
+    const void* b = sqlite3_column_blob(q, c);
+    return std::string(static_cast<const char*>(b), static_cast<std::size_t>(sqlite3_column_bytes(q, c)));
+  };
+  const std::string record = blob(0) + junk;
+  const std::string detections = blob(1);
+  sqlite3_finalize(q);
+  REQUIRE(sqlite3_prepare_v2(db, "UPDATE key_images SET record = ?, crc = ? WHERE id = ?", -1, &q, nullptr) == SQLITE_OK);
+  sqlite3_bind_blob(q, 1, record.data(), static_cast<int>(record.size()), SQLITE_TRANSIENT);
+  sqlite3_bind_int64(q, 2, vmap::detail::row_crc(record, detections));
+  sqlite3_bind_int64(q, 3, id);
+  REQUIRE(sqlite3_step(q) == SQLITE_DONE);
+  sqlite3_finalize(q);
+  sqlite3_close(db);
+}
+
+}  // namespace
+
+TEST_CASE("store: a key image record with bytes after its contents is refused naming the row, its checksum right") {
+  auto memory = make(options(vmap::ImageStorage::png));
+  for (std::size_t i = 0; i < 30; ++i) memory.push(frames()[i]);
+  REQUIRE(memory.key_images() >= 2);
+  const fs::path file = fresh("padded.vmdb");
+  {
+    auto store = vmap::MemoryStore::create(file);
+    store.sync(memory);
+  }
+  const std::int64_t length = sql_integer(file, "SELECT length(record) FROM key_images WHERE id = 1");
+  pad_key_record(file, 1, std::string(4096, 'J'));
+  CHECK(sql_integer(file, "SELECT length(record) FROM key_images WHERE id = 1") == length + 4096);
+
+  auto store = vmap::MemoryStore::open(file, vmap::sqlite::Access::read);
+  const std::string e = error_of([&] { (void)load(store); });
+  CHECK(e.find(file.string()) != std::string::npos);
+  CHECK(e.find("key image 1") != std::string::npos);
+  CHECK(e.find("4096 unexpected bytes after the key image") != std::string::npos);
+  // The reader of one key image's features (a bounded working memory) refuses it too.
+  const std::string f = error_of([&] { (void)store.features()(1); });
+  CHECK(f.find("key image 1") != std::string::npos);
+  CHECK(f.find("4096 unexpected bytes after the key image") != std::string::npos);
+  // The other rows read as they were written.
+  CHECK(store.features()(0).keypoints.size() == memory.map().keys[0].features.keypoints.size());
+}

@@ -6,6 +6,7 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/features/detail/grey.hpp>
+#include <vmap/io/files.hpp>
 
 #include <opencv2/core.hpp>
 #include <opencv2/dnn.hpp>
@@ -20,7 +21,28 @@
 #include <system_error>
 #include <vector>
 
+namespace vmap {
+
+/// Largest ONNX model file read. The models vmap runs are 1-50 MB (XFeat 1-4 MB, YOLO
+/// exports up to ~250 MB for the largest); a path recorded in a memory can name anything,
+/// and a larger file (or /dev/zero, which never ends) is not a model to read whole.
+inline constexpr std::uintmax_t max_model_file_bytes = std::uintmax_t{1} << 30;  // 1 GiB
+
+}  // namespace vmap
+
 namespace vmap::detail {
+
+/// The bytes of a model file, refused by name before it is opened when it is missing, a
+/// folder, not a regular file (a device such as /dev/zero, a FIFO) or larger than
+/// `max_model_file_bytes`. `who` names the adapter reading it.
+inline std::string read_model_file(const std::filesystem::path& model, std::string_view who) {
+  if (model.empty()) fail(std::string(who) + ": no model file given (set the options' model path)");
+  try {
+    return read_file(model, max_model_file_bytes, "model file");
+  } catch (const Error& e) {
+    fail(std::string(who) + ": " + e.what());
+  }
+}
 
 /// "1x3549x85" for an n-dimensional Mat.
 inline std::string shape_string(const cv::Mat& m) {
@@ -81,14 +103,7 @@ struct DnnNet {
 
   DnnNet() = default;
   DnnNet(const std::filesystem::path& model, std::string_view who) : file(model) {
-    std::error_code ec;
-    if (model.empty()) fail(std::string(who) + ": no model file given (set the options' model path)");
-    if (!std::filesystem::is_regular_file(model, ec))
-      fail(std::string(who) + ": model file '" + model.string() + "' does not exist or is not a file");
-    std::ifstream in(model, std::ios::binary);
-    std::string contents((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (!in.good() && !in.eof()) fail(std::string(who) + ": cannot read the model file '" + model.string() + "'");
-    bytes = std::make_shared<const std::string>(std::move(contents));
+    bytes = std::make_shared<const std::string>(read_model_file(model, who));
     net = parse(who);
     output_names = net.getUnconnectedOutLayersNames();
   }
