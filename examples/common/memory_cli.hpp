@@ -72,10 +72,12 @@ inline nlohmann::json stack_json(const PolicyStack& s) {
   return j;
 }
 
-/// Checks the memory file a command will write (not an input, not a link or folder, its
-/// folder created and writable) before any frame is read. An existing file is kept: it
-/// is continued (`resume`), replaced only with `force` and only when it is a memory (a
-/// mistyped path never overwrites another file), and refused otherwise.
+/// Checks the memory file a command will write (not an input, not a link, folder, FIFO
+/// or device, its folder created and writable) before any frame is read. An existing
+/// file is kept: it is continued (`resume`), replaced only with `force` and only when it
+/// is a memory (a mistyped path never overwrites another file), and refused otherwise.
+/// The replacement itself is the library's (MemoryCreateOptions::replace), which checks
+/// the same again under the memory's writer lock.
 inline void prepare_memory_output(const std::filesystem::path& file, const std::string& option,
                                   const std::vector<std::filesystem::path>& inputs, bool resume = false,
                                   bool force = false) {
@@ -88,6 +90,9 @@ inline void prepare_memory_output(const std::filesystem::path& file, const std::
                 "' is an --out folder of vmap, which the next --out run replaces as a whole; keep the memory in "
                 "another folder");
   prepare_output_dir(dir, option, inputs, {file.filename().string()});
+  if (std::filesystem::exists(file, ec) && !std::filesystem::is_regular_file(file, ec))
+    usage_error(option + ": '" + file.string() + "' is not a regular file (a FIFO, a device or a socket); refusing to "
+                "write a memory there");
   if (resume || !std::filesystem::exists(file, ec)) return;
   if (memory_kind(file) == MemoryKind::other)
     usage_error(option + ": '" + file.string() + "' exists and is not a vmap memory; refusing to replace it");
@@ -207,7 +212,9 @@ inline void check_frames_left(const AnyMemory& memory, const FrameSource& src, c
 }
 
 /// Removes the memory store a run created when the run ends (an error, no frame) before
-/// keep(): no empty memory is left behind. A continued memory is never removed.
+/// keep(): no empty memory is left behind. A continued memory is never removed, nor one
+/// that replaces another (AnyMemory::replaces(): destroyed unclosed, it leaves the
+/// memory it was to replace as it was).
 class NewMemoryGuard {
  public:
   NewMemoryGuard(std::optional<AnyMemory>& memory, bool created) : memory_(&memory), armed_(created) {}
@@ -215,7 +222,7 @@ class NewMemoryGuard {
   NewMemoryGuard& operator=(const NewMemoryGuard&) = delete;
   void keep() noexcept { armed_ = false; }
   ~NewMemoryGuard() {
-    if (!armed_ || !*memory_) return;
+    if (!armed_ || !*memory_ || (*memory_)->replaces()) return;
     const std::filesystem::path file = (*memory_)->path();
     memory_->reset();
     std::error_code ec;
@@ -226,12 +233,6 @@ class NewMemoryGuard {
   std::optional<AnyMemory>* memory_;
   bool armed_;
 };
-
-/// Removes an existing memory store (and its log files) that --force replaces.
-inline void remove_memory(const std::filesystem::path& file) {
-  std::error_code ec;
-  for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(file.string() + suffix, ec);
-}
 
 // ---------------------------------------------------------------------------------------
 // JSON and text.

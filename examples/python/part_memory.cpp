@@ -98,20 +98,19 @@ AnyVocabulary vocabulary_of(const std::optional<std::string>& file) {
   return file ? AnyVocabulary::load(*file) : AnyVocabulary{};
 }
 
-/// A new memory store at `path`; an existing memory is replaced with force, any other
-/// existing file refused.
+/// A new memory store at `path`; an existing memory is replaced with force (by the
+/// library, when the new one is closed), any other existing file refused.
 std::unique_ptr<PyMemory> create_memory(const std::string& given, const PolicyStack& stack, const MemoryOptions& o,
                                         AnyVocabulary vocabulary, bool force, std::size_t working_memory) {
   const fs::path path = memory_path(given);
   std::error_code ec;
-  if (fs::exists(path, ec)) {
+  if (!force && fs::exists(path, ec)) {
     if (memory_kind(path) == MemoryKind::other)
       fail("path: '" + path.string() + "' exists and is not a vmap memory; refusing to replace it");
-    if (!force) fail("path: the memory '" + path.string() + "' exists: give force=True to replace it");
-    for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(path.string() + suffix, ec);
+    fail("path: the memory '" + path.string() + "' exists: give force=True to replace it");
   }
-  return std::make_unique<PyMemory>(
-      AnyMemory::create(path, stack, o, std::move(vocabulary), {.working_memory = working_memory}));
+  return std::make_unique<PyMemory>(AnyMemory::create(path, stack, o, std::move(vocabulary),
+                                                      {.working_memory = working_memory, .replace = force}));
 }
 
 /// None, (x, y, theta) for SE(2), or a 4 x 4 / 3 x 4 [R | t] for SE(3).
@@ -339,7 +338,10 @@ void bind(py::module_& m) {
           py::arg("working_memory") = std::size_t{200},
           "A new memory store at `path` (a folder means path/memory.vmdb), synced at every key image and loop\n"
           "edge, holding the features of its `working_memory` newest key images in RAM (0: all). An existing\n"
-          "memory is replaced only with force=True; any other existing file is refused.")
+          "memory is replaced only with force=True, when the new one is closed (close() or the end of a with\n"
+          "block): until then readers see the old one, which stays if the new one is never closed or its with\n"
+          "block ends in an exception; refused while another program writes it. Any other existing file is\n"
+          "refused.")
       .def_static(
           "open",
           [](const std::string& path, bool read_only, bool new_session, std::size_t working_memory) {
@@ -426,8 +428,13 @@ void bind(py::module_& m) {
       .def("close", [](PyMemory& self) { self.locked([](AnyMemory& mem) { mem.close(); }); },
            "Syncs and closes the store; the memory is read-only afterwards.")
       .def("__enter__", [](PyMemory& self) -> PyMemory& { return self; })
-      .def("__exit__", [](PyMemory& self, const py::object&, const py::object&, const py::object&) {
-        self.locked([](AnyMemory& mem) { mem.close(); });
+      .def("__exit__", [](PyMemory& self, const py::object& type, const py::object&, const py::object&) {
+        // A block left by an exception is a failed run: a memory created with force=True
+        // then leaves the one it was to replace.
+        self.locked([&](AnyMemory& mem) {
+          if (!type.is_none()) mem.abandon();
+          mem.close();
+        });
       })
       .def("start_session", [](PyMemory& self) { self.locked([](AnyMemory& mem) { mem.start_session(); }); },
            "Starts a new session (a new run of the robot: its first key image is not linked to the last).")

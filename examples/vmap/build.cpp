@@ -363,9 +363,10 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   } else {
     vmap::AnyVocabulary vocabulary;
     if (!args.vocabulary.empty()) vocabulary = vmap::AnyVocabulary::load(args.vocabulary);
-    if (args.force) ex::remove_memory(file);
+    // --force: the memory there is replaced when the run closes it; until then readers
+    // see it, and a failed run leaves it as it was.
     mem.emplace(vmap::AnyMemory::create(file, stack, memory_options(args), std::move(vocabulary),
-                                        {.working_memory = args.working_memory, .sync = sync}));
+                                        {.working_memory = args.working_memory, .sync = sync, .replace = args.force}));
     vmap::set_session_input(*mem, input);
   }
   ex::NewMemoryGuard guard(mem, !continued);

@@ -136,10 +136,9 @@ int convert(const MemoryArgs& a) {
   ex::prepare_memory_output(out, "OUTPUT", {a.convert_in}, false, a.force);
   const auto t0 = std::chrono::steady_clock::now();
   auto mem = vmap::AnyMemory::open(a.convert_in, {.pixels = true});
-  if (a.force) ex::remove_memory(out);
   std::optional<vmap::AnyMemory> written;
   ex::NewMemoryGuard guard(written, true);
-  written.emplace(vmap::AnyMemory::copy_into_store(std::move(mem), out));
+  written.emplace(vmap::AnyMemory::copy_into_store(std::move(mem), out, {.replace = a.force}));
   written->close();
   guard.keep();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -158,8 +157,10 @@ int convert(const MemoryArgs& a) {
 
 /// `memory merge A B --out C`: B's sessions appended to A's, loops searched from B's key
 /// images into every key image before them (VisualMemory::merge: C equals the memory
-/// built from A's runs and then B's as new sessions). C is written under a temporary
-/// name and renamed when complete, so an existing C (with --force) is never half replaced.
+/// built from A's runs and then B's as new sessions). C is written under a unique
+/// temporary name beside it and renamed when complete (MemoryCreateOptions: replace,
+/// whole_at_close), so C is never half written, an existing C (with --force) is replaced
+/// whole or not at all, and a C another run made meanwhile is not overwritten.
 int merge(const MemoryArgs& a) {
   namespace fs = std::filesystem;
   ex::current_inputs() = {a.merge_a, a.merge_b};
@@ -174,26 +175,15 @@ int merge(const MemoryArgs& a) {
   std::vector<std::optional<vmap::RecordedInput>> inputs;
   for (auto* m : {&mem, &other})
     for (std::size_t s = 0; s < m->sessions().size(); ++s) inputs.push_back(vmap::session_input(*m, s));
-  const fs::path tmp = out.string() + ".merging";
-  ex::remove_memory(tmp);
-  std::optional<vmap::AnyMemory> written;
-  {
-    ex::NewMemoryGuard guard(written, true);
-    written.emplace(vmap::AnyMemory::copy_into_store(std::move(mem), tmp));
-    written->merge(std::move(other), "memory '" + a.merge_a + "'", "memory '" + a.merge_b + "'");
-    for (std::size_t s = 0; s < inputs.size(); ++s)
-      if (inputs[s]) vmap::set_session_input_of(*written->store(), s, *inputs[s]);
-    written->close();
-    guard.keep();
-  }
-  const auto& m = *written;
+  auto written = vmap::AnyMemory::copy_into_store(std::move(mem), out, {.replace = a.force, .whole_at_close = true});
+  written.merge(std::move(other), "memory '" + a.merge_a + "'", "memory '" + a.merge_b + "'");
+  for (std::size_t s = 0; s < inputs.size(); ++s)
+    if (inputs[s]) vmap::set_session_input_of(*written.store(), s, *inputs[s]);
+  written.close();
+  const auto& m = written;
   const std::size_t frames = m.frames(), key_images = m.key_images(), loops = m.loops().size(), sessions = m.sessions().size();
   std::size_t across = 0;
   for (const auto& e : m.loops()) across += m.session_of(e.from) != m.session_of(e.link.key) ? 1 : 0;
-  written.reset();
-  ex::remove_memory(out);
-  fs::rename(tmp, out);
-  vmap::detail::sync_folder(vmap::detail::folder_of(out));
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (a.json) {
     ex::print_json({{"a", ex::path_string(a.merge_a)}, {"b", ex::path_string(a.merge_b)}, {"memory", ex::path_string(out)},

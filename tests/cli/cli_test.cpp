@@ -20,6 +20,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -30,6 +31,7 @@
 #include <iterator>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <tuple>
 #include <vector>
 
@@ -1366,6 +1368,96 @@ TEST_CASE("cli: a memory store is replaced only with --force, resumed only from 
   CHECK(!fs::exists(none));
 }
 
+namespace {
+
+/// The files of `dir` a replacement builds beside a memory (".NAME.vmap-new-PID-N").
+std::vector<std::string> replacement_files(const fs::path& dir) {
+  std::vector<std::string> out;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().filename().string().find(".vmap-new-") != std::string::npos) out.push_back(e.path().filename());
+  return out;
+}
+
+std::size_t key_images_of(const std::string& mem) {
+  const Run info = run_vmap({"memory", "info", mem, "--json"});
+  REQUIRE(info.code == 0);
+  return nlohmann::json::parse(info.out)["key_images"].size();
+}
+
+}  // namespace
+
+TEST_CASE("cli: --force replaces a memory whole: a failed run, or a memory another run writes, leaves it as it was") {
+  const fs::path dir = fresh_dir("store_replace");
+  const std::string mem = (dir / "m.vmdb").string();
+  REQUIRE(run_vmap({"memory", "build", sample, "--memory", mem, "--end", "20"}).code == 0);
+  const std::size_t keys = key_images_of(mem);
+  REQUIRE(keys > 1);
+  const std::string before = slurp(mem);
+  // No decodable frame, or no frame in the range: the run fails and the old memory stays.
+  fs::create_directories(dir / "bad");
+  write(dir / "bad" / "0001.jpg", "not an image");
+  write(dir / "bad" / "0002.jpg", "not an image either");
+  const Run bad = run_vmap({"build", (dir / "bad").string(), "--memory", mem, "--force"});
+  INFO(bad.err);
+  CHECK(bad.code == 1);
+  fails_with({"build", sample, "--memory", mem, "--force", "--start", "5000"}, 1, "gave no frame in the requested range");
+  CHECK(slurp(mem) == before);
+  CHECK(key_images_of(mem) == keys);
+  CHECK(replacement_files(dir).empty());
+
+  // A memory another `vmap build` writes (a long input: the sample five times over) is
+  // not replaced: that run completes with its own memory.
+  std::string list;
+  for (int lap = 0; lap < 5; ++lap) {
+    std::ifstream in(std::string(VMAP_TEST_SOURCE_DIR) + "/" + sample);
+    std::string line;
+    while (std::getline(in, line)) {
+      if (line.empty() || line[0] == '#') continue;
+      const auto space = line.find(' ');
+      list += std::to_string(std::stod(line.substr(0, space)) + 10.0 * lap) + " " + VMAP_TEST_SOURCE_DIR +
+              "/examples/data/tum_fr1_rpy_60/" + line.substr(space + 1) + "\n";
+    }
+  }
+  write(dir / "long.txt", list);
+  const std::string busy = (dir / "busy.vmdb").string();
+  const fs::path code = dir / "first.code";
+  const std::string first = "cd " + quote(VMAP_TEST_SOURCE_DIR) + " && (" + quote(VMAP_CLI_BINARY) + " build " +
+                            quote((dir / "long.txt").string()) + " --memory " + quote(busy) +
+                            " --save-every 1 >/dev/null 2>" + quote((dir / "first.err").string()) + "; echo $? > " +
+                            quote(code.string()) + ") &";
+  REQUIRE(std::system(first.c_str()) == 0);
+  const auto wait_for = [](const fs::path& p) {
+    for (int i = 0; i < 1200 && !fs::exists(p); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    return fs::exists(p);
+  };
+  REQUIRE(wait_for(busy));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const Run forced = run_vmap({"build", sample, "--memory", busy, "--force", "--end", "10"});
+  CHECK(forced.code == 1);
+  CHECK(forced.err.find("memory '" + busy + "' is being written by another program") != std::string::npos);
+  REQUIRE(wait_for(code));
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  CHECK(slurp(code) == "0\n");
+  const auto info = nlohmann::json::parse(run_vmap({"memory", "info", busy, "--json"}).out);
+  CHECK(info["frames"] == 300);
+  CHECK(replacement_files(dir).empty());
+
+  // A FIFO as the memory written, with or without --force, or read: refused unopened.
+  const fs::path fifo = dir / "fifo.vmdb";
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"build", sample, "--memory", fifo.string(), "--force"},
+        std::vector<std::string>{"build", sample, "--memory", fifo.string()},
+        std::vector<std::string>{"memory", "convert", mem, fifo.string(), "--force"},
+        std::vector<std::string>{"memory", "merge", mem, mem, "--out", fifo.string(), "--force"}}) {
+    CAPTURE(args.front());
+    fails_with(args, 2, "'" + fifo.string() + "' is not a regular file");
+  }
+  fails_with({"memory", "info", fifo.string()}, 2, "'" + fifo.string() + "' is not a regular file");
+  fails_with({"memory", "convert", fifo.string(), (dir / "x.vmdb").string()}, 2, "is not a regular file");
+  CHECK(fs::is_fifo(fifo));
+}
+
 TEST_CASE("cli: memory convert turns .vmem files of every version into stores that answer the same") {
   const fs::path dir = fresh_dir("store_convert");
   for (const char* name : {"labels_gcs.vmem", "labels_gcs_v2.vmem", "v1_five_keys.vmem"}) {
@@ -1467,7 +1559,7 @@ TEST_CASE("cli: --session new adds a run to a memory; memory merge of two memori
   CHECK(nlohmann::json::parse(merged.out)["sessions"] == 2);
   const auto k = nlohmann::json::parse(run_vmap({"memory", "info", c, "--json"}).out);
   CHECK(without_sizes(k) == without_sizes(j));
-  CHECK(!fs::exists(c + ".merging"));
+  CHECK(replacement_files(dir).empty());
   usage_error({"memory", "merge", a, b, "--out", c}, "exists: give --force to replace it");
   // Other options: refused, naming both, and nothing written.
   const std::string d = (dir / "d.vmdb").string();

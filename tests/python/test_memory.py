@@ -221,6 +221,36 @@ def test_errors_name_the_input(tmp_path, sample_frames):
         mem.key_features(3)
 
 
+def test_force_replaces_at_close_and_never_a_memory_being_written(tmp_path, sample_frames):
+    path = str(tmp_path / "m.vmdb")
+    with vmap.VisualMemory.create(path) as old:
+        for img, t, _ in sample_frames[:10]:
+            old.push(img, timestamp=t)
+    writer = vmap.VisualMemory.open(path)
+    with pytest.raises(vmap.Error, match="m.vmdb' is being written by another program"):
+        vmap.VisualMemory.create(path, force=True)
+    writer.close()
+    assert vmap.VisualMemory.open(path, read_only=True).frames == 10
+    new = vmap.VisualMemory.create(path, force=True)
+    for img, t, _ in sample_frames[:20]:
+        new.push(img, timestamp=t)
+    # Readers see the old memory until the new one is closed; one never closed leaves it.
+    assert vmap.VisualMemory.open(path, read_only=True).frames == 10
+    new.close()
+    assert vmap.VisualMemory.open(path, read_only=True).frames == 20
+    unclosed = vmap.VisualMemory.create(path, force=True)
+    unclosed.push(sample_frames[0][0])
+    del unclosed
+    assert vmap.VisualMemory.open(path, read_only=True).frames == 20
+    # A with block left by an exception is a failed run: the old memory stays.
+    with pytest.raises(RuntimeError, match="stopped"):
+        with vmap.VisualMemory.create(path, force=True) as failed:
+            failed.push(sample_frames[0][0])
+            raise RuntimeError("stopped")
+    assert vmap.VisualMemory.open(path, read_only=True).frames == 20
+    assert [p.name for p in tmp_path.iterdir() if "vmap-new" in p.name] == []
+
+
 def test_push_releases_the_gil(sample_list):
     mem = vmap.VisualMemory()
     worker = threading.Thread(target=mem.push_frames, args=(sample_list,))

@@ -15,7 +15,9 @@
 // closed the file, so SQLite's locks are never dropped by a close() of ours. Readers
 // (Access::read) take no lock and see the last committed transaction; where they cannot
 // create SQLite's index file beside the database (read-only media), they read it as
-// immutable, which nothing can then change either.
+// immutable, which nothing can then change either. The same lock (WriterLock) is what a
+// replacement of the file takes (memory/replace.hpp): a file being written is never
+// replaced, nor written while it is replaced.
 //
 // Threads: a Database and the Statements prepared on it may be used from any thread, by
 // one thread at a time. The connection is opened with SQLITE_OPEN_NOMUTEX (SQLite's
@@ -29,6 +31,7 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cctype>
@@ -86,6 +89,92 @@ enum class Access : std::uint8_t {
 
 class Statement;
 
+/// The writer's lock of a database file: an flock on a descriptor of its own, held until
+/// release() or destruction. flock locks belong to the open file description, so a second
+/// WriterLock of one file is refused also within one process. `what` names the file in
+/// messages (e.g. "memory 'm.vmdb'").
+class WriterLock {
+ public:
+  WriterLock() = default;
+
+  /// Locks `path` (with `create`, a new file made with O_EXCL). Refused without waiting
+  /// while another holder has it ("is being written by another program"); a path that is
+  /// not a regular file is refused without reading it (a FIFO or a device).
+  WriterLock(const std::filesystem::path& path, bool create, const std::string& what) {
+    // A file renamed over `path` between open() and flock() (a replacement that just
+    // finished) is locked again under its new identity, so the lock is always the one
+    // of the file the path names.
+    for (int attempt = 0; attempt < 8; ++attempt) {
+      fd_ = ::open(path.c_str(), O_RDWR | O_CLOEXEC | O_NONBLOCK | (create ? O_CREAT | O_EXCL : 0), 0644);
+      if (fd_ < 0) vmap::detail::fail(what + " cannot be opened for writing: " + std::strerror(errno));
+      struct stat st{};
+      if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode)) {
+        release();
+        vmap::detail::fail(what + " is not a regular file");
+      }
+      if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+        const int err = errno;
+        release();
+        if (err == EWOULDBLOCK)
+          vmap::detail::fail(what + " is being written by another program (one writer at a time; open it read-only to "
+                                    "localize while it maps)");
+        vmap::detail::fail(what + " cannot be locked: " + std::strerror(err));
+      }
+      struct stat now{};
+      if (create || (::stat(path.c_str(), &now) == 0 && now.st_dev == st.st_dev && now.st_ino == st.st_ino)) return;
+      release();
+    }
+    vmap::detail::fail(what + " cannot be locked: it was replaced again and again while being opened");
+  }
+  WriterLock(WriterLock&& o) noexcept : fd_(std::exchange(o.fd_, -1)) {}
+  WriterLock& operator=(WriterLock&& o) noexcept {
+    if (this != &o) {
+      release();
+      fd_ = std::exchange(o.fd_, -1);
+    }
+    return *this;
+  }
+  WriterLock(const WriterLock&) = delete;
+  WriterLock& operator=(const WriterLock&) = delete;
+  ~WriterLock() { release(); }
+
+  [[nodiscard]] bool held() const noexcept { return fd_ >= 0; }
+  void release() noexcept {
+    if (fd_ >= 0) ::close(std::exchange(fd_, -1));
+  }
+
+ private:
+  int fd_ = -1;
+};
+
+/// Moves the write-ahead log of the database at `path` into the file and truncates the
+/// log to nothing (PRAGMA wal_checkpoint(TRUNCATE)), through a connection of its own that
+/// takes no WriterLock: for a caller that holds the file's WriterLock already (a second
+/// flock of the same file from this process would conflict with it). A reader that holds
+/// an older snapshot for longer than SQLite's 5 s wait makes it an Error: the log was not
+/// emptied. A database that is not in WAL mode is left as it is.
+inline void checkpoint_locked(const std::filesystem::path& path, const std::string& what) {
+  sqlite3* db = nullptr;
+  const int rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOMUTEX, nullptr);
+  struct Close {
+    sqlite3* db;
+    ~Close() { sqlite3_close_v2(db); }
+  } close{db};
+  if (rc != SQLITE_OK)
+    vmap::detail::fail(what + " cannot be opened: " + (db ? sqlite3_errmsg(db) : sqlite3_errstr(rc)));
+  sqlite3_busy_timeout(db, 5000);
+  sqlite3_stmt* s = nullptr;
+  if (sqlite3_prepare_v2(db, "PRAGMA wal_checkpoint(TRUNCATE)", -1, &s, nullptr) != SQLITE_OK)
+    vmap::detail::fail(what + " checkpoint its write-ahead log: " + sqlite3_errmsg(db));
+  const int step = sqlite3_step(s);
+  const bool busy = step == SQLITE_ROW && sqlite3_column_int(s, 0) != 0;
+  const std::string why = step == SQLITE_ROW ? std::string() : sqlite3_errmsg(db);
+  sqlite3_finalize(s);
+  if (step != SQLITE_ROW) vmap::detail::fail(what + " checkpoint its write-ahead log: " + why);
+  if (busy)
+    vmap::detail::fail(what + " checkpoint its write-ahead log: a reader held an older snapshot for 5 s; try again");
+}
+
 /// One connection to a database file.
 class Database {
  public:
@@ -98,7 +187,7 @@ class Database {
     if (access == Access::create && exists) fail("exists already");
     if (access != Access::create && !exists) fail("does not exist");
     if (exists && !std::filesystem::is_regular_file(path, ec)) fail("is not a regular file");
-    if (access != Access::read) lock(path, access == Access::create);
+    if (access != Access::read) lock_ = WriterLock(path, access == Access::create, what_);
     int flags = access == Access::read ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE;
     std::string name = path.string();
     if (access == Access::read && !folder_writable(path)) {
@@ -135,12 +224,12 @@ class Database {
   }
 
   Database(Database&& o) noexcept
-      : db_(std::exchange(o.db_, nullptr)), lock_fd_(std::exchange(o.lock_fd_, -1)), what_(std::move(o.what_)) {}
+      : db_(std::exchange(o.db_, nullptr)), lock_(std::move(o.lock_)), what_(std::move(o.what_)) {}
   Database& operator=(Database&& o) noexcept {
     if (this != &o) {
       close();
       db_ = std::exchange(o.db_, nullptr);
-      lock_fd_ = std::exchange(o.lock_fd_, -1);
+      lock_ = std::move(o.lock_);
       what_ = std::move(o.what_);
     }
     return *this;
@@ -185,25 +274,13 @@ class Database {
     return ::access(folder.c_str(), W_OK) == 0;
   }
 
-  void lock(const std::filesystem::path& path, bool create) {
-    lock_fd_ = ::open(path.c_str(), O_RDWR | O_CLOEXEC | (create ? O_CREAT | O_EXCL : 0), 0644);
-    if (lock_fd_ < 0) fail(std::string("cannot be opened for writing: ") + std::strerror(errno));
-    if (::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0) {
-      const int err = errno;
-      ::close(std::exchange(lock_fd_, -1));
-      if (err == EWOULDBLOCK)
-        fail("is being written by another program (one writer at a time; open it read-only to localize while it maps)");
-      fail(std::string("cannot be locked: ") + std::strerror(err));
-    }
-  }
-
   void close() noexcept {
     if (db_) sqlite3_close_v2(std::exchange(db_, nullptr));
-    if (lock_fd_ >= 0) ::close(std::exchange(lock_fd_, -1));
+    lock_.release();
   }
 
   sqlite3* db_ = nullptr;
-  int lock_fd_ = -1;  ///< holds the writer's flock; closed after the database
+  WriterLock lock_;  ///< the writer's flock; released after the database closed
   std::string what_;
 };
 

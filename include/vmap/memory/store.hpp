@@ -45,7 +45,10 @@
 //
 // One writer at a time (open(..., write) of a memory another program writes is refused
 // with a message naming the file); any number of readers (open(..., read)) load the
-// last committed sync while the writer goes on.
+// last committed sync while the writer goes on. An existing memory is replaced by a new
+// store through MemoryReplacement (memory/replace.hpp): the new store is built beside it
+// under another name and renamed over it when closed, so readers see the old memory
+// until then, and a failed or killed run leaves the old memory as it was.
 //
 // Threading: a MemoryStore object is used by one thread at a time (the one that pushes
 // into the memory). Its writer thread uses the SQLite connection only while a sync is
@@ -434,9 +437,11 @@ class MemoryStoreConnection {
 
 class MemoryStore {
  public:
-  /// A new, empty store at `path`; refused when the file exists.
-  [[nodiscard]] static MemoryStore create(const std::filesystem::path& path) {
-    MemoryStore s(path, sqlite::Access::create);
+  /// A new, empty store at `path`; refused when the file exists. `what` names it in
+  /// messages (default "memory '<path>'"; a store built to replace another under a
+  /// temporary name is named as the memory it replaces).
+  [[nodiscard]] static MemoryStore create(const std::filesystem::path& path, std::string what = {}) {
+    MemoryStore s(path, sqlite::Access::create, std::move(what));
     try {
       sqlite::Transaction t(s.db(), "create the tables");
       s.db().exec(schema_sql(), "create the tables");
@@ -706,9 +711,10 @@ class MemoryStore {
     return committed_.keys;
   }
 
-  MemoryStore(const std::filesystem::path& path, sqlite::Access access)
+  MemoryStore(const std::filesystem::path& path, sqlite::Access access, std::string what = {})
       : path_(path),
-        connection_(std::make_unique<detail::MemoryStoreConnection>(path, access, "memory '" + path.string() + "'")) {}
+        connection_(std::make_unique<detail::MemoryStoreConnection>(
+            path, access, what.empty() ? "memory '" + path.string() + "'" : std::move(what))) {}
 
   [[nodiscard]] sqlite::Database& db() const noexcept { return connection_->db; }
 

@@ -16,7 +16,11 @@
 // crosses this interface. A memory is opened from a memory store (SQLite,
 // memory/store.hpp) or a single file (.vmem, memory/vmem.hpp), told apart by their first
 // bytes; a store is opened to read (a snapshot, also while another program writes it) or
-// to write (one writer at a time: pushing syncs it, SyncPolicy).
+// to write (one writer at a time: pushing syncs it, SyncPolicy). A new store replaces an
+// existing memory only when asked (MemoryCreateOptions::replace), atomically: it is built
+// beside the old one while readers keep reading that, and renamed over it by close();
+// a run that fails, or a memory destroyed before close(), leaves the old one as it was
+// (memory/replace.hpp).
 //
 // Threading: as VisualMemory (memory/visual_memory.hpp): one thread at a time calls
 // push(), localize() and the other members; separate AnyMemory objects share nothing.
@@ -27,6 +31,7 @@
 #include <vmap/io/frame_source.hpp>
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/memory/records.hpp>
+#include <vmap/memory/replace.hpp>
 #include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 #include <vmap/memory/vmem.hpp>
@@ -39,7 +44,6 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
-#include <fstream>
 #include <memory>
 #include <optional>
 #include <string>
@@ -53,26 +57,6 @@ namespace vmap {
 /// The memory type of a policy stack (eq. 5's inlier ratio as the similarity).
 template <class D, class M, class E>
 using MemoryOf = VisualMemory<D, M, E, InlierRatio>;
-
-/// What a file given as a memory is, by its first bytes.
-enum class MemoryKind : std::uint8_t {
-  store,  ///< a memory store (an SQLite file; an empty file is one whose creation was interrupted)
-  file,   ///< a single-file memory (.vmem, "VMAPMEMO")
-  other,  ///< neither
-};
-
-[[nodiscard]] inline MemoryKind memory_kind(const std::filesystem::path& file) {
-  std::error_code ec;
-  if (std::filesystem::is_regular_file(file, ec) && std::filesystem::file_size(file, ec) == 0 && !ec)
-    return MemoryKind::store;
-  std::ifstream f(file, std::ios::binary);
-  char head[16] = {};
-  f.read(head, sizeof head);
-  const std::string_view h(head, static_cast<std::size_t>(std::max<std::streamsize>(f.gcount(), 0)));
-  if (h == std::string_view("SQLite format 3\0", 16)) return MemoryKind::store;
-  if (h.size() >= 8 && h.substr(0, 8) == std::string_view(detail::memory_magic, 8)) return MemoryKind::file;
-  return MemoryKind::other;
-}
 
 /// The file name a folder given as a memory holds.
 inline constexpr const char* memory_file_name = "memory.vmdb";
@@ -109,10 +93,20 @@ struct MemoryOpenOptions {
   SyncPolicy sync{};
 };
 
-/// How AnyMemory::create makes a memory store.
+/// How AnyMemory::create (and copy_into_store) makes a memory store.
 struct MemoryCreateOptions {
   std::size_t working_memory = 0;  ///< as MemoryOpenOptions::working_memory
   SyncPolicy sync{};
+  /// Replace an existing memory at the path (a store or a .vmem file; any other file is
+  /// refused): the new store is built under another name and renamed over it by close(),
+  /// holding the old one's writer lock meanwhile (refused while another program writes
+  /// it). false: an existing file is refused. A path with no file gets a new store there
+  /// either way, written in place so that readers can follow it.
+  bool replace = false;
+  /// A new store where no file is appears there only when closed, whole: it is built under
+  /// another name as a replacement is (a killed run leaves no partial memory there; a file
+  /// another program made there meanwhile is not replaced). false: written in place.
+  bool whole_at_close = false;
 };
 
 namespace detail {
@@ -278,9 +272,10 @@ class AnyMemory {
     return out;
   }
 
-  /// A new memory store at `path` (refused when the file exists; its folder made when
-  /// missing) of `stack`, with these options and vocabulary (empty: learned from the first
-  /// key images). The stack's camera source is kept as the store's note "camera source".
+  /// A new memory store at `path` (its folder made when missing) of `stack`, with these
+  /// options and vocabulary (empty: learned from the first key images). An existing file
+  /// is refused, or with `how.replace` replaced by close() when it is a memory. The
+  /// stack's camera source is kept as the store's note "camera source".
   [[nodiscard]] static AnyMemory create(const std::filesystem::path& path, const PolicyStack& given,
                                         const MemoryOptions& options = {}, AnyVocabulary vocabulary = {},
                                         const MemoryCreateOptions& how = {}) {
@@ -292,10 +287,11 @@ class AnyMemory {
       std::filesystem::create_directories(path.parent_path(), ec);
       if (ec) detail::fail("memory '" + path.string() + "': cannot create its folder: " + ec.message());
     }
+    out.replacement_ = replacement_of(path, how);
     out.impl_ = with_policies(stack, StackUse::memory, [&](auto d, auto m, auto e) -> std::unique_ptr<detail::MemoryConcept> {
       using Memory = MemoryOf<decltype(d), decltype(m), decltype(e)>;
       Memory memory(std::move(d), std::move(m), std::move(e), InlierRatio{}, options, std::move(vocabulary));
-      MemoryStore store = MemoryStore::create(path);
+      MemoryStore store = new_store(path, out.replacement_.get());
       if (stack.camera && !stack.camera_source.empty()) store.set_note(camera_source_note, stack.camera_source);
       return std::make_unique<detail::MemoryModel<Memory>>(std::move(memory), std::move(store));
     }, camera_name(stack));
@@ -324,12 +320,15 @@ class AnyMemory {
   }
 
   /// A memory store at `path` holding `source`'s memory (its records written whole into
-  /// a new store; refused when the file exists): a .vmem file made a store, a store copied.
-  /// The memory must have been opened with its pixels when it keeps them.
-  [[nodiscard]] static AnyMemory copy_into_store(AnyMemory&& source, const std::filesystem::path& path) {
+  /// a new store): a .vmem file made a store, a store copied. An existing file is refused,
+  /// or with `how.replace` replaced by close() when it is a memory (`how`'s other fields
+  /// are not used). The memory must have been opened with its pixels when it keeps them.
+  [[nodiscard]] static AnyMemory copy_into_store(AnyMemory&& source, const std::filesystem::path& path,
+                                                 const MemoryCreateOptions& how = {}) {
     AnyMemory out = std::move(source);
     if (auto* s = out.impl_->store()) s->flush();
-    MemoryStore store = MemoryStore::create(path);
+    out.replacement_ = replacement_of(path, how);
+    MemoryStore store = new_store(path, out.replacement_.get());
     if (out.stack_.camera && !out.stack_.camera_source.empty()) store.set_note(camera_source_note, out.stack_.camera_source);
     // The memory's records, written whole by the first sync into the new store (a memory
     // bounded by its old store reads its released features through that store's own
@@ -348,6 +347,8 @@ class AnyMemory {
   AnyMemory(const AnyMemory&) = delete;
   AnyMemory& operator=(const AnyMemory&) = delete;
   /// Waits for a sync in flight (a failure of it is dropped: close() or flush() first).
+  /// A memory replacing another (MemoryCreateOptions::replace) that was not closed is
+  /// discarded: the memory it was to replace stays.
   ~AnyMemory() = default;
 
   // ---- what it is ---------------------------------------------------------------------
@@ -362,6 +363,10 @@ class AnyMemory {
   [[nodiscard]] bool writes() const noexcept { return writes_ && !closed_; }
   /// Whether it was opened to read only (a snapshot of a store, a file not opened to write).
   [[nodiscard]] bool read_only() const noexcept { return !writes_; }
+  /// Whether close() is still to rename the store over the memory it replaces, or into
+  /// place (MemoryCreateOptions::replace, whole_at_close): until then path() holds the
+  /// old memory, or nothing.
+  [[nodiscard]] bool replaces() const noexcept { return replacement_ != nullptr; }
   /// The store it is synced into, or nullptr (a file, a memory in RAM, a closed memory).
   [[nodiscard]] MemoryStore* store() noexcept { return closed_ ? nullptr : impl_->store(); }
 
@@ -434,7 +439,8 @@ class AnyMemory {
   }
 
   /// Syncs, commits and closes the store (its write-ahead log moved into the file); the
-  /// memory can still be read, not changed. A no-op for a memory without a store.
+  /// memory can still be read, not changed. A store replacing another memory is renamed
+  /// over it here (an Error leaves the old one). A no-op for a memory without a store.
   void close() {
     if (closed_) return;
     if (auto* s = impl_->store(); s && writes_) {
@@ -443,6 +449,20 @@ class AnyMemory {
     }
     impl_->drop_store();
     closed_ = true;
+    if (replacement_) {
+      const std::unique_ptr<MemoryReplacement> r = std::move(replacement_);
+      r->commit();
+    }
+  }
+
+  /// Ends a memory that replaces another without replacing it, for a run that failed:
+  /// what it wrote is removed and the memory it was to replace stays; it is closed (read
+  /// only). A no-op for any other memory (close() keeps what it wrote).
+  void abandon() {
+    if (!replacement_) return;
+    impl_->drop_store();
+    closed_ = true;
+    replacement_.reset();
   }
 
   /// Writes the memory as a .vmem file, atomically (VisualMemory::save).
@@ -487,6 +507,24 @@ class AnyMemory {
 
   /// The store note that keeps where a stack's calibration came from (for messages).
   static constexpr const char* camera_source_note = "camera source";
+
+  /// The replacement of the memory at `path` when `how` asks for one (a file there and
+  /// `replace`, or none there and `whole_at_close`); null for a store made in place (or
+  /// refused there when a file is).
+  static std::unique_ptr<MemoryReplacement> replacement_of(const std::filesystem::path& path,
+                                                           const MemoryCreateOptions& how) {
+    std::error_code ec;
+    const bool exists = std::filesystem::exists(std::filesystem::symlink_status(path, ec));
+    if (!(exists ? how.replace : how.whole_at_close)) return nullptr;
+    return std::make_unique<MemoryReplacement>(path, !exists);
+  }
+
+  /// A new store at `path`, or beside it when it replaces the memory there (named as
+  /// that memory in messages).
+  static MemoryStore new_store(const std::filesystem::path& path, const MemoryReplacement* replacement) {
+    if (!replacement) return MemoryStore::create(path);
+    return MemoryStore::create(replacement->path(), "memory '" + path.string() + "'");
+  }
 
   static void check_input(const std::filesystem::path& path) {
     std::error_code ec;
@@ -553,6 +591,9 @@ class AnyMemory {
 
   [[nodiscard]] std::string where() const { return path_.empty() ? std::string() : " '" + path_.string() + "'"; }
 
+  /// Declared before impl_: the new store is closed before an unfinished replacement
+  /// removes it.
+  std::unique_ptr<MemoryReplacement> replacement_;
   std::unique_ptr<detail::MemoryConcept> impl_;
   PolicyStack stack_;
   std::filesystem::path path_;
