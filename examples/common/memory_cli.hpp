@@ -212,9 +212,11 @@ inline void check_frames_left(const AnyMemory& memory, const FrameSource& src, c
 }
 
 /// Removes the memory store a run created when the run ends (an error, no frame) before
-/// keep(): no empty memory is left behind. A continued memory is never removed, nor one
-/// that replaces another (AnyMemory::replaces(): destroyed unclosed, it leaves the
-/// memory it was to replace as it was).
+/// keep() while it holds nothing: no empty memory is left behind. One that holds key
+/// images a sync committed (a reader may have seen them; the run failed later, e.g. on a
+/// full disk) is kept, and the guard says so: `--resume` continues it. A continued memory
+/// is never removed, nor one that replaces another (AnyMemory::replaces(): destroyed
+/// unclosed, it leaves the memory it was to replace as it was).
 class NewMemoryGuard {
  public:
   NewMemoryGuard(std::optional<AnyMemory>& memory, bool created) : memory_(&memory), armed_(created) {}
@@ -224,7 +226,20 @@ class NewMemoryGuard {
   ~NewMemoryGuard() {
     if (!armed_ || !*memory_ || (*memory_)->replaces()) return;
     const std::filesystem::path file = (*memory_)->path();
-    memory_->reset();
+    memory_->reset();  // waits for the sync in flight
+    // Removed only when it is known to hold nothing: a store that cannot be read back
+    // now (the error may still be there) is kept as it is.
+    try {
+      auto store = MemoryStore::open(file, sqlite::Access::read);
+      if (store.synced()) {
+        std::fprintf(stderr, "the memory '%s' keeps the %zu key images committed before the error (--resume "
+                     "continues it)\n", file.c_str(), store.key_images());
+        return;
+      }
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "the memory '%s' is kept as the error left it (reading it back: %s)\n", file.c_str(), e.what());
+      return;
+    }
     std::error_code ec;
     for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(file.string() + suffix, ec);
   }

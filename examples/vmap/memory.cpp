@@ -165,6 +165,10 @@ int merge(const MemoryArgs& a) {
   namespace fs = std::filesystem;
   ex::current_inputs() = {a.merge_a, a.merge_b};
   for (const auto& [in, option] : {std::pair{a.merge_a, "A"}, std::pair{a.merge_b, "B"}}) ex::check_memory_input(in, option);
+  std::error_code ec;
+  if (fs::equivalent(a.merge_a, a.merge_b, ec))
+    ex::usage_error("A and B are the same memory ('" + a.merge_a + "'): merging it with itself would add each of its "
+                    "runs again as a new session");
   const fs::path out = vmap::memory_path(a.out);
   ex::prepare_memory_output(out, "--out", {a.merge_a, a.merge_b}, false, a.force);
   const auto t0 = std::chrono::steady_clock::now();

@@ -1561,12 +1561,42 @@ TEST_CASE("cli: --session new adds a run to a memory; memory merge of two memori
   CHECK(without_sizes(k) == without_sizes(j));
   CHECK(replacement_files(dir).empty());
   usage_error({"memory", "merge", a, b, "--out", c}, "exists: give --force to replace it");
+  // A memory merged with itself (also under another name) would repeat its runs.
+  fs::create_symlink(fs::absolute(a), dir / "a_link.vmdb");
+  usage_error({"memory", "merge", a, (dir / "a_link.vmdb").string(), "--out", (dir / "self.vmdb").string()},
+              "A and B are the same memory ('" + a + "')");
+  CHECK(!fs::exists(dir / "self.vmdb"));
   // Other options: refused, naming both, and nothing written.
   const std::string d = (dir / "d.vmdb").string();
   REQUIRE(run_vmap({"memory", "build", sample, "--memory", d, "--end", "10", "--threshold", "0.5"}).code == 0);
   fails_with({"memory", "merge", a, d, "--out", (dir / "e.vmdb").string()}, 1,
              "cannot merge memory '" + d + "' into memory '" + a + "'");
   CHECK(!fs::exists(dir / "e.vmdb"));
+}
+
+TEST_CASE("cli: a new memory whose run fails after committing key images (a full disk) is kept and resumes") {
+  const fs::path dir = fresh_dir("store_full");
+  const std::string mem = (dir / "m.vmdb").string();
+  // bash's file size limit stands in for a full disk: writes past 1000 KiB fail (EFBIG,
+  // with SIGXFSZ ignored) after the first syncs were committed.
+  const std::string inner = "trap '' XFSZ; ulimit -f 1000; exec " + quote(VMAP_CLI_BINARY) + " build " + quote(sample) +
+                            " --memory " + quote(mem) + " >/dev/null 2>" + quote((dir / "err.txt").string());
+  const std::string cmd = "cd " + quote(VMAP_TEST_SOURCE_DIR) + " && bash -c " + quote(inner);
+  const int status = std::system(cmd.c_str());
+  CHECK(WEXITSTATUS(status) == 1);
+  const std::string err = slurp(dir / "err.txt");
+  INFO(err);
+  CHECK(err.find("the memory '" + mem + "' keeps the ") != std::string::npos);
+  const std::size_t kept = key_images_of(mem);
+  CHECK(kept > 0);
+  // With the disk back, --resume goes on to the memory of an uninterrupted run.
+  const Run resumed = run_vmap({"build", sample, "--memory", mem, "--resume"});
+  INFO(resumed.err);
+  CHECK(resumed.code == 0);
+  const std::string whole = (dir / "whole.vmdb").string();
+  REQUIRE(run_vmap({"build", sample, "--memory", whole}).code == 0);
+  CHECK(key_images_of(mem) == key_images_of(whole));
+  CHECK(key_images_of(mem) > kept);
 }
 
 TEST_CASE("cli: a memory store is read without vmap, by sqlite3 and by Python's sqlite3 module") {

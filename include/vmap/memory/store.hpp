@@ -783,6 +783,14 @@ class MemoryStore {
       if (!q.step()) db().fail(std::string(doing) + ": no row");
       return static_cast<std::size_t>(q.integer(0));
     };
+    // The tables vmap makes give each state and note one row (PRIMARY KEY name); a table
+    // remade without that key by another program could hold two, and which one a read
+    // meets would be SQLite's choice.
+    for (const char* table : {"meta", "notes"}) {
+      auto q = db().prepare(std::string("SELECT name FROM ") + table + " GROUP BY name HAVING count(*) > 1 LIMIT 1",
+                            "look for repeated rows");
+      if (q.step()) db().fail("is corrupt: its " + std::string(table) + " table holds '" + q.text(0) + "' more than once");
+    }
     held_ = {};
     held_.keys = count("SELECT count(*) FROM key_images", "count the key images");
     held_.loops = count("SELECT count(*) FROM loops", "count the loop edges");

@@ -553,8 +553,10 @@ TEST_CASE("store: every row is checked: a flipped bit, a column that differs fro
     const fs::path copy = fresh("rows_copy.vmdb");
     fs::copy_file(file, copy);
     raw_sql(copy, damage);
-    auto store = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read);
-    const std::string e = error_of([&] { (void)load(store); });
+    const std::string e = error_of([&] {
+      auto store = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read);
+      (void)load(store);
+    });
     const std::string who = "memory '" + copy.string() + "' is corrupt: ";
     REQUIRE(e.starts_with(who));
     return e.substr(who.size());
@@ -568,6 +570,10 @@ TEST_CASE("store: every row is checked: a flipped bit, a column that differs fro
                              "name = 'other.png'"})
     CHECK(error_after(std::string("UPDATE key_images SET ") + column + " WHERE id = 5") ==
           "the columns of key image 5 do not match its record");
+  // A state or note twice (in a table remade without its primary key).
+  CHECK(error_after("CREATE TABLE meta2(name TEXT NOT NULL, value BLOB NOT NULL, crc INTEGER NOT NULL); INSERT INTO "
+                    "meta2 SELECT * FROM meta; INSERT INTO meta2 SELECT * FROM meta WHERE name = 'options'; DROP TABLE "
+                    "meta; ALTER TABLE meta2 RENAME TO meta") == "its meta table holds 'options' more than once");
   // Loop rows against the count the state records.
   const std::string loops = std::to_string(memory.loops().size());
   CHECK(error_after("DELETE FROM loops WHERE id = (SELECT max(id) FROM loops)").find(
