@@ -522,10 +522,11 @@ class OutputFolder {
       : dir_(dir) {
     prepare_output_dir(dir, option, inputs, files);
     try {
-      set_.emplace(dir);
+      vmap::AtomicDirectory::check(dir);
     } catch (const vmap::Error& e) {
       usage_error(option + ": " + e.what());
     }
+    set_.emplace(dir);  // a failure here (a full disk) is the run's, not the options'
   }
   /// Where to write the file `name` of the set until commit().
   [[nodiscard]] std::filesystem::path operator/(const std::string& name) const { return set_->path() / name; }

@@ -219,8 +219,10 @@ inline void write_image_atomically(const std::filesystem::path& target, const cv
 /// The target's parent folders are created if missing (errors name the folder).
 /// Move-only; one thread.
 class AtomicDirectory {
- public:
-  explicit AtomicDirectory(const std::filesystem::path& target) : target_(target) {
+  struct ChecksOnly {};
+
+  /// Only the checks of the target (check()); creates nothing.
+  AtomicDirectory(const std::filesystem::path& target, ChecksOnly) : target_(target) {
     detail::check(!target.empty(), "AtomicDirectory: the output folder name is empty");
     auto name = target_.filename();
     if (name.empty() || name == "." || name == "..") {  // "out/" or "." : use the real name
@@ -230,6 +232,18 @@ class AtomicDirectory {
       detail::check(!name.empty(), "output folder '" + target.string() + "' cannot be replaced");
     }
     check_replaceable();
+  }
+
+ public:
+  /// The checks the constructor makes before it creates anything: whether `target` may
+  /// be replaced. A front end reports their failures as the user's to fix, apart from the
+  /// constructor's own (creating the folder or its first file on a full disk).
+  static void check(const std::filesystem::path& target) { (void)AtomicDirectory(target, ChecksOnly{}); }
+
+  // (Delegating: once the checks' constructor returned, a failure below runs the
+  // destructor, which removes the temporary folder made so far.)
+  explicit AtomicDirectory(const std::filesystem::path& target) : AtomicDirectory(target, ChecksOnly{}) {
+    const auto name = target_.filename();
     const auto parent = detail::folder_of(target_);
     create_directories(parent, "output folder's parent");
     std::string templ = (parent / ("." + name.string() + ".vmap-XXXXXX")).string();
