@@ -405,8 +405,8 @@ void bind(py::module_& m) {
           py::arg("record_time") = false, py::arg("poses") = py::none(), py::arg("progress") = py::none(),
           py::arg("progress_every") = 50,
           "Pushes every frame of a source (as vmap.frames reads it, with the same keywords) in C++, with the frame's pose from a TUM\n"
-          "or KITTI pose file when `poses` is given. Frames keep the source's indices in a new memory or session, and are\n"
-          "numbered after the frames already pushed otherwise (the source's gaps kept); progress(frames) is called every progress_every frames\n"
+          "or KITTI pose file when `poses` is given. Frames keep the source's indices where they follow the frames already\n"
+          "pushed (a new memory or session), and are shifted to follow them otherwise (the source's gaps kept); progress(frames) is called every progress_every frames\n"
           "with the GIL held (Ctrl-C, or an exception it raises, stops the run there; what was pushed stays).\n"
           "Returns a PushSummary.")
       .def(

@@ -47,13 +47,13 @@ def test_push_frames_numbers_frames_after_those_pushed(tmp_path, sample_list, sa
     mem.push(img, timestamp=t, name=n)
     mem.push_frames(sample_list, end=10)          # source frames 0..9 follow frame 0
     assert mem.last_frame_index == 10
-    mem.push_frames(sample_list, start=20, end=30)  # keeps the source's gap: 11 + (20 - 20)
-    assert mem.last_frame_index == 20
-    mem.push_frames(sample_list, start=0, end=5)
-    assert mem.frames == 26 and mem.last_frame_index == 25
+    mem.push_frames(sample_list, start=20, end=30)  # 20..29 follow frame 10 as they are
+    assert mem.last_frame_index == 29
+    mem.push_frames(sample_list, start=0, end=5)    # 0..4 shifted to follow frame 29
+    assert mem.frames == 26 and mem.last_frame_index == 34
     mem.close()
     back = vmap.VisualMemory.open(path, read_only=True)
-    assert back.frames == 26 and back.last_frame_index == 25
+    assert back.frames == 26 and back.last_frame_index == 34
     # In a fresh memory (or a new session) the source's own indices are kept.
     fresh = vmap.VisualMemory(vocabulary_after=5)
     fresh.push_frames(sample_list, start=20, end=30)

@@ -75,12 +75,12 @@ struct RecordOptions {
   std::function<OdometryPose(const Frame&)> poses{};
   /// Called after each frame pushed, with the memory (e.g. for progress).
   std::function<void(const AnyMemory&)> on_frame{};
-  /// Numbers the frames after the last one the memory's current session holds (the
-  /// source's indices shifted by one offset, so its gaps stay): a second run into the
-  /// same session, or one that starts earlier in its source, then continues the session
-  /// instead of being refused for indices that go backwards. Off, frames keep the
-  /// source's indices, which line up with its ground truth (--resume reads on after the
-  /// last frame instead).
+  /// Numbers the frames after the last one the memory's current session holds where the
+  /// source's own indices would not follow it (all shifted by one offset, so the source's
+  /// gaps stay): a second run into the same session, or one that starts earlier in its
+  /// source, then continues the session instead of being refused for indices that go
+  /// backwards. Off, frames keep the source's indices, which line up with its ground
+  /// truth (--resume reads on after the last frame instead).
   bool number_after_pushed = false;
 };
 
