@@ -1460,7 +1460,7 @@ TEST_CASE("cli: --force replaces a memory whole: a failed run, or a memory anoth
        {std::vector<std::string>{"build", sample, "--memory", fifo.string(), "--force"},
         std::vector<std::string>{"build", sample, "--memory", fifo.string()},
         std::vector<std::string>{"memory", "convert", mem, fifo.string(), "--force"},
-        std::vector<std::string>{"memory", "merge", mem, mem, "--out", fifo.string(), "--force"}}) {
+        std::vector<std::string>{"memory", "merge", mem, busy, "--out", fifo.string(), "--force"}}) {
     CAPTURE(args.front());
     fails_with(args, 2, "'" + fifo.string() + "' is not a regular file");
   }

@@ -235,6 +235,6 @@ TEST_SUITE("data") {
     MESSAGE(e);
 
     e = error_of([&] { vmap::NanoDetDetector d({.model = dir}); });  // a folder
-    CHECK(e.find("not a file") != std::string::npos);
+    CHECK(e.find("is a folder, expected a file") != std::string::npos);
   }
 }
