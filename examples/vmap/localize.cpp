@@ -1,5 +1,5 @@
 // `vmap localize`: learn a GCS map of images with poses and localize query images
-// (Trujillo-Romero 2024, DESIGN.md sec. 1.3). Either the virtual-room experiment
+// (Trujillo-Romero 2024, examples/methods.md, sec. 3). Either the virtual-room experiment
 // (--room) or a real sequence with a pose file (--train ... --poses ...). With --memory M
 // IMAGE... it answers instead from a saved visual memory (`vmap build --memory`): the key
 // image(s) each query image matches (common/memory_cli.hpp).

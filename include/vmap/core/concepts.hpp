@@ -1,6 +1,6 @@
 #pragma once
 
-// The four concepts the library is built on (DESIGN.md sec. 2). Each big concept is
+// The four concepts the library is built on (examples/methods.md, sec. 5). Each big concept is
 // composed of small named ones, one requirement per line, because the line a compiler
 // error points to should say which requirement a policy misses.
 

@@ -1,7 +1,7 @@
 #pragma once
 
 // SE(2) poses (x, y, theta) of a robot on the floor: the pose algebra of the GCS
-// localization paper (Trujillo-Romero 2024, DESIGN.md sec. 1.3 step 1), where odometry
+// localization paper (Trujillo-Romero 2024, examples/methods.md, sec. 3 step 1), where odometry
 // increments are `pose2DInverse(a) * b` and poses are integrated by composition.
 
 #include <vmap/core/error.hpp>

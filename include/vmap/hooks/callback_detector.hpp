@@ -1,6 +1,6 @@
 #pragma once
 
-// The callback adapter of the object-detector hook (DESIGN.md sec. 3): any callable
+// The callback adapter of the object-detector hook (examples/methods.md, sec. 7): any callable
 // `std::vector<Detection>(const cv::Mat&)` becomes an ObjectDetector, so a user plugs in
 // TensorRT, ONNX Runtime, LibTorch or a ROS service without writing a class.
 

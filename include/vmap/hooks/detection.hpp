@@ -1,6 +1,6 @@
 #pragma once
 
-// The object-detector hook (DESIGN.md sec. 3): LFM-LCD tags every key frame with the
+// The object-detector hook (examples/methods.md, sec. 7): LFM-LCD tags every key frame with the
 // labels a detector finds. vmap runs networks, it does not train them; any runtime fits
 // behind this concept (cv::dnn adapters, a callback over TensorRT/ONNX Runtime/ROS, a
 // file of precomputed detections).

@@ -1,6 +1,6 @@
 #pragma once
 
-// The detector-free matcher hook (DESIGN.md sec. 2-3): a LoFTR-style network matches an
+// The detector-free matcher hook (examples/methods.md, sec. 5 and 7): a LoFTR-style network matches an
 // image pair directly. It yields correspondences and its own denominator for eq. 5
 // (its number of coarse cells), so a key-image selector can use it instead of
 // Descriptor + Matcher.

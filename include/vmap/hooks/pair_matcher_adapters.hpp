@@ -1,6 +1,6 @@
 #pragma once
 
-// Adapters for the PairMatcher hook (DESIGN.md sec. 2-3), for detector-free matchers of
+// Adapters for the PairMatcher hook (examples/methods.md, sec. 5 and 7), for detector-free matchers of
 // the LoFTR family (Sun et al., CVPR 2021), which match an image pair directly:
 //  - CallbackPairMatcher wraps any callable (ONNX Runtime, TensorRT, LibTorch, a
 //    service) and checks what it returns;

@@ -1,6 +1,6 @@
 #pragma once
 
-// A detector-free front end from XFeat's dense map (DESIGN.md sec. 2-3), the visual-map
+// A detector-free front end from XFeat's dense map (examples/methods.md, sec. 5 and 7), the visual-map
 // paper's "detector-free" configuration (García-Pintos et al. 2023 use LoFTR) with a
 // network that runs in OpenCV 4.6 on the CPU:
 //   - every cell of the 1/8 grid is a candidate, placed at its best pixel (the argmax

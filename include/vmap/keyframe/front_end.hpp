@@ -7,7 +7,7 @@
 //   - FeatureFrontEnd<Descriptor, Matcher, Estimator, Similarity>: per-frame features,
 //     matched and verified by a fundamental matrix (the paper's method);
 //   - PairFrontEnd<PairMatcher, Estimator>: a detector-free matcher that takes the image
-//     pair and returns correspondences plus its eq. 5 denominator (DESIGN.md sec. 2).
+//     pair and returns correspondences plus its eq. 5 denominator (examples/methods.md, sec. 5).
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>

@@ -1,7 +1,7 @@
 #pragma once
 
 // Streaming key-image selection, Algorithm 1 / eq. 6 of García-Pintos et al. 2023
-// (DESIGN.md sec. 1.1). The logic lives once, in BasicKeyframeSelector<FrontEnd>; the
+// (examples/methods.md, sec. 1). The logic lives once, in BasicKeyframeSelector<FrontEnd>; the
 // paper's feature stack (KeyframeSelector<D, M, E, S>) and detector-free pair matchers
 // (PairKeyframeSelector<P, E>) are front ends of it, and the threshold sweep drives the
 // same object.

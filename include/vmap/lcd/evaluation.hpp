@@ -1,7 +1,7 @@
 #pragma once
 
 // Evaluation of loop closure against ground truth (Zhu et al., Sensors 2021, sec. 4;
-// DESIGN.md sec. 1.2 step 6): precision = TP / (TP + FP), recall = TP / (TP + FN), the
+// examples/methods.md, sec. 2 step 6): precision = TP / (TP + FP), recall = TP / (TP + FN), the
 // precision-recall curve over the decision threshold, and the recall at 100 % precision,
 // the headline figure of the loop-closure literature (a false loop corrupts a map, a
 // missed one only delays its correction).

@@ -1,6 +1,6 @@
 #pragma once
 
-// Label sources for LFM-LCD (Zhu et al., Sensors 2021, sec. 3.2; DESIGN.md sec. 1.2):
+// Label sources for LFM-LCD (Zhu et al., Sensors 2021, sec. 3.2; examples/methods.md, sec. 2):
 // the union of several detectors' detections, and what a set of label vectors can give
 // the binary classified tree on a sequence with known loops.
 //

@@ -1,6 +1,6 @@
 #pragma once
 
-// Loop closure detection over key frames (DESIGN.md sec. 1.2). Per key frame: its label
+// Loop closure detection over key frames (examples/methods.md, sec. 2). Per key frame: its label
 // vector (LFM-LCD, Zhu et al., Sensors 2021, eq. 3-4) and its features -> the loop
 // engine (lcd/loop_engine.hpp: candidates from the tree, the bag-of-words ranking or
 // brute force, verification, the evidence and the place decision with the revisit rule

@@ -1,6 +1,6 @@
 #pragma once
 
-// The one loop engine (DESIGN.md sec. 1.4): "same place?" for loop closure over a stream
+// The one loop engine (examples/methods.md, sec. 4): "same place?" for loop closure over a stream
 // of key frames and for localization of a single image, used by LoopDetector (over its
 // frames) and by VisualMemory (over its key images).
 //

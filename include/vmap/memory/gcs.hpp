@@ -1,6 +1,6 @@
 #pragma once
 
-// The visual memory's GCS localizer (Trujillo-Romero 2024, DESIGN.md sec. 1.3;
+// The visual memory's GCS localizer (Trujillo-Romero 2024, examples/methods.md, sec. 3;
 // VisualMemory::train_gcs): trained by som/'s train_pose_map on the key images' own
 // features, kept with what it was trained with and on, and written to and read from the
 // memory's section "gcsl" (examples/memory.md, "The single-file format (.vmem)") here.

@@ -1,6 +1,6 @@
 #pragma once
 
-// The visual memory's state as records (DESIGN.md sec. 2.1): what a memory is made of,
+// The visual memory's state as records (examples/methods.md, sec. 6): what a memory is made of,
 // apart from where it is kept. VisualMemory assembles them (records()) and is rebuilt
 // from them (from_records()); the back-ends keep them: the single-file format
 // (memory/vmem.hpp, whole) and the memory store (memory/store.hpp: SQLite, key image by

@@ -47,7 +47,7 @@ inline const OdometryPose no_odometry_pose{};
 }  // namespace detail
 
 /// LFM-LCD's label tree inside the memory (Zhu et al., Sensors 2021, sec. 3.2-3.3;
-/// DESIGN.md sec. 1.2), used when the frames are pushed with object detections.
+/// examples/methods.md, sec. 2), used when the frames are pushed with object detections.
 /// (Eq. 3's score threshold, the candidate source and m of sec. 3.3 are the loop
 /// engine's: MemoryOptions::loops.labels, .index, .min_candidates.)
 struct MemoryLabelOptions {
@@ -62,7 +62,7 @@ struct MemoryLabelOptions {
 };
 
 /// The GCS localizer trained on the memory's key images (Trujillo-Romero 2024,
-/// DESIGN.md sec. 1.3): their own features -> BowHistogram -> GCS -> a pose per neuron.
+/// examples/methods.md, sec. 3): their own features -> BowHistogram -> GCS -> a pose per neuron.
 struct MemoryGcsOptions {
   BowHistogramOptions histogram{};  ///< its vocabulary is learned from the key images
   GcsOptions gcs{};                 ///< the network's options (max_cells 100, seed 1)

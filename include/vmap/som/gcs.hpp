@@ -1,7 +1,7 @@
 #pragma once
 
 // Growing Cell Structures (Fritzke 1994), the network of the GCS localization paper
-// (Trujillo-Romero 2024, Algorithm 1; DESIGN.md sec. 1.3 step 4 gives the procedure).
+// (Trujillo-Romero 2024, Algorithm 1; examples/methods.md, sec. 3 step 4 gives the procedure).
 // Generic over the scalar, the dimension and the metric: the same structure without
 // the pose payload is a general clustering tool.
 //

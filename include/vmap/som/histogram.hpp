@@ -1,7 +1,7 @@
 #pragma once
 
 // Image feature vectors for the GCS map ("BuildHistos" of Trujillo-Romero 2024,
-// DESIGN.md sec. 1.3 step 3): a fixed-length vector from an image's A-KAZE keypoints
+// examples/methods.md, sec. 3 step 3): a fixed-length vector from an image's A-KAZE keypoints
 // and descriptors. Two policies:
 //  - BowHistogram: bag of binary words over a vocabulary learned from the training
 //    images (k-majority: the flat, depth-1 place/vocabulary.hpp tree), L1- or

@@ -1,6 +1,6 @@
 #pragma once
 
-// The whole method of Trujillo-Romero 2024 (DESIGN.md sec. 1.3) as one object: images
+// The whole method of Trujillo-Romero 2024 (examples/methods.md, sec. 3) as one object: images
 // -> A-KAZE features -> histogram ("BuildHistos") -> GCS -> a pose per neuron; then
 // one or two query images -> position.
 

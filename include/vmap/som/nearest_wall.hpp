@@ -1,7 +1,7 @@
 #pragma once
 
-// Nearest-wall choice of the GCS localization paper (Trujillo-Romero 2024; DESIGN.md
-// sec. 1.3 step 2): A-KAZE keypoints are counted in the left and right halves of a
+// Nearest-wall choice of the GCS localization paper (Trujillo-Romero 2024;
+// examples/methods.md, sec. 3 step 2): A-KAZE keypoints are counted in the left and right halves of a
 // forward-looking image; the half with more keypoints shows the nearer wall, and the
 // robot turns its camera to it.
 

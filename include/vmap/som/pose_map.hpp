@@ -1,7 +1,7 @@
 #pragma once
 
 // Poses attached to the neurons of a trained GCS (Trujillo-Romero 2024, Algorithm 4) and
-// localization from one or two query vectors (Algorithm 5; DESIGN.md sec. 1.3 steps
+// localization from one or two query vectors (Algorithm 5; examples/methods.md, sec. 3 steps
 // 5-6).
 
 #include <vmap/core/error.hpp>

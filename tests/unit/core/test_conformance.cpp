@@ -1,5 +1,5 @@
 // Conformance suites for the Estimator and Similarity concepts: every model runs the
-// same checks of the contract (DESIGN.md sec. 2) on top of its own tests.
+// same checks of the contract (examples/methods.md, sec. 5) on top of its own tests.
 #include <vmap/geometry/fundamental.hpp>
 #include <vmap/geometry/homography.hpp>
 #include <vmap/geometry/similarity.hpp>

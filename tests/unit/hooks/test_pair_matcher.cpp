@@ -105,7 +105,7 @@ struct EmptyPairCallback {
 };
 template class vmap::CallbackPairMatcher<EmptyPairCallback>;
 
-// Both adapters plug into the key-image selector's pair front end (DESIGN.md sec. 2).
+// Both adapters plug into the key-image selector's pair front end (examples/methods.md, sec. 5).
 static_assert(vmap::KeyframeFrontEnd<vmap::PairFrontEnd<vmap::DnnPairMatcher, vmap::FundamentalEstimator>>);
 static_assert(
     vmap::KeyframeFrontEnd<vmap::PairFrontEnd<vmap::CallbackPairMatcher<decltype(right)>, vmap::FundamentalEstimator>>);
