@@ -1,5 +1,5 @@
-// Heap allocations and speed of the key-image selector's per-frame path (issue 10,
-// item 6), on the first frames of a TUM sequence with the paper's stack
+// Heap allocations and speed of the key-image selector's per-frame path, on
+// the first frames of a TUM sequence with the paper's stack
 // (OrbMagsacSelector default-constructed: ORB 1000, mutual NN, MAGSAC++ 1 px 0.99 with
 // the homography degeneracy check, eq. 5, tau 0.3).
 //

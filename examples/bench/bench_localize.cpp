@@ -1,5 +1,5 @@
-// Benchmark of the GCS map and localization (Trujillo-Romero 2024; issue "GCS map and
-// localization"):
+// Benchmark of the GCS map and localization (Trujillo-Romero 2024;
+// examples/methods.md, sec. 3):
 //  1. training time of 100, 200, 300-neuron maps on the 164 images of the virtual room,
 //     against the paper's reported 4,063 s, 14,287 s and 33,347 s (its figures: the
 //     paper's code is not available, so they are the baseline);

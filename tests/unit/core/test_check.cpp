@@ -1,4 +1,4 @@
-// detail::check builds its message only when the condition fails (issue 10, item 6):
+// detail::check builds its message only when the condition fails:
 // a composed message is a callable, run once on failure and never when the check holds.
 #include <vmap/core/error.hpp>
 

@@ -1,4 +1,4 @@
-// Boundary checks of numbers (issue 13): negative input for unsigned options, junk,
+// Boundary checks of numbers: negative input for unsigned options, junk,
 // non-finite values, all named by the option; non-finite figures printed as words.
 #include <vmap/core/numeric.hpp>
 #include <vmap/features/orb.hpp>

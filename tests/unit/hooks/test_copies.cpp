@@ -1,4 +1,4 @@
-// Copies of stateful policies (issue 10, item 5): every OpenCV- or network-backed policy
+// Copies of stateful policies: every OpenCV- or network-backed policy
 // deep-copies, so a std::vector of per-thread copies runs in parallel. For each policy,
 // two copies used from two std::threads (while the original runs too) give exactly the
 // results of the original used serially, and a copy owns its network or detector.
@@ -87,7 +87,7 @@ auto check_copies_agree(P& original, const std::vector<cv::Mat>& inputs, Run run
   std::vector<Result> serial;
   for (std::size_t i = 0; i < inputs.size(); ++i) serial.push_back(run(original, inputs, i));
 
-  std::vector<P> copies(2, original);  // the per-thread copies of the issue
+  std::vector<P> copies(2, original);  // the per-thread copies
   std::vector<std::vector<Result>> results(copies.size());
   std::vector<std::string> errors(copies.size());
   std::vector<std::thread> threads;

@@ -1,4 +1,4 @@
-// Hostile and broken inputs to the io layer (issue 13): folders, devices and FIFOs where
+// Hostile and broken inputs to the io layer: folders, devices and FIFOs where
 // a file is expected, symbolic link loops, unreadable folders, images whose header
 // claims a huge size, corrupt video frames, bad TUM lines, concurrent and failed saves.
 // Every case must end in a vmap::Error naming the input or in a reported skip, never in

@@ -1,6 +1,6 @@
-// The selector's per-frame path with reused buffers and a deferred degeneracy check
-// (issue 10, item 6): every reusing form gives exactly what the allocating one gives, on
-// the repository's sample TUM frames.
+// The selector's per-frame path with reused buffers and a deferred degeneracy check:
+// every reusing form gives exactly what the allocating one gives, on the repository's
+// sample TUM frames.
 #include "support/shared_data.hpp"
 
 #include <vmap/io/frame_source.hpp>

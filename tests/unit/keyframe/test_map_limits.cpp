@@ -1,4 +1,4 @@
-// Map files as untrusted input (issue 13): a key image whose PNG header claims a huge
+// Map files as untrusted input: a key image whose PNG header claims a huge
 // size is refused before it is decoded, a folder or device given as the map is named,
 // and concurrent saves to one path always leave a loadable map.
 #include <vmap/keyframe/map_io.hpp>

@@ -149,7 +149,7 @@ TEST_SUITE("data") {
 
 namespace {
 
-// The curve as written before it was made one sort (issue 10, item 6): evaluate_loops at
+// The curve as written before it was made one sort: evaluate_loops at
 // every distinct proposed score, highest first.
 std::vector<vmap::PrecisionRecall> reference_curve(const std::vector<LoopScore>& scores, const LoopGroundTruth& gt) {
   std::vector<double> thresholds;

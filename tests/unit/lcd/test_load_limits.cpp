@@ -1,4 +1,4 @@
-// The LCD loaders as untrusted input (issue 13): a folder or device where a file is
+// The LCD loaders as untrusted input: a folder or device where a file is
 // expected is an Error naming it; a tree file whose label bits would expand into far
 // more memory than the file holds is refused before the tree is built.
 #include <vmap/hooks/precomputed_detections.hpp>

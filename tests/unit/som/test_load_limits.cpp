@@ -1,4 +1,4 @@
-// The SOM loaders as untrusted input (issue 13): a GCS file claiming more cells than
+// The SOM loaders as untrusted input: a GCS file claiming more cells than
 // its own max_cells, or a folder / device given as a GCS or pose file, is an Error
 // naming the input.
 #include <vmap/features/akaze.hpp>
