@@ -259,7 +259,8 @@ class Calibrated {
   /// pixels of the inliers (the cheirality test picks one of the four solutions). No pose
   /// is an expected outcome: when no inlier triangulates in front of both cameras (a
   /// camera that only turns gives no parallax), the test cannot choose, and the "best"
-  /// solution is as often the twisted pair, 180 degrees off (measured on tum_fr1_rpy).
+  /// solution is as often the twisted pair, 180 degrees off (see examples/camera.md and
+  /// tests/unit/geometry/test_camera_data.cpp).
   void recover_pose(const std::vector<cv::Point2f>& ia, const std::vector<cv::Point2f>& ib, Verification& v) const
     requires std::same_as<E, FundamentalEstimator>
   {

@@ -30,9 +30,8 @@
 //   - per key image, per threshold: a KeyImage without features or pixels (280 B, mostly
 //     empty cv::Mat headers, plus its name) and a KeyPair link (96 B; sizes for GCC 12
 //     x86-64): the only part that grows with the video, by the number of key images.
-// Measured (bench_rss, examples/memory.md): the peak resident memory grows by 2.8 KB per
-// frame on tum_fr1_rpy with the nine default thresholds (5.1 key images per frame over
-// them), where caching every frame's features grew by 210 KB per frame.
+// The peak resident memory per frame, streaming against caching every frame's features:
+// see examples/bench/bench_rss.cpp; results in examples/results/memory.md.
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/frame_source.hpp>

@@ -104,26 +104,27 @@ struct LoopOptions {
   /// tree_ranked: the paper's tree with bag-of-words ranking (needs labels and a
   /// vocabulary); VisualMemory uses bow for frames without detections.
   CandidateIndex index = CandidateIndex::tree_ranked;
-  /// Ranked sources: how many of the best-scored candidates are verified. 2: on
-  /// rtabmap_loop (ORB) bow keeps brute force's recall with 19x fewer verifications
-  /// (examples/loops.md). ORB-SLAM3 verifies 3.
+  /// Ranked sources: how many of the best-scored candidates are verified. 2: the top k
+  /// at which bow keeps brute force's recall on rtabmap_loop (see
+  /// examples/bench/bench_loops.cpp; results in examples/results/loops.md). ORB-SLAM3
+  /// verifies 3.
   std::size_t top_k = 2;
   /// Ranked sources: candidates scoring below this bag-of-words score are not verified.
   /// 0: none is dropped for its score.
   double min_bow_score = 0.0;
   /// A loop stands when the previous `temporal_consistency` queries also matched places
   /// within `temporal_tolerance` frames of the next one's (DBoW2's islands). 0 (off) by
-  /// default: on rtabmap_loop one confirmation cost 6 of 41 true loops (recall 0.932 ->
-  /// 0.795) and the decision alone kept precision 1.0 on every shared sequence
-  /// (examples/loops.md, "The place decision").
+  /// default: one confirmation costs true loops while the decision alone keeps precision
+  /// 1.0 on the shared sequences (see examples/loops.md, "The place decision"; results in
+  /// examples/results/loops.md).
   std::size_t temporal_consistency = 0;
   std::size_t temporal_tolerance = 3;
   /// The revisit rule: candidate j was left when a frame between j and the query scores
   /// below `left_ratio` times the query's bag-of-words score against j. 0.2: frames of a
-  /// resting camera with sensor noise and sub-pixel jitter score 0.15-0.63 against each
-  /// other (their ORB keypoints move), so at 0.3 a noisy still clip closed 21 false loops
-  /// in 60 frames; at 0.2 none, and rtabmap_loop keeps its recall (examples/loops.md,
-  /// "The place decision").
+  /// resting camera with sensor noise and sub-pixel jitter score well above it against
+  /// each other (their ORB keypoints move); at 0.2 a noisy still clip closes no loop
+  /// (tests/unit/lcd/test_place_decision.cpp) and rtabmap_loop keeps its recall (see examples/loops.md, "The place decision"; results in
+  /// examples/results/loops.md).
   double left_ratio = 0.2;
   /// The decision (confidence threshold, evidence).
   PlaceDecisionOptions decision{};
