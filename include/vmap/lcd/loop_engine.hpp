@@ -123,8 +123,8 @@ struct LoopOptions {
   /// below `left_ratio` times the query's bag-of-words score against j. 0.2: frames of a
   /// resting camera with sensor noise and sub-pixel jitter score well above it against
   /// each other (their ORB keypoints move); at 0.2 a noisy still clip closes no loop
-  /// (tests/unit/lcd/test_place_decision.cpp) and rtabmap_loop keeps its recall (see examples/loops.md, "The place decision"; results in
-  /// examples/results/loops.md).
+  /// (tests/unit/lcd/test_place_decision.cpp) and rtabmap_loop keeps its recall (see
+  /// examples/loops.md, "The place decision"; results in examples/results/loops.md).
   double left_ratio = 0.2;
   /// The decision (confidence threshold, evidence).
   PlaceDecisionOptions decision{};
