@@ -15,7 +15,7 @@
 //     speed ratio) on a large synthetic score list.
 //
 // The program uses only API that existed before the change, so the same file built at
-// the parent commit gives the 'before' figures (see examples/keyframes.md).
+// the parent commit gives the 'before' figures (see examples/results/keyframes.md).
 //
 // usage: bench_allocations [RGB_TXT] [FRAMES=60] [WARM=5] [PR_FRAMES=2000]
 #include <vmap/io/frame_source.hpp>

@@ -1,4 +1,4 @@
-// Inliers with and without the camera model (the figures of examples/camera.md):
+// Inliers with and without the camera model (the figures of examples/results/camera.md):
 //  1. synthetic two-view scenes through a 160-degree equidistant fisheye and a strong
 //     radial-tangential lens (tests/support/lens_scene.hpp, the unit tests' scenes):
 //     inliers of the ideal pinhole with the same K (the reference), of F on raw pixels,

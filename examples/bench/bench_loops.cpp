@@ -187,7 +187,7 @@ int main(int argc, char** argv) {
                    {"YOLOX+FastestDet", {yolox, fastestdet}},
                    {"YOLOX+NanoDet+FastestDet", {yolox, nanodet, fastestdet}},
                    // The best setting within 0.02 of brute force's recall found by a sweep
-                   // over detectors, scores, band and m (examples/loops.md): tuned on this
+                   // over detectors, scores, band and m (examples/results/loops.md): tuned on this
                    // very sequence, so an optimistic figure.
                    {"FastestDet (tuned band)", {fastestdet}, 0.5f, 0.10}};
       sets.push_back(std::move(d));

@@ -16,7 +16,7 @@
 //
 // Peak memory only grows, so each configuration is its own process. The "before" figure
 // of the sweep (the version that cached every frame's features) is this file compiled
-// against that version's headers; examples/memory.md gives the commands and the figures.
+// against that version's headers; examples/results/memory.md gives the commands and the figures.
 #include <vmap/keyframe/sweep.hpp>
 #include <vmap/memory/visual_memory.hpp>
 

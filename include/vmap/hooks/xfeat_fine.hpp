@@ -12,8 +12,8 @@
 // the offset added to the cell's top-left pixel is sum_k p_k * (k % 8 - 3, k / 8 - 3).
 // Upstream subtracts 4; on identical descriptors the network peaks at (3, 3), and on
 // synthetic sub-pixel shifts of a real frame upstream's 4 places the refined points
-// about 1 px up and left (test_xfeat_fine measures both: median error 0.99 px with 3,
-// 1.81 px with 4, 3.58 px unrefined; examples/hooks.md), so 3 is used.
+// about 1 px up and left (tests/unit/hooks/test_xfeat_fine.cpp measures both; the
+// median errors are in examples/hooks.md, "XFeat*"), so 3 is used.
 //
 // Pieces:
 //   - XFeatRefiner: the network (one batched cv::dnn call per pair) and the rule;

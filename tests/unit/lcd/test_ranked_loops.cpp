@@ -107,7 +107,7 @@ TEST_SUITE("data") {
   TEST_CASE("ranked loops: rtabmap_loop with a vocabulary learned on it finds the known loops, verifying few") {
     // ORB 1000, window 10, top 2, the default decision; vocabulary k = 10, L = 3 learned
     // on the sequence (as `vmap loops` without --vocabulary). Measured
-    // (examples/loops.md): bow recall 0.886 at the default confidence, 0.955 at 100 %
+    // (examples/results/loops.md): bow recall 0.886 at the default confidence, 0.955 at 100 %
     // precision over the confidence, 141 verifications; brute force 0.864 with 2701.
     const auto gt = vmap::LoopGroundTruth::load(vmap::test::data_path("rtabmap_loop/gt_loop_matrix_84x84.txt"), 84);
     const auto labels =

@@ -152,6 +152,6 @@ TEST_CASE("TUM fr3 cabinet: train on even frames, localize odd ones" * doctest::
   CHECK(median(e1) < 0.3);  // the target: a median error under 0.3 m
   // Two queries here are consecutive odd key frames, up to ~0.3 m apart: a wrong winner
   // for either moves their mean, and at this half resolution the pair is worse than
-  // one image (0.37 m measured; see examples/localize.md for full resolution).
+  // one image (0.37 m measured; see examples/results/localize.md for full resolution).
   CHECK(median(e2) < 0.5);
 }
