@@ -33,7 +33,8 @@ namespace vmap {
 enum class ImageStorage : std::uint8_t {
   none,  ///< features only (the smallest memory; localize and loops need no pixels)
   png,   ///< lossless
-  jpeg,  ///< lossy, MemoryOptions::jpeg_quality (about 8x smaller than PNG)
+  jpeg,  ///< lossy, MemoryOptions::jpeg_quality (smaller than PNG; sizes per key image: see
+         ///< examples/bench/bench_memory.cpp; results in examples/results/memory.md)
 };
 
 /// An odometry pose given with a frame: none, SE(2) (a ground robot) or SE(3).
