@@ -59,16 +59,4 @@ inline PolicyStack stack_of(const DescriptorChoice& d, const std::string& method
 /// --estimator's method.
 inline RobustMethod parse_method(const std::string& name) { return stack_of({}, name, std::nullopt).method; }
 
-/// f(descriptor) with the descriptor of the options (vmap::with_descriptor).
-template <class F>
-decltype(auto) with_descriptor(const DescriptorChoice& c, F&& f) {
-  return vmap::with_descriptor(stack_of(c, "magsac", std::nullopt), std::forward<F>(f));
-}
-
-/// `estimator` as a descriptor of type D verifies with it (vmap::verifier_for).
-template <class D, class E>
-auto estimator_for(const D&, const DescriptorChoice& c, const E& estimator) {
-  return vmap::verifier_for<D>(stack_of(c, "magsac", std::nullopt), estimator);
-}
-
 }  // namespace vmap::examples

@@ -59,7 +59,7 @@
 #include <vmap/hooks/detection.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/files.hpp>
-#include <vmap/io/frame_source.hpp>
+#include <vmap/io/frame.hpp>
 #include <vmap/io/timestamps.hpp>
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/keyframe/selector.hpp>
@@ -578,3 +578,15 @@ using AkazeVisualMemory = VisualMemory<AkazeDescriptor, BruteForceMatcher, Funda
 using SiftVisualMemory = VisualMemory<SiftDescriptor, BruteForceMatcher, FundamentalEstimator, InlierRatio>;
 
 }  // namespace vmap
+
+// A program that links vmap::stacks (CMake) compiles the named stacks' members defined
+// apart from the class (memory/detail/visual_memory_impl.hpp) once, there
+// (runtime/detail/compiled_stacks.hpp).
+#ifdef VMAP_COMPILED_STACKS
+extern template class vmap::VisualMemory<vmap::OrbDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator,
+                                         vmap::InlierRatio>;
+extern template class vmap::VisualMemory<vmap::AkazeDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator,
+                                         vmap::InlierRatio>;
+extern template class vmap::VisualMemory<vmap::SiftDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator,
+                                         vmap::InlierRatio>;
+#endif

@@ -104,6 +104,30 @@ class LoopDetectorModel final : public LoopDetectorBase {
   Detector detector_;
 };
 
+/// The loop detectors of one descriptor type D, with the stack's matcher and estimator
+/// for loops. Defined apart from AnyLoopDetector so that a program linking vmap::stacks
+/// instantiates none of them itself (see the end of this file).
+template <class D>
+struct LoopDetectorFactory {
+  static std::unique_ptr<LoopDetectorBase> create(D descriptor, const PolicyStack& stack, LabelSchema schema,
+                                                  const LoopOptions& options,
+                                                  const std::shared_ptr<const AnyVocabulary>& vocabulary,
+                                                  const std::string& camera_name);
+};
+
+template <class D>
+std::unique_ptr<LoopDetectorBase> LoopDetectorFactory<D>::create(D descriptor, const PolicyStack& stack,
+                                                                 LabelSchema schema, const LoopOptions& options,
+                                                                 const std::shared_ptr<const AnyVocabulary>& vocabulary,
+                                                                 const std::string& camera_name) {
+  auto matcher = matcher_for(descriptor);
+  auto estimator = estimator_for<D>(stack, StackUse::loops, camera_name);
+  using Detector = LoopDetector<D, decltype(matcher), decltype(estimator)>;
+  return std::make_unique<LoopDetectorModel<Detector>>(
+      Detector(std::move(schema), std::move(descriptor), std::move(matcher), std::move(estimator), options,
+               PlaceRanker(vocabulary, vocabulary ? vocabulary->scoring() : BowScoring::l1)));
+}
+
 }  // namespace detail
 
 /// A LoopDetector of a PolicyStack (see the top of this file).
@@ -126,15 +150,11 @@ class AnyLoopDetector {
                   std::shared_ptr<const AnyVocabulary> vocabulary = nullptr, const std::string& camera_name = "camera")
       : stack_(stack),
         vocabulary_(std::move(vocabulary)),
-        detector_(with_policies(
-            stack, StackUse::loops,
-            [&](auto descriptor, auto matcher, auto estimator) -> std::unique_ptr<detail::LoopDetectorBase> {
-              using Detector = LoopDetector<decltype(descriptor), decltype(matcher), decltype(estimator)>;
-              return std::make_unique<detail::LoopDetectorModel<Detector>>(
-                  Detector(std::move(schema), std::move(descriptor), std::move(matcher), std::move(estimator), options,
-                           PlaceRanker(vocabulary_, vocabulary_ ? vocabulary_->scoring() : BowScoring::l1)));
-            },
-            camera_name)) {}
+        detector_(with_descriptor(stack, [&](auto descriptor) {
+          return detail::LoopDetectorFactory<decltype(descriptor)>::create(std::move(descriptor), stack,
+                                                                           std::move(schema), options, vocabulary_,
+                                                                           camera_name);
+        })) {}
 
   /// One frame whose features are already extracted by the stack's descriptor, with its
   /// detections (for the label tree): its decision, then the frame is indexed.
@@ -165,3 +185,15 @@ class AnyLoopDetector {
 };
 
 }  // namespace vmap
+
+// A program that links vmap::stacks compiles the loop detectors of the shipped
+// descriptors once, there (runtime/detail/compiled_stacks.hpp).
+#ifdef VMAP_COMPILED_STACKS
+namespace vmap::detail {
+extern template struct LoopDetectorFactory<OrbDescriptor>;
+extern template struct LoopDetectorFactory<AkazeDescriptor>;
+extern template struct LoopDetectorFactory<SiftDescriptor>;
+extern template struct LoopDetectorFactory<XFeatDescriptor>;
+extern template struct LoopDetectorFactory<XFeatDenseDescriptor>;
+}  // namespace vmap::detail
+#endif

@@ -28,7 +28,7 @@
 #include <vmap/core/error.hpp>
 #include <vmap/hooks/detection.hpp>
 #include <vmap/io/files.hpp>
-#include <vmap/io/frame_source.hpp>
+#include <vmap/io/frame.hpp>
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/memory/records.hpp>
 #include <vmap/memory/replace.hpp>
@@ -210,13 +210,45 @@ class MemoryModel final : public MemoryConcept {
   std::optional<MemoryStore> store_;
 };
 
-/// The memory of `records` with the policies of `stack`.
-template <class D, class M, class E>
-std::unique_ptr<MemoryConcept> memory_model(MemoryRecords records, const std::string& name, D d, M m, E e,
-                                            bool pixels_unread, std::optional<MemoryStore> store) {
-  using Memory = MemoryOf<D, M, E>;
+/// The memories of one descriptor type D, with the stack's matcher and estimator for a
+/// memory (runtime/policies.hpp). Defined apart from the class so that a program linking
+/// vmap::stacks, which compiles them once for the shipped descriptors, instantiates
+/// nothing of a VisualMemory itself (see the end of this file).
+template <class D>
+struct MemoryFactory {
+  /// A new memory in RAM.
+  static std::unique_ptr<MemoryConcept> create(D descriptor, const PolicyStack& stack, const MemoryOptions& options,
+                                               AnyVocabulary vocabulary, const std::string& camera_name);
+  /// The memory of `records`, synced into `store` when given.
+  static std::unique_ptr<MemoryConcept> load(D descriptor, const PolicyStack& stack, MemoryRecords records,
+                                             const std::string& who, bool pixels_unread,
+                                             std::optional<MemoryStore> store, const std::string& camera_name);
+};
+
+template <class D>
+std::unique_ptr<MemoryConcept> MemoryFactory<D>::create(D descriptor, const PolicyStack& stack,
+                                                        const MemoryOptions& options, AnyVocabulary vocabulary,
+                                                        const std::string& camera_name) {
+  auto matcher = matcher_for(descriptor);
+  auto estimator = estimator_for<D>(stack, StackUse::memory, camera_name);
+  using Memory = MemoryOf<D, decltype(matcher), decltype(estimator)>;
   return std::make_unique<MemoryModel<Memory>>(
-      Memory::from_records(std::move(records), name, std::move(d), std::move(m), std::move(e), InlierRatio{}, pixels_unread),
+      Memory(std::move(descriptor), std::move(matcher), std::move(estimator), InlierRatio{}, options,
+             std::move(vocabulary)),
+      std::nullopt);
+}
+
+template <class D>
+std::unique_ptr<MemoryConcept> MemoryFactory<D>::load(D descriptor, const PolicyStack& stack, MemoryRecords records,
+                                                      const std::string& who, bool pixels_unread,
+                                                      std::optional<MemoryStore> store,
+                                                      const std::string& camera_name) {
+  auto matcher = matcher_for(descriptor);
+  auto estimator = estimator_for<D>(stack, StackUse::memory, camera_name);
+  using Memory = MemoryOf<D, decltype(matcher), decltype(estimator)>;
+  return std::make_unique<MemoryModel<Memory>>(
+      Memory::from_records(std::move(records), who, std::move(descriptor), std::move(matcher), std::move(estimator),
+                           InlierRatio{}, pixels_unread),
       std::move(store));
 }
 
@@ -288,13 +320,10 @@ class AnyMemory {
       if (ec) detail::fail("memory '" + path.string() + "': cannot create its folder: " + ec.message());
     }
     out.replacement_ = replacement_of(path, how);
-    out.impl_ = with_policies(stack, StackUse::memory, [&](auto d, auto m, auto e) -> std::unique_ptr<detail::MemoryConcept> {
-      using Memory = MemoryOf<decltype(d), decltype(m), decltype(e)>;
-      Memory memory(std::move(d), std::move(m), std::move(e), InlierRatio{}, options, std::move(vocabulary));
-      MemoryStore store = new_store(path, out.replacement_.get());
-      if (stack.camera && !stack.camera_source.empty()) store.set_note(camera_source_note, stack.camera_source);
-      return std::make_unique<detail::MemoryModel<Memory>>(std::move(memory), std::move(store));
-    }, camera_name(stack));
+    out.impl_ = new_memory(stack, options, std::move(vocabulary));
+    MemoryStore store = new_store(path, out.replacement_.get());
+    if (stack.camera && !stack.camera_source.empty()) store.set_note(camera_source_note, stack.camera_source);
+    out.impl_->attach(std::move(store));
     out.path_ = path;
     out.kind_ = MemoryKind::store;
     out.writes_ = true;
@@ -311,11 +340,7 @@ class AnyMemory {
     out.stack_ = stack;
     out.kind_ = MemoryKind::other;
     out.writes_ = true;
-    out.impl_ = with_policies(stack, StackUse::memory, [&](auto d, auto m, auto e) -> std::unique_ptr<detail::MemoryConcept> {
-      using Memory = MemoryOf<decltype(d), decltype(m), decltype(e)>;
-      return std::make_unique<detail::MemoryModel<Memory>>(
-          Memory(std::move(d), std::move(m), std::move(e), InlierRatio{}, options, std::move(vocabulary)), std::nullopt);
-    }, camera_name(stack));
+    out.impl_ = new_memory(stack, options, std::move(vocabulary));
     return out;
   }
 
@@ -574,13 +599,21 @@ class AnyMemory {
     return s;
   }
 
+  static std::unique_ptr<detail::MemoryConcept> new_memory(const PolicyStack& stack, const MemoryOptions& options,
+                                                           AnyVocabulary vocabulary) {
+    return with_descriptor(stack, [&](auto d) {
+      return detail::MemoryFactory<decltype(d)>::create(std::move(d), stack, options, std::move(vocabulary),
+                                                        camera_name(stack));
+    });
+  }
+
   static std::unique_ptr<detail::MemoryConcept> build(const PolicyStack& stack, MemoryRecords records,
                                                       const std::string& who, bool pixels_unread,
                                                       std::optional<MemoryStore> store) {
-    return with_policies(stack, StackUse::memory, [&](auto d, auto m, auto e) {
-      return detail::memory_model(std::move(records), who, std::move(d), std::move(m), std::move(e), pixels_unread,
-                                  std::move(store));
-    }, camera_name(stack));
+    return with_descriptor(stack, [&](auto d) {
+      return detail::MemoryFactory<decltype(d)>::load(std::move(d), stack, std::move(records), who, pixels_unread,
+                                                      std::move(store), camera_name(stack));
+    });
   }
 
   void writable(const char* what) const {
@@ -607,3 +640,16 @@ class AnyMemory {
 };
 
 }  // namespace vmap
+
+// A program that links vmap::stacks (CMake) compiles the memories of the shipped
+// descriptors once, there (runtime/detail/compiled_stacks.hpp): its other translation
+// units instantiate none of them.
+#ifdef VMAP_COMPILED_STACKS
+namespace vmap::detail {
+extern template struct MemoryFactory<OrbDescriptor>;
+extern template struct MemoryFactory<AkazeDescriptor>;
+extern template struct MemoryFactory<SiftDescriptor>;
+extern template struct MemoryFactory<XFeatDescriptor>;
+extern template struct MemoryFactory<XFeatDenseDescriptor>;
+}  // namespace vmap::detail
+#endif

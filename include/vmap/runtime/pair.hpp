@@ -40,6 +40,42 @@ struct PairCheck {
   [[nodiscard]] double seconds() const noexcept { return extract_seconds + match_seconds + verify_seconds; }
 };
 
+namespace detail {
+
+/// check_pair for one descriptor type D. Defined apart so that a program linking
+/// vmap::stacks instantiates none of it itself (see the end of this file).
+template <class D>
+struct PairFactory {
+  static PairCheck check(D descriptor, const PolicyStack& stack, const cv::Mat& image_a, const cv::Mat& image_b,
+                         const FundamentalOptions& options, const std::string& camera_name);
+};
+
+template <class D>
+PairCheck PairFactory<D>::check(D descriptor, const PolicyStack& stack, const cv::Mat& image_a,
+                                const cv::Mat& image_b, const FundamentalOptions& options,
+                                const std::string& camera_name) {
+  using clock = std::chrono::steady_clock;
+  const auto seconds = [](clock::duration d) { return std::chrono::duration<double>(d).count(); };
+  const auto matcher = matcher_for(descriptor);
+  const auto estimator = estimator_for<D>(stack, options, camera_name);
+  PairCheck c;
+  const auto t0 = clock::now();
+  c.a = descriptor.extract(image_a);
+  c.b = descriptor.extract(image_b);
+  const auto t1 = clock::now();
+  c.matches = matcher.match(c.a, c.b);
+  const auto t2 = clock::now();
+  c.verification = estimator.verify(c.a, c.b, c.matches);
+  const auto t3 = clock::now();
+  c.similarity = InlierRatio{}(c.a, c.b, c.verification);
+  c.extract_seconds = seconds(t1 - t0);
+  c.match_seconds = seconds(t2 - t1);
+  c.verify_seconds = seconds(t3 - t2);
+  return c;
+}
+
+}  // namespace detail
+
 /// Images a and b through the stack (see the top of this file). `camera_name` names the
 /// stack's camera in errors (runtime/stack_choice.hpp).
 [[nodiscard]] inline PairCheck check_pair(const PolicyStack& stack, const cv::Mat& image_a, const cv::Mat& image_b,
@@ -48,25 +84,21 @@ struct PairCheck {
   FundamentalOptions fo = detail::stack_fundamental_options(stack.method, true);
   fo.threshold_px = options.epipolar_px;
   return with_descriptor(stack, [&](auto descriptor) {
-    using clock = std::chrono::steady_clock;
-    const auto seconds = [](clock::duration d) { return std::chrono::duration<double>(d).count(); };
-    const auto matcher = matcher_for(descriptor);
-    const auto estimator = estimator_for<decltype(descriptor)>(stack, fo, camera_name);
-    PairCheck c;
-    const auto t0 = clock::now();
-    c.a = descriptor.extract(image_a);
-    c.b = descriptor.extract(image_b);
-    const auto t1 = clock::now();
-    c.matches = matcher.match(c.a, c.b);
-    const auto t2 = clock::now();
-    c.verification = estimator.verify(c.a, c.b, c.matches);
-    const auto t3 = clock::now();
-    c.similarity = InlierRatio{}(c.a, c.b, c.verification);
-    c.extract_seconds = seconds(t1 - t0);
-    c.match_seconds = seconds(t2 - t1);
-    c.verify_seconds = seconds(t3 - t2);
-    return c;
+    return detail::PairFactory<decltype(descriptor)>::check(std::move(descriptor), stack, image_a, image_b, fo,
+                                                            camera_name);
   });
 }
 
 }  // namespace vmap
+
+// A program that links vmap::stacks compiles check_pair for the shipped descriptors
+// once, there (runtime/detail/compiled_stacks.hpp).
+#ifdef VMAP_COMPILED_STACKS
+namespace vmap::detail {
+extern template struct PairFactory<OrbDescriptor>;
+extern template struct PairFactory<AkazeDescriptor>;
+extern template struct PairFactory<SiftDescriptor>;
+extern template struct PairFactory<XFeatDescriptor>;
+extern template struct PairFactory<XFeatDenseDescriptor>;
+}  // namespace vmap::detail
+#endif

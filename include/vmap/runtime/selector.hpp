@@ -96,6 +96,37 @@ class SelectorModel final : public SelectorBase {
   Selector selector_;
 };
 
+/// The selectors and sweeps of one descriptor type D, with the stack's matcher and
+/// estimator for selection. Defined apart from AnySelector so that a program linking
+/// vmap::stacks instantiates none of them itself (see the end of this file).
+template <class D>
+struct SelectorFactory {
+  static std::unique_ptr<SelectorBase> create(D descriptor, const PolicyStack& stack, const SelectorOptions& options,
+                                              const std::string& camera_name);
+  static SweepResult sweep(D descriptor, FrameSource& source, const PolicyStack& stack, const SweepOptions& options,
+                           const std::string& camera_name);
+};
+
+template <class D>
+std::unique_ptr<SelectorBase> SelectorFactory<D>::create(D descriptor, const PolicyStack& stack,
+                                                         const SelectorOptions& options,
+                                                         const std::string& camera_name) {
+  auto matcher = matcher_for(descriptor);
+  auto estimator = estimator_for<D>(stack, StackUse::selection, camera_name);
+  using Selector = KeyframeSelector<D, decltype(matcher), decltype(estimator), InlierRatio>;
+  return std::make_unique<SelectorModel<Selector>>(std::move(descriptor), std::move(matcher), std::move(estimator),
+                                                   InlierRatio{}, options);
+}
+
+template <class D>
+SweepResult SelectorFactory<D>::sweep(D descriptor, FrameSource& source, const PolicyStack& stack,
+                                      const SweepOptions& options, const std::string& camera_name) {
+  auto matcher = matcher_for(descriptor);
+  auto estimator = estimator_for<D>(stack, StackUse::selection, camera_name);
+  return sweep_thresholds(source, std::move(descriptor), std::move(matcher), std::move(estimator), InlierRatio{},
+                          options);
+}
+
 }  // namespace detail
 
 /// A KeyframeSelector of a PolicyStack (see the top of this file).
@@ -117,14 +148,10 @@ class AnySelector {
   explicit AnySelector(const PolicyStack& stack, const SelectorOptions& options = {},
                        const std::string& camera_name = "camera")
       : stack_(stack),
-        selector_(with_policies(
-            stack, StackUse::selection,
-            [&](auto descriptor, auto matcher, auto estimator) -> std::unique_ptr<detail::SelectorBase> {
-              using Selector = KeyframeSelector<decltype(descriptor), decltype(matcher), decltype(estimator), InlierRatio>;
-              return std::make_unique<detail::SelectorModel<Selector>>(std::move(descriptor), std::move(matcher),
-                                                                       std::move(estimator), InlierRatio{}, options);
-            },
-            camera_name)) {}
+        selector_(with_descriptor(stack, [&](auto descriptor) {
+          return detail::SelectorFactory<decltype(descriptor)>::create(std::move(descriptor), stack, options,
+                                                                       camera_name);
+        })) {}
 
   /// One frame (Algorithm 1's step j): whether it made a key image, and why.
   FrameResult push(const Frame& frame) { return selector_->push(frame); }
@@ -162,13 +189,22 @@ class AnySelector {
 [[nodiscard]] inline SweepResult sweep_thresholds(FrameSource& source, const PolicyStack& stack,
                                                   const SweepOptions& options = {},
                                                   const std::string& camera_name = "camera") {
-  return with_policies(
-      stack, StackUse::selection,
-      [&](auto descriptor, auto matcher, auto estimator) {
-        return sweep_thresholds(source, std::move(descriptor), std::move(matcher), std::move(estimator), InlierRatio{},
-                                options);
-      },
-      camera_name);
+  return with_descriptor(stack, [&](auto descriptor) {
+    return detail::SelectorFactory<decltype(descriptor)>::sweep(std::move(descriptor), source, stack, options,
+                                                                camera_name);
+  });
 }
 
 }  // namespace vmap
+
+// A program that links vmap::stacks compiles the selectors of the shipped descriptors
+// once, there (runtime/detail/compiled_stacks.hpp).
+#ifdef VMAP_COMPILED_STACKS
+namespace vmap::detail {
+extern template struct SelectorFactory<OrbDescriptor>;
+extern template struct SelectorFactory<AkazeDescriptor>;
+extern template struct SelectorFactory<SiftDescriptor>;
+extern template struct SelectorFactory<XFeatDescriptor>;
+extern template struct SelectorFactory<XFeatDenseDescriptor>;
+}  // namespace vmap::detail
+#endif
