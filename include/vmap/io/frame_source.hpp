@@ -47,6 +47,7 @@
 #include <vmap/io/detail/lines.hpp>
 #include <vmap/io/detail/natural_order.hpp>
 #include <vmap/io/files.hpp>
+#include <vmap/io/frame.hpp>
 #include <vmap/io/image.hpp>
 #include <vmap/io/timestamps.hpp>
 
@@ -75,18 +76,6 @@
 #include <vector>
 
 namespace vmap {
-
-/// One frame of a sequence. `index` is the frame's position in the whole sequence
-/// (before start/stride are applied), so it lines up with ground-truth files.
-struct Frame {
-  cv::Mat image;
-  std::size_t index = 0;
-  std::string name;        ///< file name, or "<video>#<index>"
-  double timestamp = 0.0;  ///< seconds, see the top of this file (+ FrameSourceOptions::time_offset)
-  /// The same time in whole nanoseconds (io/timestamps.hpp): exact where the source
-  /// states nanoseconds or decimal seconds, else `timestamp` rounded.
-  std::int64_t time_ns = 0;
-};
 
 /// A frame that could not be decoded and was skipped.
 struct SkippedFrame {

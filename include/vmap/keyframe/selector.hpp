@@ -16,7 +16,8 @@
 #include <vmap/geometry/similarity.hpp>
 #include <vmap/hooks/pair_matcher.hpp>
 #include <vmap/io/binary.hpp>
-#include <vmap/io/frame_source.hpp>
+#include <vmap/io/frame.hpp>
+#include <vmap/io/timestamps.hpp>
 #include <vmap/keyframe/front_end.hpp>
 #include <vmap/keyframe/visual_map.hpp>
 #include <vmap/matching/brute_force.hpp>

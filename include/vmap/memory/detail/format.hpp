@@ -171,7 +171,7 @@ inline constexpr double memory_rotation_tolerance = 1e-4;
 /// value a push accepts is one the memory writes and reads back, so a bad value is an
 /// Error naming it here instead of a sync that fails, or a memory that no longer opens,
 /// later. `last_in_session` is the last frame index pushed into the current session.
-/// (A Frame's fields, io/frame_source.hpp, given one by one: this header stays light.)
+/// (A Frame's fields, io/frame.hpp, given one by one: this header stays light.)
 struct PushedFrame {
   const cv::Mat& image;
   std::size_t index;
