@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Runs every `vmap` command shown in README.md and examples/*.md, as written, and fails
-# when one exits non-zero. A command is a line inside a fenced code block that starts
+# Runs every `vmap` command shown in README.md, examples/*.md and examples/results/*.md,
+# as written, and fails when one exits non-zero. A command is a line inside a fenced code block that starts
 # with `vmap `, `$ vmap ` or `build/release/examples/vmap ` (continued over lines ending
 # in a backslash); synopsis lines (with `[`, `INPUT` or `IMAGE...`) are not commands.
 # A program run from another build folder (`build/test/examples/...`) fails the test:
@@ -43,7 +43,7 @@ extract() {
 }
 
 cd "$src" || exit 1
-mapfile -t commands < <(extract README.md examples/*.md | grep -E -- "${VMAP_DOC_ONLY:-.}")
+mapfile -t commands < <(extract README.md examples/*.md examples/results/*.md | grep -E -- "${VMAP_DOC_ONLY:-.}")
 if [ "$list_only" = "--list" ]; then printf '%s\n' "${commands[@]}"; exit 0; fi
 
 rm -rf "$scratch"

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Compile time of a program that uses vmap, against the dependency floor (a file that
+# includes only the OpenCV and Eigen headers such a program needs), one after the other
+# on the same machine with the same flags; the ratio is the figure (the machine is
+# shared and noisy). Three programs: the probe of SHARED/bench/compile (consumer.cpp:
+# an OrbVisualMemory fed from a folder, one localization) header-only and as it compiles
+# in a program linking vmap::stacks (-DVMAP_COMPILED_STACKS), and a run-time-layer
+# program (tests/consumer/stacks.cpp: AnyMemory) both ways. Peak compiler memory too.
+#
+#   bash examples/bench/compile_time.sh [SHARED_DIR=../shared] [ROUNDS=1]
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+shared=${1:-../shared}
+rounds=${2:-1}
+flags=(-std=c++20 -O2 -Iinclude -isystem /usr/include/opencv4 -isystem /usr/include/eigen3 -c -o /dev/null)
+
+# seconds and peak KB of one compile, the best of `rounds`
+measure() {
+  local best_s="" best_kb=""
+  for ((r = 0; r < rounds; r++)); do
+    local out
+    out=$( { /usr/bin/time -f "%e %M" g++ "${flags[@]}" "$@" >/dev/null 2>/dev/null; } 2>&1 | tail -1)
+    local s=${out% *} kb=${out#* }
+    if [ -z "$best_s" ] || awk "BEGIN{exit !($s < $best_s)}"; then best_s=$s best_kb=$kb; fi
+  done
+  echo "$best_s $best_kb"
+}
+
+printf '%-44s %8s %8s %8s\n' "translation unit" "seconds" "x floor" "peak MB"
+read -r floor_s floor_kb < <(measure "$shared/bench/compile/floor.cpp")
+row() {
+  local name=$1; shift
+  read -r s kb < <(measure "$@")
+  printf '%-44s %8.1f %8.2f %8.0f\n' "$name" "$s" "$(awk "BEGIN{print $s / $floor_s}")" "$((kb / 1024))"
+}
+printf '%-44s %8.1f %8.2f %8.0f\n' "floor (OpenCV + Eigen headers)" "$floor_s" 1 "$((floor_kb / 1024))"
+row "consumer.cpp, header-only" "$shared/bench/compile/consumer.cpp"
+row "consumer.cpp, linking vmap::stacks" -DVMAP_COMPILED_STACKS "$shared/bench/compile/consumer.cpp"
+row "AnyMemory program, header-only" tests/consumer/stacks.cpp
+row "AnyMemory program, linking vmap::stacks" -DVMAP_COMPILED_STACKS tests/consumer/stacks.cpp
