@@ -248,11 +248,35 @@ TEST_CASE("cli: --out naming an existing file fails before the work; a missing f
   CHECK(j["out"] == fresh.string());
 }
 
-TEST_CASE("cli: bad input files exit 1 with a one-line message naming them") {
+TEST_CASE("cli: the exit code tells a missing input (3), a damaged memory (4) and a newer one (5)") {
+  const fs::path dir = work_dir() / "exit_codes";
+  fs::create_directories(dir);
+  const auto failed = [](const Run& r, int code, const std::string& message) {
+    INFO("stderr: " << r.err);
+    CHECK(r.code == code);
+    CHECK(r.err.find(message) != std::string::npos);
+    CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+  };
+  failed(run_vmap({"build", (dir / "no_such_folder").string()}), 3, "does not exist");
+  // A store whose pages are not SQLite's (a damaged file with the right first bytes).
+  const fs::path store = dir / "damaged.vmdb";
+  write(store, std::string("SQLite format 3") + '\0' + std::string(4096, 'm'));
+  failed(run_vmap({"memory", "info", store.string()}), 4, store.string());
+  // A memory file cut inside its header, and one of a format version this build does not
+  // read (the u32 after the magic).
+  const fs::path cut = dir / "cut.vmem";
+  write(cut, std::string("VMAPMEMO") + std::string(4, '\0'));
+  failed(run_vmap({"memory", "info", cut.string()}), 4, "cut.vmem");
+  const fs::path newer = dir / "newer.vmem";
+  write(newer, std::string("VMAPMEMO") + std::string("\x63\0\0\0", 4) + std::string(64, '\0'));
+  failed(run_vmap({"memory", "info", newer.string()}), 5, "format version 99 is not supported");
+}
+
+TEST_CASE("cli: bad input files exit 1 (3 when missing) with a one-line message naming them") {
   const fs::path dir = work_dir() / "bad_inputs";
   fs::create_directories(dir);
   const Run missing = run_vmap({"build", (dir / "nothing.txt").string()});
-  CHECK(missing.code == 1);
+  CHECK(missing.code == 3);
   CHECK(missing.err.find("nothing.txt") != std::string::npos);
   const Run gtdir = run_vmap({"loops", sample, "--gt", dir.string(), "--index", "all"});
   CHECK(gtdir.code == 2);
@@ -458,7 +482,7 @@ TEST_CASE("cli: build --memory errors: mixed options, --resume without a memory,
   CHECK(slurp(dir / "notes.txt") == "keep\n");
   write(dir / "not_memory.vmdb", "VMAPMAP! this is no memory file at all");
   const Run bad = run_vmap({"build", sample, "--memory", (dir / "not_memory.vmdb").string(), "--resume"});
-  CHECK(bad.code == 1);
+  CHECK(bad.code == 4);
   CHECK(bad.err.find("not a vmap memory") != std::string::npos);
   CHECK(std::count(bad.err.begin(), bad.err.end(), '\n') == 1);
 }
@@ -593,7 +617,7 @@ TEST_CASE("cli: localize --memory errors: mixed modes, no image, missing or non-
   const fs::path missing = work_dir() / "no_such.vmdb";
   usage_error({"localize", "--memory", missing.string(), frame_a}, "--memory: '" + missing.string() + "' does not exist");
   const Run bad = run_vmap({"localize", "--memory", sample, frame_a});
-  CHECK(bad.code == 1);
+  CHECK(bad.code == 4);
   CHECK(bad.err.find("'" + sample + "' is not a vmap memory") != std::string::npos);
   // A list, a folder or a video of queries: each frame a query, in order.
   const Run list = run_vmap({"localize", "--memory", file.string(), sample, "--json"});
@@ -608,7 +632,7 @@ TEST_CASE("cli: localize --memory errors: mixed modes, no image, missing or non-
   CHECK(std::count(folder.out.begin(), folder.out.end(), '\n') >= 60);
   // One image that cannot be read is an Error naming it.
   const Run img = run_vmap({"localize", "--memory", file.string(), (work_dir() / "no_such.jpg").string()});
-  CHECK(img.code == 1);
+  CHECK(img.code == 3);
   CHECK(img.err.find("query image '" + (work_dir() / "no_such.jpg").string() + "': ") != std::string::npos);
   usage_error({"memory", "localise", file.string(), frame_a}, "unknown subcommand 'localise'; did you mean 'memory localize'?");
 }
@@ -675,7 +699,7 @@ TEST_CASE("cli: loops --memory prints the memory's loop edges; --gt evaluates th
   usage_error({"loops", "--memory", file.string(), "--rank", "all"}, "--memory and --rank conflict");
   usage_error({"loops"}, "give INPUT (the frames) or --memory M");
   const Run bad = run_vmap({"loops", "--memory", gt.string()});
-  CHECK(bad.code == 1);
+  CHECK(bad.code == 4);
   CHECK(bad.err.find("not a vmap memory") != std::string::npos);
   // A ground truth smaller than the memory's frames is refused, naming --gt.
   write(gt, "0 0\n0 0\n");
@@ -1358,7 +1382,7 @@ TEST_CASE("cli: a memory store is replaced only with --force, resumed only from 
     REQUIRE(fd >= 0);
     REQUIRE(::flock(fd, LOCK_EX | LOCK_NB) == 0);
     const Run second = run_vmap({"memory", "build", sample, "--memory", mem, "--resume"});
-    CHECK(second.code == 1);
+    CHECK(second.code == 7);
     CHECK(second.err.find("memory '" + mem + "' is being written by another program") != std::string::npos);
     const Run reader = run_vmap({"memory", "info", mem, "--json"});
     CHECK(reader.code == 0);
@@ -1444,7 +1468,7 @@ TEST_CASE("cli: --force replaces a memory whole: a failed run, or a memory anoth
   REQUIRE(wait_for(busy));
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   const Run forced = run_vmap({"build", sample, "--memory", busy, "--force", "--end", "10"});
-  CHECK(forced.code == 1);
+  CHECK(forced.code == 7);
   CHECK(forced.err.find("memory '" + busy + "' is being written by another program") != std::string::npos);
   REQUIRE(wait_for(code));
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
@@ -1723,7 +1747,7 @@ TEST_CASE("cli: a memory keeps the policy stack it was built with (--features, -
   const std::string orb = (dir / "orb.vmdb").string();
   REQUIRE(run_vmap({"memory", "build", sample, "--memory", orb, "--end", "20"}).code == 0);
   const Run m = run_vmap({"memory", "merge", orb, akaze, "--out", (dir / "merged.vmdb").string()});
-  CHECK(m.code == 1);
+  CHECK(m.code == 6);
   CHECK(m.err.find("cannot merge memory '" + akaze + "' (akaze, magsac, raw pixels) into memory '" + orb +
                    "' (orb 1000, magsac, raw pixels): they were built with different policies") != std::string::npos);
   CHECK(!fs::exists(dir / "merged.vmdb"));
