@@ -408,6 +408,7 @@ inline nlohmann::json localizations_json(const AnyMemory& mem, const std::vector
     nlohmann::json j{{"image", path_string(q.image)},
                      {"status", std::string(to_string(q.answer.status))},
                      {"reason", q.answer.reason},
+                     {"reason_code", std::string(to_string(q.answer.reason_code))},
                      {"confidence", q.answer.confidence},
                      {"localized", q.answer.ok()},
                      {"evidence", evidence_json(q.answer.evidence)},

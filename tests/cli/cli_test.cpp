@@ -541,6 +541,7 @@ TEST_CASE("cli: localize --memory answers every query with its place decision; -
     CHECK(q["confidence"].get<double>() >= 0.5);
     CHECK(q["confidence"].get<double>() <= 1.0);
     CHECK(q["reason"].get<std::string>().rfind("confidence ", 0) == 0);
+    CHECK(q["reason_code"] == "confidence reaches the threshold");
     CHECK(q["evidence"]["inliers"].get<int>() >= 12);
     CHECK(q["evidence"]["inlier_ratio"].get<double>() > 0.0);
     CHECK(q["evidence"]["significance"].get<double>() > 0.0);
@@ -595,6 +596,7 @@ TEST_CASE("cli: localize --memory answers every query with its place decision; -
   CHECK(sj["queries"][0]["status"] == "unknown place");
   CHECK(sj["queries"][0]["key"].is_null());
   CHECK(sj["queries"][0]["reason"].get<std::string>().find("< 1.00") != std::string::npos);
+  CHECK(sj["queries"][0]["reason_code"] == "confidence below the threshold");
   const Run strict_text = run_vmap({"localize", "--memory", file.string(), frame_30, "--min-confidence", "1"});
   REQUIRE(strict_text.code == 0);
   CHECK(strict_text.out.find(frame_30 + ": unknown place (confidence ") != std::string::npos);
