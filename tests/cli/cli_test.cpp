@@ -150,6 +150,8 @@ TEST_CASE("cli: --help and --version exit 0 and document the exit codes") {
   const Run h = run_vmap({"--help"});
   CHECK(h.code == 0);
   CHECK(h.out.find("Exit codes: 0 ok; 1 bad input") != std::string::npos);
+  CHECK(h.out.find("3 an input does not exist") != std::string::npos);
+  CHECK(h.out.find("8 a write failed") != std::string::npos);
   const Run hb = run_vmap({"build", "--help"});
   CHECK(hb.code == 0);
   CHECK(hb.out.find("Exit codes") != std::string::npos);
