@@ -1159,13 +1159,13 @@ TEST_CASE("cli: memory export writes key images with names and times, and loop e
   CHECK(!fs::exists(out / "key_images.tum"));  // no poses in this memory
   fails_with({"memory", "export", file.string()}, 2, "--out is required");
 
-  // A full disk (bash's file size limit of 0: no byte can be written): a failed run (exit 1, not a usage
-  // error) that leaves no half-written folder behind.
+  // A full disk (bash's file size limit of 0: no byte can be written): a failed write (exit 8, not a
+  // usage error) that leaves no half-written folder behind.
   const fs::path full = out.parent_path() / "full";
   const std::string inner = "trap '' XFSZ; ulimit -f 0; exec " + quote(VMAP_CLI_BINARY) + " memory export " +
                             quote(file.string()) + " --out " + quote(full.string()) + " >/dev/null 2>/dev/null";
   const int status = std::system(("bash -c " + quote(inner)).c_str());
-  CHECK(WEXITSTATUS(status) == 1);
+  CHECK(WEXITSTATUS(status) == 8);
   CHECK(!fs::exists(full));
   for (const auto& e : fs::directory_iterator(out.parent_path()))
     CHECK(e.path().filename().string().find(".vmap-") == std::string::npos);
@@ -1622,7 +1622,7 @@ TEST_CASE("cli: a new memory whose run fails after committing key images (a full
                             " --memory " + quote(mem) + " >/dev/null 2>" + quote((dir / "err.txt").string());
   const std::string cmd = "cd " + quote(VMAP_TEST_SOURCE_DIR) + " && bash -c " + quote(inner);
   const int status = std::system(cmd.c_str());
-  CHECK(WEXITSTATUS(status) == 1);
+  CHECK(WEXITSTATUS(status) == 8);
   const std::string err = slurp(dir / "err.txt");
   INFO(err);
   CHECK(err.find("the memory '" + mem + "' keeps the ") != std::string::npos);

@@ -365,13 +365,17 @@ class MemoryStoreConnection {
         insert(*rows_);
         t.commit();
       } catch (const std::exception& e) {
-        error = std::make_exception_ptr(Error(std::string(e.what()) +
-                                              " (an earlier sync, committed in the store's writer thread: it stored "
-                                              "nothing; the next sync writes its rows again)"));
+        // The kind of what failed (a full disk is io) reaches the caller with the note.
+        const auto* vmap_error = dynamic_cast<const Error*>(&e);
+        error = std::make_exception_ptr(Error(vmap_error ? vmap_error->kind() : ErrorKind::io,
+                                              std::string(e.what()) +
+                                                  " (an earlier sync, committed in the store's writer thread: it "
+                                                  "stored nothing; the next sync writes its rows again)"));
       } catch (...) {
-        error = std::make_exception_ptr(Error(db.what() + " write the memory: an unknown error (an earlier sync, "
-                                              "committed in the store's writer thread: it stored nothing; the next "
-                                              "sync writes its rows again)"));
+        error = std::make_exception_ptr(Error(ErrorKind::io,
+                                              db.what() + " write the memory: an unknown error (an earlier sync, "
+                                                          "committed in the store's writer thread: it stored nothing; "
+                                                          "the next sync writes its rows again)"));
       }
       lock.lock();
       rows_.reset();
