@@ -42,6 +42,28 @@ namespace vmap::examples {
 inline constexpr int exit_ok = 0;       ///< the command ran
 inline constexpr int exit_failure = 1;  ///< bad input (a file, an image) or a failed run
 inline constexpr int exit_usage = 2;    ///< bad command line: unknown subcommand or option, bad value, conflict
+/// A failure a script can act on, by the vmap::Error's kind (vmap::ErrorKind); any other
+/// failure (a bad input value, an OpenCV error, no frame) is exit_failure.
+inline constexpr int exit_not_found = 3;            ///< an input file or folder does not exist
+inline constexpr int exit_corrupt = 4;              ///< an input file is damaged or not of its format
+inline constexpr int exit_unsupported_version = 5;  ///< an input of a newer format than this build reads
+inline constexpr int exit_policy_mismatch = 6;      ///< a memory or vocabulary of other policies
+inline constexpr int exit_busy = 7;                 ///< the memory is being written by another program
+inline constexpr int exit_io = 8;                   ///< a write failed (a full disk, permissions)
+
+/// The exit code of a run that stopped on a vmap::Error of kind `k`.
+[[nodiscard]] constexpr int exit_code_of(vmap::ErrorKind k) noexcept {
+  switch (k) {
+    case vmap::ErrorKind::not_found: return exit_not_found;
+    case vmap::ErrorKind::corrupt: return exit_corrupt;
+    case vmap::ErrorKind::unsupported_version: return exit_unsupported_version;
+    case vmap::ErrorKind::policy_mismatch: return exit_policy_mismatch;
+    case vmap::ErrorKind::busy: return exit_busy;
+    case vmap::ErrorKind::io: return exit_io;
+    case vmap::ErrorKind::invalid_argument: break;
+  }
+  return exit_failure;
+}
 
 /// A command-line mistake found after parsing (conflicting options, an output that is
 /// an input): exit code 2, like CLI11's own parse errors. A vmap::Error, so that code

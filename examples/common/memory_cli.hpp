@@ -104,11 +104,11 @@ inline void prepare_memory_output(const std::filesystem::path& file, const std::
 }
 
 /// A memory given as an input (`option` names it): a missing path, a folder or a device
-/// is a usage error; a file that is no memory is an Error naming it (exit 1).
+/// is a usage error; a file that is no memory is an Error naming it (corrupt: exit 4).
 inline void check_memory_input(const std::filesystem::path& file, const std::string& option) {
   check_input_file(file, option);
   if (memory_kind(file) == MemoryKind::other)
-    vmap::detail::fail("'" + file.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file)");
+    vmap::detail::fail(vmap::ErrorKind::corrupt, "'" + file.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file)");
 }
 
 /// Opens a memory given as an input to read (a snapshot; `pixels` to decode its key
@@ -364,7 +364,7 @@ inline std::vector<MemoryQuery> localize_queries(AnyMemory& mem, const std::vect
       try {
         img = vmap::read_image(input, {.flags = cv::IMREAD_GRAYSCALE});
       } catch (const vmap::Error& e) {
-        vmap::detail::fail("query " + std::string(e.what()));  // "query image 'x': reason"
+        vmap::detail::fail(e.kind(), "query " + std::string(e.what()));  // "query image 'x': reason"
       }
       answer(input, img);
       continue;
@@ -408,6 +408,7 @@ inline nlohmann::json localizations_json(const AnyMemory& mem, const std::vector
     nlohmann::json j{{"image", path_string(q.image)},
                      {"status", std::string(to_string(q.answer.status))},
                      {"reason", q.answer.reason},
+                     {"reason_code", std::string(to_string(q.answer.reason_code))},
                      {"confidence", q.answer.confidence},
                      {"localized", q.answer.ok()},
                      {"evidence", evidence_json(q.answer.evidence)},

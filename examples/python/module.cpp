@@ -11,19 +11,70 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <iterator>
 #include <string>
+#include <vector>
 
 namespace vmap::python {
 
+namespace {
+
+/// One subclass of vmap.Error per ErrorKind, also derived from the built-in exception a
+/// Python program already catches for that failure (FileNotFoundError for a missing file,
+/// OSError for a busy store or a full disk, ValueError for a bad or damaged input).
+struct KindClass {
+  ErrorKind kind;
+  const char* name;
+  PyObject* builtin;
+  const char* doc;
+};
+
+/// The new class; its reference is never released (the class lives as long as the
+/// process, and a static py::object would be released after the interpreter stopped).
+PyObject* make_kind_class(py::module_& m, const py::object& base, const KindClass& k) {
+  const std::string qualified = "vmap._vmap." + std::string(k.name);
+  py::tuple bases = py::make_tuple(base, py::handle(k.builtin));
+  PyObject* cls = PyErr_NewExceptionWithDoc(qualified.c_str(), k.doc, bases.ptr(), nullptr);
+  if (!cls) throw py::error_already_set();
+  py::handle out(cls);
+  out.attr("kind") = std::string(to_string(k.kind));
+  m.attr(k.name) = out;
+  return cls;
+}
+
+}  // namespace
+
 void bind_errors(py::module_& m) {
   static py::exception<vmap::Error> error(m, "Error", PyExc_RuntimeError);
-  error.doc() = "A bad input (a file, an image, an option value) or a failed step, with vmap's message.";
-  // vmap::Error (the library's checks of every argument it is given) and OpenCV's own
-  // exceptions.
+  error.doc() = "A bad input (a file, an image, an option value) or a failed step, with vmap's message. "
+                "Its subclasses say which kind of failure it is (their attribute `kind`).";
+  static const KindClass kinds[] = {
+      {ErrorKind::invalid_argument, "InvalidArgumentError", PyExc_ValueError,
+       "A bad option, value or call: the caller must change it."},
+      {ErrorKind::not_found, "NotFoundError", PyExc_FileNotFoundError, "A file or folder that does not exist."},
+      {ErrorKind::corrupt, "CorruptError", PyExc_ValueError,
+       "A file that exists but is damaged or is not of its format."},
+      {ErrorKind::unsupported_version, "UnsupportedVersionError", PyExc_ValueError,
+       "A file of a newer format version than this build reads."},
+      {ErrorKind::policy_mismatch, "PolicyMismatchError", PyExc_ValueError,
+       "A memory or vocabulary made with other policies (descriptor, stack, options)."},
+      {ErrorKind::busy, "BusyError", PyExc_OSError, "A memory store another program writes (one writer at a time)."},
+      {ErrorKind::io, "IoError", PyExc_OSError, "A write, flush or rename the system refused (a full disk, permissions)."},
+  };
+  // Kept for the translator, which runs after this function returned (as `error` is).
+  static std::vector<PyObject*> classes;
+  for (const KindClass& k : kinds) classes.push_back(make_kind_class(m, error, k));
+  // vmap::Error (the library's checks of every argument it is given) as the subclass of
+  // its kind, and OpenCV's own exceptions as vmap.Error.
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const vmap::Error& e) {
+      for (std::size_t i = 0; i < std::size(kinds); ++i)
+        if (kinds[i].kind == e.kind()) {
+          PyErr_SetString(classes[i], e.what());
+          return;
+        }
       error(e.what());
     } catch (const cv::Exception& e) {
       error(("OpenCV: " + e.msg).c_str());

@@ -456,6 +456,9 @@ void bind_results(py::module_& m) {
           "status", [](const LoopResult& r) { return std::string(to_string(r.status)); },
           "accepted, unknown place, ambiguous, too little evidence or not a revisit")
       .def_readonly("reason", &LoopResult::reason, "why, in words (e.g. 'confidence 0.31 < 0.50')")
+      .def_property_readonly(
+          "reason_code", [](const LoopResult& r) { return std::string(to_string(r.reason_code)); },
+          "why, one name per case (vmap::DecisionReason: 'no candidates', 'too few inliers', 'not yet confirmed', ...)")
       .def_readonly("confidence", &LoopResult::confidence, "of the best place, in [0, 1]")
       .def_property_readonly(
           "best", [](const LoopResult& r) { return optional_index(r.best); },

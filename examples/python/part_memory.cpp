@@ -250,6 +250,10 @@ void bind(py::module_& m) {
       .def_property_readonly("status", [](const MemoryLocalization& l) { return std::string(to_string(l.status)); },
                              "accepted, unknown place, ambiguous, too little evidence or not a revisit")
       .def_readonly("reason", &MemoryLocalization::reason, "why, in words")
+      .def_property_readonly(
+          "reason_code", [](const MemoryLocalization& l) { return std::string(to_string(l.reason_code)); },
+          "why, one name per case (vmap::DecisionReason: 'the memory has no key image', 'confidence below the "
+          "threshold', ...)")
       .def_readonly("confidence", &MemoryLocalization::confidence, "of the best key image, in [0, 1]")
       .def_readonly("evidence", &MemoryLocalization::evidence, "of the best key image (PlaceEvidence)")
       .def_property_readonly("ok", &MemoryLocalization::ok, "whether the place was accepted")

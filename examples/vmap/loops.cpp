@@ -248,9 +248,10 @@ int run(LoopsArgs& a, const CLI::App& app) {
   };
   if (a.verbose)
     callbacks.on_result = [](const vmap::LoopResult& r) {
-      std::fprintf(stderr, "frame %3zu  candidates %3zu  verified %3zu  best %4s  inliers %4d  confidence %.2f  %s (%s)\n",
+      std::fprintf(stderr, "frame %3zu  candidates %3zu  verified %3zu  best %4s  inliers %4d  confidence %.2f  %s: %s (%s)\n",
                    r.frame, r.candidates, r.verifications, r.best ? std::to_string(*r.best).c_str() : "-",
-                   r.evidence.inliers, r.confidence, std::string(vmap::to_string(r.status)).c_str(), r.reason.c_str());
+                   r.evidence.inliers, r.confidence, std::string(vmap::to_string(r.status)).c_str(),
+                   std::string(vmap::to_string(r.reason_code)).c_str(), r.reason.c_str());
     };
   vmap::FrameSourceOptions frame_options = ex::with_bag_options(a.input, ex::reporting_skips({.time_offset = a.time_offset}));
   frame_options.on_skip = [&, report = frame_options.on_skip](const vmap::SkippedFrame& sk) {

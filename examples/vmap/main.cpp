@@ -26,7 +26,9 @@ namespace ex = vmap::examples;
 constexpr const char* exit_codes_text =
     "Exit codes: 0 ok; 1 bad input or failed run (a file that cannot be read, no frame, ...);\n"
     "2 usage (unknown subcommand or option, bad option value, conflicting options, an output\n"
-    "that is an input). Every subcommand takes --config FILE: a YAML file (OpenCV FileStorage)\n"
+    "that is an input); 3 an input does not exist; 4 an input is damaged (corrupt); 5 an input\n"
+    "of a newer format version; 6 a memory or vocabulary of other policies; 7 the memory is\n"
+    "being written by another program; 8 a write failed (a full disk). Every subcommand takes --config FILE: a YAML file (OpenCV FileStorage)\n"
     "whose keys are the long option names, e.g. \"features: akaze\"; the command line wins.";
 
 /// The subcommand named on the command line: the first argument that is not an option.
@@ -149,6 +151,7 @@ static int run_vmap(int argc, char** argv) {
     return ex::exit_usage;
   } catch (const vmap::Error& e) {
     std::fprintf(stderr, "%s: error: %s\n", where.c_str(), ex::one_line(e.what()).c_str());
+    return ex::exit_code_of(e.kind());
   } catch (const cv::Exception& e) {
     std::fprintf(stderr, "%s: OpenCV error: %s (in %s)%s\n", where.c_str(), ex::one_line(e.err).c_str(),
                  e.func.c_str(), ex::input_note().c_str());

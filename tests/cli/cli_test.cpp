@@ -150,6 +150,8 @@ TEST_CASE("cli: --help and --version exit 0 and document the exit codes") {
   const Run h = run_vmap({"--help"});
   CHECK(h.code == 0);
   CHECK(h.out.find("Exit codes: 0 ok; 1 bad input") != std::string::npos);
+  CHECK(h.out.find("3 an input does not exist") != std::string::npos);
+  CHECK(h.out.find("8 a write failed") != std::string::npos);
   const Run hb = run_vmap({"build", "--help"});
   CHECK(hb.code == 0);
   CHECK(hb.out.find("Exit codes") != std::string::npos);
@@ -248,11 +250,35 @@ TEST_CASE("cli: --out naming an existing file fails before the work; a missing f
   CHECK(j["out"] == fresh.string());
 }
 
-TEST_CASE("cli: bad input files exit 1 with a one-line message naming them") {
+TEST_CASE("cli: the exit code tells a missing input (3), a damaged memory (4) and a newer one (5)") {
+  const fs::path dir = work_dir() / "exit_codes";
+  fs::create_directories(dir);
+  const auto failed = [](const Run& r, int code, const std::string& message) {
+    INFO("stderr: " << r.err);
+    CHECK(r.code == code);
+    CHECK(r.err.find(message) != std::string::npos);
+    CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+  };
+  failed(run_vmap({"build", (dir / "no_such_folder").string()}), 3, "does not exist");
+  // A store whose pages are not SQLite's (a damaged file with the right first bytes).
+  const fs::path store = dir / "damaged.vmdb";
+  write(store, std::string("SQLite format 3") + '\0' + std::string(4096, 'm'));
+  failed(run_vmap({"memory", "info", store.string()}), 4, store.string());
+  // A memory file cut inside its header, and one of a format version this build does not
+  // read (the u32 after the magic).
+  const fs::path cut = dir / "cut.vmem";
+  write(cut, std::string("VMAPMEMO") + std::string(4, '\0'));
+  failed(run_vmap({"memory", "info", cut.string()}), 4, "cut.vmem");
+  const fs::path newer = dir / "newer.vmem";
+  write(newer, std::string("VMAPMEMO") + std::string("\x63\0\0\0", 4) + std::string(64, '\0'));
+  failed(run_vmap({"memory", "info", newer.string()}), 5, "format version 99 is not supported");
+}
+
+TEST_CASE("cli: bad input files exit 1 (3 when missing) with a one-line message naming them") {
   const fs::path dir = work_dir() / "bad_inputs";
   fs::create_directories(dir);
   const Run missing = run_vmap({"build", (dir / "nothing.txt").string()});
-  CHECK(missing.code == 1);
+  CHECK(missing.code == 3);
   CHECK(missing.err.find("nothing.txt") != std::string::npos);
   const Run gtdir = run_vmap({"loops", sample, "--gt", dir.string(), "--index", "all"});
   CHECK(gtdir.code == 2);
@@ -458,7 +484,7 @@ TEST_CASE("cli: build --memory errors: mixed options, --resume without a memory,
   CHECK(slurp(dir / "notes.txt") == "keep\n");
   write(dir / "not_memory.vmdb", "VMAPMAP! this is no memory file at all");
   const Run bad = run_vmap({"build", sample, "--memory", (dir / "not_memory.vmdb").string(), "--resume"});
-  CHECK(bad.code == 1);
+  CHECK(bad.code == 4);
   CHECK(bad.err.find("not a vmap memory") != std::string::npos);
   CHECK(std::count(bad.err.begin(), bad.err.end(), '\n') == 1);
 }
@@ -517,6 +543,7 @@ TEST_CASE("cli: localize --memory answers every query with its place decision; -
     CHECK(q["confidence"].get<double>() >= 0.5);
     CHECK(q["confidence"].get<double>() <= 1.0);
     CHECK(q["reason"].get<std::string>().rfind("confidence ", 0) == 0);
+    CHECK(q["reason_code"] == "confidence reaches the threshold");
     CHECK(q["evidence"]["inliers"].get<int>() >= 12);
     CHECK(q["evidence"]["inlier_ratio"].get<double>() > 0.0);
     CHECK(q["evidence"]["significance"].get<double>() > 0.0);
@@ -571,6 +598,7 @@ TEST_CASE("cli: localize --memory answers every query with its place decision; -
   CHECK(sj["queries"][0]["status"] == "unknown place");
   CHECK(sj["queries"][0]["key"].is_null());
   CHECK(sj["queries"][0]["reason"].get<std::string>().find("< 1.00") != std::string::npos);
+  CHECK(sj["queries"][0]["reason_code"] == "confidence below the threshold");
   const Run strict_text = run_vmap({"localize", "--memory", file.string(), frame_30, "--min-confidence", "1"});
   REQUIRE(strict_text.code == 0);
   CHECK(strict_text.out.find(frame_30 + ": unknown place (confidence ") != std::string::npos);
@@ -593,7 +621,7 @@ TEST_CASE("cli: localize --memory errors: mixed modes, no image, missing or non-
   const fs::path missing = work_dir() / "no_such.vmdb";
   usage_error({"localize", "--memory", missing.string(), frame_a}, "--memory: '" + missing.string() + "' does not exist");
   const Run bad = run_vmap({"localize", "--memory", sample, frame_a});
-  CHECK(bad.code == 1);
+  CHECK(bad.code == 4);
   CHECK(bad.err.find("'" + sample + "' is not a vmap memory") != std::string::npos);
   // A list, a folder or a video of queries: each frame a query, in order.
   const Run list = run_vmap({"localize", "--memory", file.string(), sample, "--json"});
@@ -608,7 +636,7 @@ TEST_CASE("cli: localize --memory errors: mixed modes, no image, missing or non-
   CHECK(std::count(folder.out.begin(), folder.out.end(), '\n') >= 60);
   // One image that cannot be read is an Error naming it.
   const Run img = run_vmap({"localize", "--memory", file.string(), (work_dir() / "no_such.jpg").string()});
-  CHECK(img.code == 1);
+  CHECK(img.code == 3);
   CHECK(img.err.find("query image '" + (work_dir() / "no_such.jpg").string() + "': ") != std::string::npos);
   usage_error({"memory", "localise", file.string(), frame_a}, "unknown subcommand 'localise'; did you mean 'memory localize'?");
 }
@@ -675,7 +703,7 @@ TEST_CASE("cli: loops --memory prints the memory's loop edges; --gt evaluates th
   usage_error({"loops", "--memory", file.string(), "--rank", "all"}, "--memory and --rank conflict");
   usage_error({"loops"}, "give INPUT (the frames) or --memory M");
   const Run bad = run_vmap({"loops", "--memory", gt.string()});
-  CHECK(bad.code == 1);
+  CHECK(bad.code == 4);
   CHECK(bad.err.find("not a vmap memory") != std::string::npos);
   // A ground truth smaller than the memory's frames is refused, naming --gt.
   write(gt, "0 0\n0 0\n");
@@ -1131,13 +1159,13 @@ TEST_CASE("cli: memory export writes key images with names and times, and loop e
   CHECK(!fs::exists(out / "key_images.tum"));  // no poses in this memory
   fails_with({"memory", "export", file.string()}, 2, "--out is required");
 
-  // A full disk (bash's file size limit of 0: no byte can be written): a failed run (exit 1, not a usage
-  // error) that leaves no half-written folder behind.
+  // A full disk (bash's file size limit of 0: no byte can be written): a failed write (exit 8, not a
+  // usage error) that leaves no half-written folder behind.
   const fs::path full = out.parent_path() / "full";
   const std::string inner = "trap '' XFSZ; ulimit -f 0; exec " + quote(VMAP_CLI_BINARY) + " memory export " +
                             quote(file.string()) + " --out " + quote(full.string()) + " >/dev/null 2>/dev/null";
   const int status = std::system(("bash -c " + quote(inner)).c_str());
-  CHECK(WEXITSTATUS(status) == 1);
+  CHECK(WEXITSTATUS(status) == 8);
   CHECK(!fs::exists(full));
   for (const auto& e : fs::directory_iterator(out.parent_path()))
     CHECK(e.path().filename().string().find(".vmap-") == std::string::npos);
@@ -1358,7 +1386,7 @@ TEST_CASE("cli: a memory store is replaced only with --force, resumed only from 
     REQUIRE(fd >= 0);
     REQUIRE(::flock(fd, LOCK_EX | LOCK_NB) == 0);
     const Run second = run_vmap({"memory", "build", sample, "--memory", mem, "--resume"});
-    CHECK(second.code == 1);
+    CHECK(second.code == 7);
     CHECK(second.err.find("memory '" + mem + "' is being written by another program") != std::string::npos);
     const Run reader = run_vmap({"memory", "info", mem, "--json"});
     CHECK(reader.code == 0);
@@ -1444,7 +1472,7 @@ TEST_CASE("cli: --force replaces a memory whole: a failed run, or a memory anoth
   REQUIRE(wait_for(busy));
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   const Run forced = run_vmap({"build", sample, "--memory", busy, "--force", "--end", "10"});
-  CHECK(forced.code == 1);
+  CHECK(forced.code == 7);
   CHECK(forced.err.find("memory '" + busy + "' is being written by another program") != std::string::npos);
   REQUIRE(wait_for(code));
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
@@ -1594,7 +1622,7 @@ TEST_CASE("cli: a new memory whose run fails after committing key images (a full
                             " --memory " + quote(mem) + " >/dev/null 2>" + quote((dir / "err.txt").string());
   const std::string cmd = "cd " + quote(VMAP_TEST_SOURCE_DIR) + " && bash -c " + quote(inner);
   const int status = std::system(cmd.c_str());
-  CHECK(WEXITSTATUS(status) == 1);
+  CHECK(WEXITSTATUS(status) == 8);
   const std::string err = slurp(dir / "err.txt");
   INFO(err);
   CHECK(err.find("the memory '" + mem + "' keeps the ") != std::string::npos);
@@ -1723,7 +1751,7 @@ TEST_CASE("cli: a memory keeps the policy stack it was built with (--features, -
   const std::string orb = (dir / "orb.vmdb").string();
   REQUIRE(run_vmap({"memory", "build", sample, "--memory", orb, "--end", "20"}).code == 0);
   const Run m = run_vmap({"memory", "merge", orb, akaze, "--out", (dir / "merged.vmdb").string()});
-  CHECK(m.code == 1);
+  CHECK(m.code == 6);
   CHECK(m.err.find("cannot merge memory '" + akaze + "' (akaze, magsac, raw pixels) into memory '" + orb +
                    "' (orb 1000, magsac, raw pixels): they were built with different policies") != std::string::npos);
   CHECK(!fs::exists(dir / "merged.vmdb"));

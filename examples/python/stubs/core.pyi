@@ -10,8 +10,51 @@ __version__: str
 
 _Image = npt.NDArray[numpy.uint8] | npt.NDArray[numpy.uint16]
 
+_DecisionReason = Literal[
+    "no candidates",
+    "every candidate below the bag-of-words score",
+    "no candidate verified",
+    "too few inliers",
+    "not yet confirmed",
+    "the memory has no key image",
+    "the query image has no features",
+    "the camera never left the candidates' place",
+    "confidence below the threshold",
+    "two places equally likely",
+    "confidence reaches the threshold",
+]
+
 class Error(RuntimeError):
-    """A bad input (a file, an image, an option value) or a failed step, with vmap's message."""
+    """A bad input (a file, an image, an option value) or a failed step, with vmap's message.
+    Its subclasses say which kind of failure it is (their attribute `kind`)."""
+
+class InvalidArgumentError(Error, ValueError):
+    """A bad option, value or call: the caller must change it."""
+    kind: str
+
+class NotFoundError(Error, FileNotFoundError):
+    """A file or folder that does not exist."""
+    kind: str
+
+class CorruptError(Error, ValueError):
+    """A file that exists but is damaged or is not of its format."""
+    kind: str
+
+class UnsupportedVersionError(Error, ValueError):
+    """A file of a newer format version than this build reads."""
+    kind: str
+
+class PolicyMismatchError(Error, ValueError):
+    """A memory or vocabulary made with other policies (descriptor, stack, options)."""
+    kind: str
+
+class BusyError(Error, OSError):
+    """A memory store another program writes (one writer at a time)."""
+    kind: str
+
+class IoError(Error, OSError):
+    """A write, flush or rename the system refused (a full disk, permissions)."""
+    kind: str
 
 class Frames:
     """The frames of a source, as (image, timestamp, name) tuples (vmap.frames)."""

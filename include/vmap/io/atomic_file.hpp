@@ -68,7 +68,7 @@ inline std::filesystem::path resolve_save_target(const std::filesystem::path& ta
   for (int hops = 0; std::filesystem::is_symlink(std::filesystem::symlink_status(p, ec)); ++hops) {
     if (hops >= 40) fail("cannot save '" + target.string() + "': too many levels of symbolic links");
     const auto to = std::filesystem::read_symlink(p, ec);
-    if (ec) fail("cannot save '" + target.string() + "': " + ec.message());
+    if (ec) fail(ErrorKind::io, "cannot save '" + target.string() + "': " + ec.message());
     p = to.is_absolute() ? to : p.parent_path() / to;
   }
   const auto st = std::filesystem::status(p, ec);
@@ -110,8 +110,9 @@ class AtomicFile {
       const int e = errno;
       std::error_code ec;
       const bool folder = std::filesystem::is_directory(dir, ec);
-      detail::fail("cannot write '" + target_.string() + "': " +
-                   (folder ? detail::os_reason(e) : "the folder '" + dir.string() + "' does not exist"));
+      detail::fail(folder ? ErrorKind::io : ErrorKind::not_found,
+                   "cannot write '" + target_.string() + "': " +
+                       (folder ? detail::os_reason(e) : "the folder '" + dir.string() + "' does not exist"));
     }
     ::fcntl(fd_, F_SETFD, FD_CLOEXEC);
     tmp_ = templ;
@@ -140,7 +141,7 @@ class AtomicFile {
       if (n < 0) {
         const int e = errno;
         abandon();
-        detail::fail("writing '" + target_.string() + "' failed: " + detail::os_reason(e));
+        detail::fail(ErrorKind::io, "writing '" + target_.string() + "' failed: " + detail::os_reason(e));
       }
       done += static_cast<std::size_t>(n);
     }
@@ -152,18 +153,18 @@ class AtomicFile {
     if (::fsync(fd_) != 0 && errno != EINVAL) {
       const int e = errno;
       abandon();
-      detail::fail("writing '" + target_.string() + "' failed (fsync): " + detail::os_reason(e));
+      detail::fail(ErrorKind::io, "writing '" + target_.string() + "' failed (fsync): " + detail::os_reason(e));
     }
     const int closed = ::close(std::exchange(fd_, -1));
     if (closed != 0) {
       const int e = errno;
       abandon();
-      detail::fail("writing '" + target_.string() + "' failed (close): " + detail::os_reason(e));
+      detail::fail(ErrorKind::io, "writing '" + target_.string() + "' failed (close): " + detail::os_reason(e));
     }
     if (::rename(tmp_.c_str(), real_.c_str()) != 0) {
       const int e = errno;
       abandon();
-      detail::fail("cannot move the new '" + target_.string() + "' into place: " + detail::os_reason(e));
+      detail::fail(ErrorKind::io, "cannot move the new '" + target_.string() + "' into place: " + detail::os_reason(e));
     }
     tmp_.clear();
     detail::sync_folder(detail::folder_of(real_));
@@ -249,7 +250,7 @@ class AtomicDirectory {
     std::string templ = (parent / ("." + name.string() + ".vmap-XXXXXX")).string();
     if (::mkdtemp(templ.data()) == nullptr) {
       const int e = errno;
-      detail::fail("cannot create output folder '" + target_.string() + "': " + detail::os_reason(e));
+      detail::fail(ErrorKind::io, "cannot create output folder '" + target_.string() + "': " + detail::os_reason(e));
     }
     tmp_ = templ;
     ::chmod(tmp_.c_str(), 0755);  // mkdtemp makes 0700; an output folder is a normal folder
@@ -324,7 +325,7 @@ class AtomicDirectory {
       return;
     }
     const bool empty = std::filesystem::is_empty(target_, ec);
-    if (ec) detail::fail("cannot read output folder '" + target_.string() + "': " + ec.message());
+    if (ec) detail::fail(ErrorKind::io, "cannot read output folder '" + target_.string() + "': " + ec.message());
     if (!empty)
       detail::fail("output folder '" + target_.string() +
                    "' exists and holds files vmap did not write; vmap replaces its output folder as a whole, "
@@ -341,7 +342,7 @@ class AtomicDirectory {
       const std::string name = e.path().filename().string();
       if (name != detail::output_marker && name.find('\n') == std::string::npos) text += name + "\n";
     }
-    if (ec) detail::fail("cannot list the new output folder '" + tmp_.string() + "': " + ec.message());
+    if (ec) detail::fail(ErrorKind::io, "cannot list the new output folder '" + tmp_.string() + "': " + ec.message());
     write_file_atomically(tmp_ / detail::output_marker, text);
   }
 
@@ -369,12 +370,12 @@ class AtomicDirectory {
                      "', which is not one of the files vmap wrote there; vmap replaces its output folder as a "
                      "whole, so move it away or give another folder");
     }
-    if (ec) detail::fail("cannot read output folder '" + target_.string() + "': " + ec.message());
+    if (ec) detail::fail(ErrorKind::io, "cannot read output folder '" + target_.string() + "': " + ec.message());
   }
 
   [[noreturn]] void fail_commit(int e) {
     abandon();
-    detail::fail("cannot move the new output folder '" + target_.string() + "' into place: " + detail::os_reason(e));
+    detail::fail(ErrorKind::io, "cannot move the new output folder '" + target_.string() + "' into place: " + detail::os_reason(e));
   }
 
   void abandon() noexcept {

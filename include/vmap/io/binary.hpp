@@ -170,6 +170,9 @@ class BinaryReader {
 
   /// Throws vmap::Error "<source>: <what> (at byte <offset>)" at the current position.
   [[noreturn]] void corrupt(const std::string& what) const { fail_at(pos_, what); }
+  /// The same message with another kind: a format version newer than the reader's is
+  /// `ErrorKind::unsupported_version`, not damage.
+  [[noreturn]] void fail_here(ErrorKind kind, const std::string& what) const { fail_at(pos_, what, kind); }
 
   [[nodiscard]] std::size_t remaining() const noexcept { return bytes_.size() - pos_; }
   [[nodiscard]] bool at_end() const noexcept { return pos_ == bytes_.size(); }
@@ -180,8 +183,8 @@ class BinaryReader {
   [[nodiscard]] const std::string& source() const noexcept { return source_; }
 
  private:
-  [[noreturn]] void fail_at(std::size_t pos, const std::string& what) const {
-    fail(source_ + ": " + what + " (at byte " + std::to_string(base_ + pos) + ")");
+  [[noreturn]] void fail_at(std::size_t pos, const std::string& what, ErrorKind kind = ErrorKind::corrupt) const {
+    fail(kind, source_ + ": " + what + " (at byte " + std::to_string(base_ + pos) + ")");
   }
 
   void need(std::uint64_t n, std::string_view field) const {

@@ -47,7 +47,8 @@ inline struct stat require_regular_file(const std::filesystem::path& path, const
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) {
     const int e = errno;
-    fail(what + " '" + path.string() + "': " + (e == ENOENT ? std::string("does not exist") : os_reason(e)));
+    fail(e == ENOENT || e == ENOTDIR ? ErrorKind::not_found : ErrorKind::io,
+         what + " '" + path.string() + "': " + (e == ENOENT ? std::string("does not exist") : os_reason(e)));
   }
   if (S_ISDIR(st.st_mode)) fail(what + " '" + path.string() + "' is a folder, expected a file");
   if (!S_ISREG(st.st_mode))
@@ -85,7 +86,7 @@ struct FdGuard {
   detail::FdGuard fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK));
   if (fd.fd < 0) {
     const int e = errno;
-    detail::fail("cannot open " + name + ": " + detail::os_reason(e));
+    detail::fail(ErrorKind::io, "cannot open " + name + ": " + detail::os_reason(e));
   }
   struct stat now {};
   if (::fstat(fd.fd, &now) != 0 || !S_ISREG(now.st_mode)) detail::fail(name + " is not a regular file");
@@ -101,7 +102,7 @@ struct FdGuard {
     if (n < 0 && errno == EINTR) continue;
     if (n < 0) {
       const int e = errno;
-      detail::fail("reading " + name + " failed: " + detail::os_reason(e));
+      detail::fail(ErrorKind::io, "reading " + name + " failed: " + detail::os_reason(e));
     }
     if (n == 0) break;  // shrank while being read: keep what is there
     got += static_cast<std::size_t>(n);
@@ -130,7 +131,7 @@ inline void create_directories(const std::filesystem::path& dir, const std::stri
   const auto st = std::filesystem::status(dir, ec);
   if (std::filesystem::is_directory(st)) {
     if (::access(dir.c_str(), W_OK | X_OK) != 0)
-      detail::fail(what + " '" + dir.string() + "' is not writable: " + detail::os_reason(errno));
+      detail::fail(ErrorKind::io, what + " '" + dir.string() + "' is not writable: " + detail::os_reason(errno));
     return;
   }
   if (std::filesystem::exists(st))
@@ -144,9 +145,9 @@ inline void create_directories(const std::filesystem::path& dir, const std::stri
     break;
   }
   std::filesystem::create_directories(dir, ec);
-  if (ec) detail::fail("cannot create " + what + " '" + dir.string() + "': " + ec.message());
+  if (ec) detail::fail(ErrorKind::io, "cannot create " + what + " '" + dir.string() + "': " + ec.message());
   if (!std::filesystem::is_directory(dir, ec))
-    detail::fail("cannot create " + what + " '" + dir.string() + "'");
+    detail::fail(ErrorKind::io, "cannot create " + what + " '" + dir.string() + "'");
 }
 
 }  // namespace vmap

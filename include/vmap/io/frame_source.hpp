@@ -572,7 +572,7 @@ class FrameSource {
   FrameSource() = default;
 
   [[noreturn]] static void fail_missing(const std::filesystem::path& p) {
-    detail::fail("frame source: '" + p.string() + "' does not exist");
+    detail::fail(ErrorKind::not_found, "frame source: '" + p.string() + "' does not exist");
   }
 
   /// A folder without images; a EuRoC recording (`mav0`, whose cameras are `cam0`,

@@ -217,7 +217,9 @@ inline cv::Mat try_read_image(const std::filesystem::path& path, const ImageRead
 [[nodiscard]] inline cv::Mat read_image(const std::filesystem::path& path, const ImageReadOptions& options = {}) {
   std::string reason;
   cv::Mat img = detail::try_read_image(path, options, reason);
-  if (img.empty()) detail::fail("image '" + path.string() + "': " + reason);
+  if (img.empty())
+    detail::fail(std::filesystem::exists(path) ? ErrorKind::invalid_argument : ErrorKind::not_found,
+                 "image '" + path.string() + "': " + reason);
   return img;
 }
 

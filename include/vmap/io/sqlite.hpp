@@ -62,6 +62,34 @@ namespace detail {
   return why;
 }
 
+/// The kind of Error an SQLite result code `rc` is. The library's SQL is fixed, so a
+/// statement that fails on a file that opened is the file's fault (a schema that is not
+/// a memory's, damaged pages): corrupt, as SQLite's "not a database" is.
+[[nodiscard]] inline ErrorKind kind_of(int rc) noexcept {
+  switch (rc & 0xff) {
+    case SQLITE_BUSY:
+    case SQLITE_LOCKED: return ErrorKind::busy;
+    case SQLITE_ERROR:
+    case SQLITE_CORRUPT:
+    case SQLITE_NOTADB:
+    case SQLITE_SCHEMA:
+    case SQLITE_FORMAT:
+    case SQLITE_MISMATCH: return ErrorKind::corrupt;
+    case SQLITE_IOERR:
+    case SQLITE_FULL:
+    case SQLITE_CANTOPEN:
+    case SQLITE_READONLY:
+    case SQLITE_PERM:
+    case SQLITE_NOLFS:
+    case SQLITE_NOMEM: return ErrorKind::io;
+    default: return ErrorKind::invalid_argument;
+  }
+}
+/// The kind of the last error on `db`.
+[[nodiscard]] inline ErrorKind kind_of(sqlite3* db) noexcept {
+  return db ? kind_of(sqlite3_extended_errcode(db)) : ErrorKind::invalid_argument;
+}
+
 /// `path` as an SQLite URI ("file:" and the path, bytes other than letters, digits and
 /// "/._-~" escaped as %HH), for the query parameters a plain file name cannot carry.
 [[nodiscard]] inline std::string uri_of(const std::filesystem::path& path, std::string_view query) {
@@ -106,7 +134,11 @@ class WriterLock {
     // of the file the path names.
     for (int attempt = 0; attempt < 8; ++attempt) {
       fd_ = ::open(path.c_str(), O_RDWR | O_CLOEXEC | O_NONBLOCK | (create ? O_CREAT | O_EXCL : 0), 0644);
-      if (fd_ < 0) vmap::detail::fail(what + " cannot be opened for writing: " + std::strerror(errno));
+      if (fd_ < 0) {
+        const int err = errno;
+        vmap::detail::fail(err == ENOENT ? ErrorKind::not_found : ErrorKind::io,
+                           what + " cannot be opened for writing: " + std::strerror(err));
+      }
       struct stat st{};
       if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode)) {
         release();
@@ -116,15 +148,15 @@ class WriterLock {
         const int err = errno;
         release();
         if (err == EWOULDBLOCK)
-          vmap::detail::fail(what + " is being written by another program (one writer at a time; open it read-only to "
+          vmap::detail::fail(ErrorKind::busy, what + " is being written by another program (one writer at a time; open it read-only to "
                                     "localize while it maps)");
-        vmap::detail::fail(what + " cannot be locked: " + std::strerror(err));
+        vmap::detail::fail(ErrorKind::io, what + " cannot be locked: " + std::strerror(err));
       }
       struct stat now{};
       if (create || (::stat(path.c_str(), &now) == 0 && now.st_dev == st.st_dev && now.st_ino == st.st_ino)) return;
       release();
     }
-    vmap::detail::fail(what + " cannot be locked: it was replaced again and again while being opened");
+    vmap::detail::fail(ErrorKind::busy, what + " cannot be locked: it was replaced again and again while being opened");
   }
   WriterLock(WriterLock&& o) noexcept : fd_(std::exchange(o.fd_, -1)) {}
   WriterLock& operator=(WriterLock&& o) noexcept {
@@ -161,18 +193,19 @@ inline void checkpoint_locked(const std::filesystem::path& path, const std::stri
     ~Close() { sqlite3_close_v2(db); }
   } close{db};
   if (rc != SQLITE_OK)
-    vmap::detail::fail(what + " cannot be opened: " + (db ? sqlite3_errmsg(db) : sqlite3_errstr(rc)));
+    vmap::detail::fail(detail::kind_of(rc), what + " cannot be opened: " + (db ? sqlite3_errmsg(db) : sqlite3_errstr(rc)));
   sqlite3_busy_timeout(db, 5000);
   sqlite3_stmt* s = nullptr;
   if (sqlite3_prepare_v2(db, "PRAGMA wal_checkpoint(TRUNCATE)", -1, &s, nullptr) != SQLITE_OK)
-    vmap::detail::fail(what + " checkpoint its write-ahead log: " + sqlite3_errmsg(db));
+    vmap::detail::fail(detail::kind_of(db), what + " checkpoint its write-ahead log: " + sqlite3_errmsg(db));
   const int step = sqlite3_step(s);
   const bool busy = step == SQLITE_ROW && sqlite3_column_int(s, 0) != 0;
   const std::string why = step == SQLITE_ROW ? std::string() : sqlite3_errmsg(db);
+  const ErrorKind kind = detail::kind_of(db);
   sqlite3_finalize(s);
-  if (step != SQLITE_ROW) vmap::detail::fail(what + " checkpoint its write-ahead log: " + why);
+  if (step != SQLITE_ROW) vmap::detail::fail(kind, what + " checkpoint its write-ahead log: " + why);
   if (busy)
-    vmap::detail::fail(what + " checkpoint its write-ahead log: a reader held an older snapshot for 5 s; try again");
+    vmap::detail::fail(ErrorKind::busy, what + " checkpoint its write-ahead log: a reader held an older snapshot for 5 s; try again");
 }
 
 /// One connection to a database file.
@@ -185,7 +218,7 @@ class Database {
     std::error_code ec;
     const bool exists = std::filesystem::exists(path, ec);
     if (access == Access::create && exists) fail("exists already");
-    if (access != Access::create && !exists) fail("does not exist");
+    if (access != Access::create && !exists) fail("does not exist", ErrorKind::not_found);
     if (exists && !std::filesystem::is_regular_file(path, ec)) fail("is not a regular file");
     if (access != Access::read) lock_ = WriterLock(path, access == Access::create, what_);
     int flags = access == Access::read ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE;
@@ -200,7 +233,8 @@ class Database {
       const auto shm = std::filesystem::path(name + "-shm");
       if (std::filesystem::exists(wal, e) && std::filesystem::file_size(wal, e) > 0 && !e)
         fail("has a write-ahead log '" + wal.string() + "' to apply, but its folder cannot be written: copy the " +
-             "file and its -wal file into a folder that can, and read the copy");
+                 "file and its -wal file into a folder that can, and read the copy",
+             ErrorKind::io);
       if (!std::filesystem::exists(shm, e)) {
         name = detail::uri_of(path, "immutable=1");
         flags |= SQLITE_OPEN_URI;
@@ -212,7 +246,7 @@ class Database {
     if (rc != SQLITE_OK) {
       const std::string why = db ? detail::message_of(db) : sqlite3_errstr(rc);
       close();
-      fail("cannot be opened: " + why);
+      fail("cannot be opened: " + why, detail::kind_of(rc));
     }
     sqlite3_extended_result_codes(db_, 1);
     // A reader waits up to 5 s for a writer's checkpoint instead of failing at once.
@@ -251,7 +285,7 @@ class Database {
                               : message                                               ? message
                                                                                       : sqlite3_errstr(rc);
       sqlite3_free(message);
-      fail(std::string(doing) + ": " + why);
+      fail(std::string(doing) + ": " + why, detail::kind_of(sqlite3_extended_errcode(db_)));
     }
   }
 
@@ -260,11 +294,13 @@ class Database {
 
   /// An Error "<what> <doing>: <SQLite's message>".
   [[noreturn]] void fail_sqlite(std::string_view doing) const {
-    fail(std::string(doing) + ": " + detail::message_of(db_));
+    fail(std::string(doing) + ": " + detail::message_of(db_), detail::kind_of(db_));
   }
 
   /// An Error "<what> <message>".
-  [[noreturn]] void fail(const std::string& message) const { vmap::detail::fail(what_ + " " + message); }
+  [[noreturn]] void fail(const std::string& message, ErrorKind kind = ErrorKind::invalid_argument) const {
+    vmap::detail::fail(kind, what_ + " " + message);
+  }
 
  private:
   /// Whether this process may create files in `path`'s folder (a read-only mount, or a
@@ -378,14 +414,16 @@ class Statement {
     if (rc != SQLITE_OK) fail_sqlite();
     return *this;
   }
-  [[noreturn]] void fail_sqlite() const { fail(detail::message_of(db_)); }
-  [[noreturn]] void fail(const std::string& message) const { vmap::detail::fail(what_ + " " + doing_ + ": " + message); }
+  [[noreturn]] void fail_sqlite() const { fail(detail::message_of(db_), detail::kind_of(db_)); }
+  [[noreturn]] void fail(const std::string& message, ErrorKind kind = ErrorKind::invalid_argument) const {
+    vmap::detail::fail(kind, what_ + " " + doing_ + ": " + message);
+  }
   void expect(int c, int type, const char* name) const {
     if (sqlite3_column_type(stmt_, c) != type) type_error(c, name);
   }
   [[noreturn]] void type_error(int c, const char* name) const {
     const char* column = sqlite3_column_name(stmt_, c);
-    fail(std::string("column '") + (column ? column : "?") + "' is not " + name);
+    fail(std::string("column '") + (column ? column : "?") + "' is not " + name, ErrorKind::corrupt);
   }
 
   sqlite3* db_ = nullptr;

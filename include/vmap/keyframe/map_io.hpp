@@ -390,8 +390,9 @@ inline VisualMap parse_map(std::string_view file, const std::string& name, const
   if (r.bytes(8, "magic") != std::string_view(map_magic, 8)) r.corrupt("not a vmap map (wrong magic bytes)");
   const std::uint32_t version = r.u32("version");
   if (version != map_format_version)
-    r.corrupt("format version " + std::to_string(version) + " is not supported (this build reads " +
-              std::to_string(map_format_version) + ")");
+    r.fail_here(version > map_format_version ? ErrorKind::unsupported_version : ErrorKind::corrupt,
+                "format version " + std::to_string(version) + " is not supported (this build reads " +
+                    std::to_string(map_format_version) + ")");
   const std::uint64_t size = r.u64("payload size");
   const std::uint32_t crc = r.u32("checksum");
   if (size != r.remaining())

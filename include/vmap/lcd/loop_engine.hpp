@@ -169,7 +169,8 @@ struct PlaceCandidate {
 /// The answer for one query (a frame of the stream, or an image to localize).
 struct PlaceDecision {
   PlaceStatus status = PlaceStatus::too_little_evidence;
-  std::string reason = "no candidates";  ///< why, in words (e.g. "no candidates", "confidence 0.31 < 0.50")
+  DecisionReason reason_code = DecisionReason::no_candidates;  ///< why, as a value a program can act on
+  std::string reason = "no candidates";  ///< why, in words with the numbers (e.g. "confidence 0.31 < 0.50")
   double confidence = 0.0;               ///< of the best place, in [0, 1]
   std::optional<std::size_t> best;       ///< the best place's frame (verified), if any
   PlaceEvidence evidence;                ///< of `best`
@@ -664,9 +665,13 @@ class LoopEngine {
     if (verified.empty()) {
       if (stayed) {
         d.status = PlaceStatus::not_a_revisit;
+        d.reason_code = DecisionReason::camera_stayed;
         d.reason = "the camera never left the candidates' place";
       } else {
         d.status = PlaceStatus::too_little_evidence;
+        d.reason_code = d.candidates == 0 ? DecisionReason::no_candidates
+                        : !any_verified   ? DecisionReason::below_bow_score
+                                          : DecisionReason::not_verified;
         d.reason = d.candidates == 0 ? "no candidates"
                    : !any_verified   ? "every candidate below the bag-of-words score"
                                      : "no candidate verified";
@@ -696,17 +701,21 @@ class LoopEngine {
     }
     if (b.evidence.inliers < dec.min_inliers) {
       d.status = PlaceStatus::too_little_evidence;
+      d.reason_code = DecisionReason::too_few_inliers;
       std::snprintf(buf, sizeof buf, "%d inliers < %d", b.evidence.inliers, dec.min_inliers);
     } else if (b.confidence < need) {
       d.status = PlaceStatus::unknown_place;
+      d.reason_code = DecisionReason::low_confidence;
       std::snprintf(buf, sizeof buf, "confidence %.2f < %.2f", b.confidence, need);
     } else if (d.second && d.second_confidence >= need &&
                d.second_confidence >= dec.ambiguity_ratio * b.confidence) {
       d.status = PlaceStatus::ambiguous;
+      d.reason_code = DecisionReason::two_places;
       std::snprintf(buf, sizeof buf, "frames %zu and %zu: confidence %.2f and %.2f", b.frame, *d.second, b.confidence,
                     d.second_confidence);
     } else {
       d.status = PlaceStatus::accepted;
+      d.reason_code = DecisionReason::confident;
       std::snprintf(buf, sizeof buf, "confidence %.2f >= %.2f", b.confidence, need);
     }
     d.reason = buf;
@@ -722,6 +731,7 @@ class LoopEngine {
     d.consistent_queries = s.consecutive > 0 ? static_cast<std::size_t>(s.consecutive - 1) : 0;
     if (candidate && !s.accepted) {
       d.status = PlaceStatus::too_little_evidence;
+      d.reason_code = DecisionReason::not_yet_confirmed;
       d.reason = "not yet confirmed: " + std::to_string(d.consistent_queries) + " of " +
                  std::to_string(options_.temporal_consistency) + " earlier queries agree";
     }

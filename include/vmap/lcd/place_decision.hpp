@@ -25,6 +25,7 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
+#include <vmap/core/name_table.hpp>
 #include <vmap/core/verification.hpp>
 
 #include <opencv2/core.hpp>
@@ -80,6 +81,52 @@ enum class PlaceStatus : std::uint8_t {
     case PlaceStatus::not_a_revisit: return "not a revisit";
   }
   return "unknown";
+}
+
+/// Why a decision has its status, one value per case, so that a program can act on it
+/// (wait for more frames, move the camera, retrain) without reading the text. The five
+/// "too little evidence" cases of the loop engine and the two of a memory's localization
+/// are told apart here; the decision's `reason` text adds the numbers.
+enum class DecisionReason : std::uint8_t {
+  no_candidates,           ///< too little evidence: the index proposed no candidate
+  below_bow_score,         ///< too little evidence: every candidate below the bag-of-words score
+  not_verified,            ///< too little evidence: candidates ranked, none verified
+  too_few_inliers,         ///< too little evidence: the best model has fewer inliers than min_inliers
+  not_yet_confirmed,       ///< too little evidence: accepted, not yet by enough earlier queries
+  empty_memory,            ///< too little evidence: the memory has no key image
+  no_query_features,       ///< too little evidence: the query image has no features
+  camera_stayed,           ///< not a revisit: the camera never left the candidates' place
+  low_confidence,          ///< unknown place: the best confidence is below min_confidence
+  two_places,              ///< ambiguous: a second place nearly as confident
+  confident,               ///< accepted: the best confidence reaches min_confidence
+};
+
+/// The reasons' names, in words (core/names.hpp: to_string and from_string read them).
+[[nodiscard]] constexpr auto names_of(DecisionReason) noexcept {
+  using R = DecisionReason;
+  return detail::NameTable<DecisionReason, 11>{{{{R::no_candidates, "no candidates"},
+                                                 {R::below_bow_score, "every candidate below the bag-of-words score"},
+                                                 {R::not_verified, "no candidate verified"},
+                                                 {R::too_few_inliers, "too few inliers"},
+                                                 {R::not_yet_confirmed, "not yet confirmed"},
+                                                 {R::empty_memory, "the memory has no key image"},
+                                                 {R::no_query_features, "the query image has no features"},
+                                                 {R::camera_stayed, "the camera never left the candidates' place"},
+                                                 {R::low_confidence, "confidence below the threshold"},
+                                                 {R::two_places, "two places equally likely"},
+                                                 {R::confident, "confidence reaches the threshold"}}}};
+}
+[[nodiscard]] constexpr std::string_view to_string(DecisionReason r) noexcept { return names_of(r).name(r); }
+
+/// The status a reason belongs to.
+[[nodiscard]] constexpr PlaceStatus status_of(DecisionReason r) noexcept {
+  switch (r) {
+    case DecisionReason::camera_stayed: return PlaceStatus::not_a_revisit;
+    case DecisionReason::low_confidence: return PlaceStatus::unknown_place;
+    case DecisionReason::two_places: return PlaceStatus::ambiguous;
+    case DecisionReason::confident: return PlaceStatus::accepted;
+    default: return PlaceStatus::too_little_evidence;
+  }
 }
 
 struct PlaceDecisionOptions {

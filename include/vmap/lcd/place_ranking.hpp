@@ -86,7 +86,7 @@ class BasicPlaceRanker {
     if (f.descriptors.empty()) return {};
     detail::check(f.descriptors.type() == vocabulary_->descriptor_type() &&
                       f.descriptors.cols == vocabulary_->descriptor_cols(),
-                  [&] {
+                  ErrorKind::policy_mismatch, [&] {
                     return "PlaceRanker: descriptors of type " + cv::typeToString(f.descriptors.type()) + " x " +
                            std::to_string(f.descriptors.cols) + " do not fit the vocabulary (" +
                            cv::typeToString(vocabulary_->descriptor_type()) + " x " +

@@ -97,7 +97,7 @@ class MemoryReplacement {
     target_ = std::filesystem::is_symlink(std::filesystem::symlink_status(target, ec))
                   ? std::filesystem::canonical(target, ec)
                   : target;
-    if (ec || !std::filesystem::exists(target_, ec)) detail::fail(who + " does not exist");
+    if (ec || !std::filesystem::exists(target_, ec)) detail::fail(ErrorKind::not_found, who + " does not exist");
     if (!std::filesystem::is_regular_file(target_, ec)) detail::fail(who + " is not a regular file");
     lock_ = sqlite::WriterLock(target_, false, who);
     const MemoryKind kind = memory_kind(target_);

@@ -365,13 +365,17 @@ class MemoryStoreConnection {
         insert(*rows_);
         t.commit();
       } catch (const std::exception& e) {
-        error = std::make_exception_ptr(Error(std::string(e.what()) +
-                                              " (an earlier sync, committed in the store's writer thread: it stored "
-                                              "nothing; the next sync writes its rows again)"));
+        // The kind of what failed (a full disk is io) reaches the caller with the note.
+        const auto* vmap_error = dynamic_cast<const Error*>(&e);
+        error = std::make_exception_ptr(Error(vmap_error ? vmap_error->kind() : ErrorKind::io,
+                                              std::string(e.what()) +
+                                                  " (an earlier sync, committed in the store's writer thread: it "
+                                                  "stored nothing; the next sync writes its rows again)"));
       } catch (...) {
-        error = std::make_exception_ptr(Error(db.what() + " write the memory: an unknown error (an earlier sync, "
-                                              "committed in the store's writer thread: it stored nothing; the next "
-                                              "sync writes its rows again)"));
+        error = std::make_exception_ptr(Error(ErrorKind::io,
+                                              db.what() + " write the memory: an unknown error (an earlier sync, "
+                                                          "committed in the store's writer thread: it stored nothing; "
+                                                          "the next sync writes its rows again)"));
       }
       lock.lock();
       rows_.reset();
@@ -463,7 +467,7 @@ class MemoryStore {
     detail::check(access != sqlite::Access::create, "MemoryStore::open: use MemoryStore::create for a new store");
     std::error_code ec;
     if (std::filesystem::is_regular_file(path, ec) && std::filesystem::file_size(path, ec) == 0 && !ec)
-      detail::fail("memory '" + path.string() + "' is empty: its creation was interrupted before the tables were "
+      detail::fail(ErrorKind::corrupt, "memory '" + path.string() + "' is empty: its creation was interrupted before the tables were "
                    "written (remove it, or create the memory again)");
     MemoryStore s(path, access);
     s.check_schema();
@@ -575,7 +579,7 @@ class MemoryStore {
       if (!q.step()) reader->db.fail("holds no key image " + std::to_string(key));
       const std::string who = reader->db.what() + " key image " + std::to_string(key);
       if (reader->version >= 4 && detail::row_crc(q.blob(0), q.blob(1)) != q.integer(2))
-        detail::fail(who + ": checksum mismatch (the store is corrupt)");
+        detail::fail(ErrorKind::corrupt, who + ": checksum mismatch (the store is corrupt)");
       detail::BinaryReader r(q.blob(0), who);
       MapLoadOptions limits;
       limits.decode_images = false;
@@ -748,11 +752,12 @@ class MemoryStore {
   /// Checks the application id and the version.
   void check_schema() {
     if (pragma("application_id") != memory_store_application_id)
-      db().fail("is not a vmap memory store (an SQLite file without vmap's application id)");
+      db().fail("is not a vmap memory store (an SQLite file without vmap's application id)", ErrorKind::corrupt);
     const std::int64_t version = pragma("user_version");
     if (version < 1 || version > memory_store_version)
       db().fail("has store version " + std::to_string(version) + "; this build reads versions 1 to " +
-                std::to_string(memory_store_version));
+                    std::to_string(memory_store_version),
+                version < 1 ? ErrorKind::corrupt : ErrorKind::unsupported_version);
     version_ = version;
   }
 
@@ -789,7 +794,9 @@ class MemoryStore {
     for (const char* table : {"meta", "notes"}) {
       auto q = db().prepare(std::string("SELECT name FROM ") + table + " GROUP BY name HAVING count(*) > 1 LIMIT 1",
                             "look for repeated rows");
-      if (q.step()) db().fail("is corrupt: its " + std::string(table) + " table holds '" + q.text(0) + "' more than once");
+      if (q.step())
+        db().fail("is corrupt: its " + std::string(table) + " table holds '" + q.text(0) + "' more than once",
+                  ErrorKind::corrupt);
     }
     held_ = {};
     held_.keys = count("SELECT count(*) FROM key_images", "count the key images");
@@ -827,7 +834,7 @@ class MemoryStore {
   void check_same_memory(const VisualMap& map) {
     auto q = db().prepare("SELECT frame_index FROM key_images WHERE id = ?", "read the last key image");
     q.bind(1, static_cast<std::int64_t>(held_.keys - 1));
-    if (!q.step()) db().fail("is corrupt: key image " + std::to_string(held_.keys - 1) + " is missing");
+    if (!q.step()) db().fail("is corrupt: key image " + std::to_string(held_.keys - 1) + " is missing", ErrorKind::corrupt);
     const auto stored = q.integer(0);
     if (stored != static_cast<std::int64_t>(map.keys[held_.keys - 1].frame_index))
       db().fail("holds another memory: its key image " + std::to_string(held_.keys - 1) + " is frame " +
@@ -843,7 +850,7 @@ class MemoryStore {
     if (!q.step()) db().fail(std::string("holds no '") + name + "' state (an empty store, or not synced)");
     std::string value(q.blob(0));
     if (version_ >= 4 && detail::row_crc(value) != q.integer(1))
-      db().fail(std::string("is corrupt: the checksum of its '") + name + "' state does not match");
+      db().fail(std::string("is corrupt: the checksum of its '") + name + "' state does not match", ErrorKind::corrupt);
     return value;
   }
 
@@ -854,12 +861,13 @@ class MemoryStore {
   void expect_index(std::int64_t got, std::size_t want, const char* what) const {
     if (got != static_cast<std::int64_t>(want))
       db().fail("is corrupt: " + std::string(what) + " " + std::to_string(got) + " where " + std::to_string(want) +
-                " was expected");
+                    " was expected",
+                ErrorKind::corrupt);
   }
 
   /// A row whose blobs do not match its checksum (version 4).
   void check_crc(std::int64_t got, std::int64_t want, const std::string& row) const {
-    if (version_ >= 4 && got != want) db().fail("is corrupt: the checksum of " + row + " does not match");
+    if (version_ >= 4 && got != want) db().fail("is corrupt: the checksum of " + row + " does not match", ErrorKind::corrupt);
   }
 
   /// The records of every row (see records()), inside the caller's read transaction.
@@ -930,12 +938,12 @@ class MemoryStore {
         if (q.integer(1) != static_cast<std::int64_t>(key.frame_index) || q.real(2) != key.timestamp ||
             (v4 && q.integer(3) != key.time_ns) || q.text(4) != key.name ||
             (m >= released && q.integer(5) != static_cast<std::int64_t>(key.features.keypoints.size())))
-          db().fail("is corrupt: the columns of " + row + " do not match its record");
+          db().fail("is corrupt: the columns of " + row + " do not match its record", ErrorKind::corrupt);
         detail::BinaryReader det(q.blob(7), db().what() + " " + row + "'s detections");
         k.detections = detail::memory_read_detections(det);
         det.expect_end("the detections");
         if (!q.is_null(9)) {
-          if (r.bows.size() != m) db().fail("is corrupt: " + row + " has a bag of words, an earlier one none");
+          if (r.bows.size() != m) db().fail("is corrupt: " + row + " has a bag of words, an earlier one none", ErrorKind::corrupt);
           check_crc(detail::row_crc(q.blob(9)), q.integer(10), row + "'s bag of words");
           detail::BinaryReader b(q.blob(9), db().what() + " " + row + "'s bag of words");
           auto [id, bow] = PlaceDatabase<std::uint32_t>::read_record(b, r.words, r.options.scoring);
@@ -960,7 +968,7 @@ class MemoryStore {
         KeyPair p = detail::read_key_pair(rec, "verification status");
         rec.expect_end("the link");
         if (q.integer(1) != p.matches || q.integer(2) != p.inliers || q.real(3) != p.similarity)
-          db().fail("is corrupt: the columns of " + row + " do not match its record");
+          db().fail("is corrupt: the columns of " + row + " do not match its record", ErrorKind::corrupt);
         r.links.push_back(p);
       }
     }
@@ -983,7 +991,7 @@ class MemoryStore {
         }
         if (q.integer(1) != e.from || q.integer(2) != e.link.key || q.integer(3) != e.link.inliers ||
             q.real(4) != e.link.confidence)
-          db().fail("is corrupt: the columns of " + row + " do not match its record");
+          db().fail("is corrupt: the columns of " + row + " do not match its record", ErrorKind::corrupt);
         r.loops.push_back(std::move(e));
       }
     }
@@ -1031,7 +1039,7 @@ class MemoryStore {
       auto q = db().prepare("SELECT id, first_key, first_frame FROM sessions ORDER BY id", "read the sessions");
       while (q.step()) {
         expect_index(q.integer(0), r.sessions.size(), "session");
-        if (q.integer(1) < 0 || q.integer(2) < 0) db().fail("is corrupt: session " + std::to_string(r.sessions.size()) + " starts before 0");
+        if (q.integer(1) < 0 || q.integer(2) < 0) db().fail("is corrupt: session " + std::to_string(r.sessions.size()) + " starts before 0", ErrorKind::corrupt);
         r.sessions.push_back({static_cast<std::size_t>(q.integer(1)), static_cast<std::size_t>(q.integer(2))});
       }
     }
@@ -1046,7 +1054,7 @@ class MemoryStore {
         db().fail("is corrupt: it holds " + std::to_string(m) + " key images, " + std::to_string(r.loops.size()) +
                   " loop edges, " + std::to_string(r.bows.size()) + " bags of words and " +
                   std::to_string(r.sessions.size()) + " sessions, its state records " + std::to_string(keys) + ", " +
-                  std::to_string(loops) + ", " + std::to_string(bows) + " and " + std::to_string(sessions));
+                  std::to_string(loops) + ", " + std::to_string(bows) + " and " + std::to_string(sessions), ErrorKind::corrupt);
     }
     return r;
   }
@@ -1062,7 +1070,7 @@ class MemoryStore {
     // The pixels: the old key records' image bytes, spliced into the new records.
     auto q = db().prepare("SELECT record FROM key_images ORDER BY id", "read the key images' pixels");
     for (auto& row : rows.keys) {
-      if (!q.step()) db().fail("is corrupt: a key image went missing");
+      if (!q.step()) db().fail("is corrupt: a key image went missing", ErrorKind::corrupt);
       row.record = with_image_of(row.record, q.blob(0), row.id);
       row.crc = detail::row_crc(row.record, row.detections);
     }

@@ -129,7 +129,8 @@ struct MemoryLocalization {
   /// ambiguous (two places equally likely), too little evidence (an empty memory, a
   /// query without features, no candidate verified).
   PlaceStatus status = PlaceStatus::too_little_evidence;
-  std::string reason = "the memory has no key image";
+  DecisionReason reason_code = DecisionReason::empty_memory;  ///< why, as a value (lcd/place_decision.hpp)
+  std::string reason = "the memory has no key image";         ///< why, in words with the numbers
   double confidence = 0.0;   ///< of the best key image, in [0, 1]
   PlaceEvidence evidence;    ///< of the best key image
   /// Every verified key image, most confident first (matches.front() is the decision's

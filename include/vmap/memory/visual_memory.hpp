@@ -525,7 +525,7 @@ class VisualMemory {
       if (f.descriptors.empty()) return;
       const DescriptorLayout want = selector_.front_end().descriptor().layout();
       if (const DescriptorLayout got = layout_of(f); got != want)
-        detail::fail(name + ": " + what() + " has descriptors of " + to_string(got) + ", the descriptor given to load makes " +
+        detail::fail(ErrorKind::policy_mismatch, name + ": " + what() + " has descriptors of " + to_string(got) + ", the descriptor given to load makes " +
                      to_string(want));
     }
   }

@@ -165,8 +165,9 @@ namespace vmap::detail {
   MemoryRecords m;
   const std::uint32_t version = file.u32("version");
   if (version < 1 || version > memory_format_version)
-    file.corrupt("header: format version " + std::to_string(version) + " is not supported (this build reads 1 to " +
-                 std::to_string(memory_format_version) + ")");
+    file.fail_here(version < 1 ? ErrorKind::corrupt : ErrorKind::unsupported_version,
+                   "header: format version " + std::to_string(version) + " is not supported (this build reads 1 to " +
+                       std::to_string(memory_format_version) + ")");
   m.version = version;
   const std::uint32_t sections = version == 1   ? memory_sections_v1
                                  : version == 2 ? memory_sections_v2

@@ -82,7 +82,7 @@ struct ForeignTree {
 };
 
 [[noreturn]] inline void bad_vocabulary(const std::string& source, const std::string& what) {
-  fail(source + ": " + what);
+  fail(ErrorKind::corrupt, source + ": " + what);
 }
 
 /// Breadth-first from the root: each node visited once (a node reached twice or never
@@ -686,7 +686,7 @@ inline VocabularyFormat sniff_vocabulary_format(std::string_view head, const std
   std::size_t p = 0;
   long a = 0;
   if (detail::next_int(head, p, a)) return VocabularyFormat::orbslam_text;
-  detail::fail("'" + path.string() + "' is not a vocabulary file vmap knows (vmap, ORB-SLAM2/3 ORBvoc.txt, DBoW2 YAML "
+  detail::fail(ErrorKind::corrupt, "'" + path.string() + "' is not a vocabulary file vmap knows (vmap, ORB-SLAM2/3 ORBvoc.txt, DBoW2 YAML "
                                      "(.yml, .yml.gz) or FBoW binary)");
 }
 
@@ -699,7 +699,7 @@ inline BinaryVocabularyTree import_binary_vocabulary(const std::filesystem::path
     detail::fail("'" + path.string() + "' is " + std::to_string(size) + " bytes, larger than a vocabulary file can be (" +
                  std::to_string(max_vocabulary_file_bytes) + ")");
   std::string head(static_cast<std::size_t>(std::min<std::uintmax_t>(size, 4096)), '\0');
-  if (!in.read(head.data(), static_cast<std::streamsize>(head.size()))) detail::fail("reading '" + path.string() + "' failed");
+  if (!in.read(head.data(), static_cast<std::streamsize>(head.size()))) detail::fail(ErrorKind::io, "reading '" + path.string() + "' failed");
   in.close();
   switch (sniff_vocabulary_format(head, path)) {
     case VocabularyFormat::vmap:

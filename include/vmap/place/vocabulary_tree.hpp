@@ -659,7 +659,7 @@ class VocabularyTree {
       return m;
     });
     if (d.empty()) return;
-    detail::check(d.type() == Traits::descriptor_type && d.cols == cols_, [&] {
+    detail::check(d.type() == Traits::descriptor_type && d.cols == cols_, ErrorKind::policy_mismatch, [&] {
       std::string m = "VocabularyTree::";
       m += what;
       m += ": descriptors must be ";

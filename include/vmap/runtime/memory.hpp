@@ -169,7 +169,7 @@ class MemoryModel final : public MemoryConcept {
   GcsTrainStats train_gcs(const MemoryGcsOptions& options) override { return memory_.train_gcs(options); }
   void merge(MemoryConcept& other, const std::string& name, const std::string& other_name) override {
     auto* same = dynamic_cast<MemoryModel*>(&other);
-    if (!same) fail("cannot merge " + other_name + " into " + name + ": they were made with other policies");
+    if (!same) fail(ErrorKind::policy_mismatch, "cannot merge " + other_name + " into " + name + ": they were made with other policies");
     memory_.merge(std::move(same->memory_), name, other_name);
   }
   void sync() override {
@@ -430,7 +430,7 @@ class AnyMemory {
   void merge(AnyMemory&& other, const std::string& name, const std::string& other_name) {
     writable("merge");
     if (!(other.stack_ == stack_))
-      detail::fail("cannot merge " + other_name + " (" + summary(other.stack_) + ") into " + name + " (" + summary(stack_) +
+      detail::fail(ErrorKind::policy_mismatch, "cannot merge " + other_name + " (" + summary(other.stack_) + ") into " + name + " (" + summary(stack_) +
                    "): they were built with different policies");
     impl_->merge(*other.impl_, name, other_name);
     other.closed_ = true;
@@ -553,11 +553,11 @@ class AnyMemory {
 
   static void check_input(const std::filesystem::path& path) {
     std::error_code ec;
-    if (!std::filesystem::exists(path, ec)) detail::fail("memory '" + path.string() + "' does not exist");
+    if (!std::filesystem::exists(path, ec)) detail::fail(ErrorKind::not_found, "memory '" + path.string() + "' does not exist");
     if (!std::filesystem::is_regular_file(path, ec))
       detail::fail("memory '" + path.string() + "' is not a regular file (a folder, a device or a FIFO)");
     if (memory_kind(path) == MemoryKind::other)
-      detail::fail("'" + path.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file)");
+      detail::fail(ErrorKind::corrupt, "'" + path.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file)");
   }
 
   /// `s` checked, its model files named by absolute paths: the memory records the stack,

@@ -276,8 +276,9 @@ inline PolicyStack PolicyStack::from_string(std::string_view text) {
 /// memory whose descriptor record is empty has no stack here (stack_of_legacy_note).
 [[nodiscard]] inline PolicyStack stack_of_policies(const std::array<std::string, 4>& records, const std::string& who) {
   const auto refuse = [&](const std::string& why) -> PolicyStack {
-    detail::fail(who + ": its policies are not one of vmap's stacks (" + why + "; descriptor '" + records[0] +
-                 "', estimator '" + records[2] + "'); load it with VisualMemory and the policies it was built with");
+    detail::fail(ErrorKind::policy_mismatch,
+                 who + ": its policies are not one of vmap's stacks (" + why + "; descriptor '" + records[0] +
+                     "', estimator '" + records[2] + "'); load it with VisualMemory and the policies it was built with");
   };
   const auto descriptor = detail::read_description(records[0]);
   if (!descriptor) return refuse("an unreadable descriptor record");

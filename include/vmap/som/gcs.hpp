@@ -342,8 +342,9 @@ class GrowingCellStructures {
     if (in.bytes(magic().size(), "the magic") != magic()) in.corrupt("not a vmap GCS file (bad magic)");
     const auto version = in.u32("the version");
     if (version != file_version)
-      in.corrupt("unsupported GCS file version " + std::to_string(version) + " (this build reads " +
-                 std::to_string(file_version) + ")");
+      in.fail_here(version > file_version ? ErrorKind::unsupported_version : ErrorKind::corrupt,
+                   "unsupported GCS file version " + std::to_string(version) + " (this build reads " +
+                       std::to_string(file_version) + ")");
     if (in.u32("the byte-order tag") != endian_tag)
       in.corrupt("bad byte-order tag (corrupt, or written in another byte order)");
     const auto scalar = in.u32("the scalar size");
@@ -418,7 +419,7 @@ class GrowingCellStructures {
     try {
       g.check_topology();
     } catch (const Error& e) {
-      detail::fail(what + ": corrupt (" + e.what() + ")");
+      detail::fail(ErrorKind::corrupt, what + ": corrupt (" + e.what() + ")");
     }
     return g;
   }

@@ -75,7 +75,7 @@ TEST_CASE("loop detector: two laps with a scripted detector find exactly the kno
     brute_verifications += b.verifications;
     if (k <= 3) {  // nothing outside the window yet
       CHECK(r.status == PlaceStatus::too_little_evidence);
-      CHECK(r.reason == "no candidates");
+      CHECK(r.reason_code == vmap::DecisionReason::no_candidates);
       CHECK(r.candidates == 0);
       continue;
     }
@@ -115,7 +115,7 @@ TEST_CASE("loop detector: tree_ranked and bow verify only the top k, and say whe
     CAPTURE(k);
     if (k <= 3) {
       CHECK(t.status == PlaceStatus::too_little_evidence);
-      CHECK(w.reason == "no candidates");
+      CHECK(w.reason_code == vmap::DecisionReason::no_candidates);
       CHECK(w.verifications == 0);
       continue;
     }
@@ -159,7 +159,7 @@ TEST_CASE("loop detector: a minimum bag-of-words score stops candidates before v
     if (k < places) {
       // Every older frame is another place (score 0.1): nothing is verified.
       CHECK(r.status == PlaceStatus::too_little_evidence);
-      CHECK(r.reason == "every candidate below the bag-of-words score");
+      CHECK(r.reason_code == vmap::DecisionReason::below_bow_score);
       CHECK(r.verifications == 0);
       CHECK(r.below_bow_score == std::min<std::size_t>(2, r.candidates));
       for (const auto& c : r.considered) CHECK(c.stage == vmap::CandidateStage::below_bow_score);
@@ -191,7 +191,7 @@ TEST_CASE("loop detector: temporal consistency holds a loop until k earlier fram
     // than two consistent predecessors.
     CHECK(r.consistent_queries == static_cast<std::size_t>(k - places));
     CHECK(r.status == (k - places >= 2 ? PlaceStatus::accepted : PlaceStatus::too_little_evidence));
-    if (k - places < 2) CHECK(r.reason.rfind("not yet confirmed", 0) == 0);
+    if (k - places < 2) CHECK(r.reason_code == vmap::DecisionReason::not_yet_confirmed);
   }
 }
 

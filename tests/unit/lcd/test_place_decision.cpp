@@ -182,7 +182,8 @@ TEST_CASE("revisit rule: a camera that stays is no loop and is reported stationa
       CHECK_FALSE(d.accepted());
       if (k > 3) {
         CHECK(d.status == PlaceStatus::not_a_revisit);
-        CHECK(d.reason == "the camera never left the candidates' place");
+        CHECK(d.reason_code == vmap::DecisionReason::camera_stayed);
+        CHECK(d.reason == to_string(d.reason_code));
         for (const auto& c : d.considered)
           CHECK((c.stage == vmap::CandidateStage::not_a_revisit || c.stage == vmap::CandidateStage::verification_failed));
       }
@@ -207,6 +208,7 @@ TEST_CASE("revisit rule: a camera that stays is no loop and is reported stationa
       CHECK(d.status == PlaceStatus::accepted);
       REQUIRE(d.best.has_value());
       CHECK(*d.best == k - 8);
+      CHECK(d.reason_code == vmap::DecisionReason::confident);
       CHECK(d.reason.rfind("confidence", 0) == 0);
     }
     CHECK_FALSE(e.stationary());
@@ -227,22 +229,26 @@ TEST_CASE("place decision: each rejection says why") {
   };
   const vmap::LoopOptions base{.window = 3, .index = vmap::CandidateIndex::bow};
   // No candidates: the first frames.
+  CHECK(run(base)[0].reason_code == vmap::DecisionReason::no_candidates);
   CHECK(run(base)[0].reason == "no candidates");
   // Below the bag-of-words score.
   auto floor = base;
   floor.min_bow_score = 2.0;
+  CHECK(run(floor)[9].reason_code == vmap::DecisionReason::below_bow_score);
   CHECK(run(floor)[9].reason == "every candidate below the bag-of-words score");
   // Too few inliers for the floor.
   auto strict = base;
   strict.decision.min_inliers = 100000;
   const auto few = run(strict)[9];
   CHECK(few.status == PlaceStatus::too_little_evidence);
+  CHECK(few.reason_code == vmap::DecisionReason::too_few_inliers);
   CHECK(few.reason.find(" inliers < 100000") != std::string::npos);
   // Not confident enough: an unknown place, with its confidence.
   auto high = base;
   high.decision.min_confidence = 1.0;
   const auto unknown = run(high)[9];
   CHECK(unknown.status == PlaceStatus::unknown_place);
+  CHECK(unknown.reason_code == vmap::DecisionReason::low_confidence);
   CHECK(unknown.reason.find("< 1.00") != std::string::npos);
   CHECK(unknown.confidence > 0.5);
   // Two places that do not look alike, both verified and equally confident: ambiguous.
@@ -261,6 +267,7 @@ TEST_CASE("place decision: each rejection says why") {
   vmap::PlaceDecision last;
   for (const auto& f : twins) last = a.add(f, {}, twin_lookup);
   CHECK(last.status == PlaceStatus::ambiguous);
+  CHECK(last.reason_code == vmap::DecisionReason::two_places);
   REQUIRE(last.second.has_value());
   CHECK(((*last.best == 0 && *last.second == 5) || (*last.best == 5 && *last.second == 0)));
   CHECK(last.reason.find("frames") == 0);
@@ -269,8 +276,25 @@ TEST_CASE("place decision: each rejection says why") {
   held.temporal_consistency = 1;
   const auto t = run(held);
   CHECK(t[8].status == PlaceStatus::too_little_evidence);
+  CHECK(t[8].reason_code == vmap::DecisionReason::not_yet_confirmed);
   CHECK(t[8].reason == "not yet confirmed: 0 of 1 earlier queries agree");
   CHECK(t[9].status == PlaceStatus::accepted);
+}
+
+TEST_CASE("place decision: every reason has a name, read back, and belongs to one status") {
+  using R = vmap::DecisionReason;
+  for (R r : {R::no_candidates, R::below_bow_score, R::not_verified, R::too_few_inliers, R::not_yet_confirmed,
+              R::empty_memory, R::no_query_features, R::camera_stayed, R::low_confidence, R::two_places,
+              R::confident}) {
+    CAPTURE(to_string(r));
+    CHECK(to_string(r) != "unknown");
+    CHECK(vmap::from_string<R>(to_string(r)) == r);
+  }
+  CHECK(vmap::status_of(R::not_verified) == PlaceStatus::too_little_evidence);
+  CHECK(vmap::status_of(R::camera_stayed) == PlaceStatus::not_a_revisit);
+  CHECK(vmap::status_of(R::low_confidence) == PlaceStatus::unknown_place);
+  CHECK(vmap::status_of(R::two_places) == PlaceStatus::ambiguous);
+  CHECK(vmap::status_of(R::confident) == PlaceStatus::accepted);
 }
 
 TEST_CASE("loop engine: LoopDetector and VisualMemory find the same loops over the same key images") {

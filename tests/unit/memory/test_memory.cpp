@@ -177,16 +177,19 @@ TEST_CASE("memory: localize answers the key image a held-out frame shows, with t
   CHECK(refused.best() == nullptr);
   CHECK(refused.confidence < 0.5);
   CHECK(refused.evidence.inliers == self.evidence.inliers);
+  CHECK(refused.reason_code == vmap::DecisionReason::low_confidence);
   CHECK(refused.reason.find("< 0.50") != std::string::npos);
   // A blank image has no features: a value, not an error; an empty one is an error.
   const auto blank = mem.localize(cv::Mat(480, 640, CV_8UC1, cv::Scalar(128)));
   CHECK(blank.status == vmap::PlaceStatus::too_little_evidence);
+  CHECK(blank.reason_code == vmap::DecisionReason::no_query_features);
   CHECK(blank.reason == "the query image has no features");
   CHECK_THROWS_AS((void)mem.localize(cv::Mat()), vmap::Error);
   // An empty memory answers so.
   auto empty = make_small_memory(small_memory_options());
   const auto none = empty.localize(all[0].image);
   CHECK(none.status == vmap::PlaceStatus::too_little_evidence);
+  CHECK(none.reason_code == vmap::DecisionReason::empty_memory);
   CHECK(none.reason == "the memory has no key image");
 }
 

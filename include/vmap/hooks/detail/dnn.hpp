@@ -40,7 +40,7 @@ inline std::string read_model_file(const std::filesystem::path& model, std::stri
   try {
     return read_file(model, max_model_file_bytes, "model file");
   } catch (const Error& e) {
-    fail(std::string(who) + ": " + e.what());
+    fail(e.kind(), std::string(who) + ": " + e.what());
   }
 }
 

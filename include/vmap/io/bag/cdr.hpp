@@ -65,7 +65,7 @@ class MessageReader {
     if (n > b_.size() - pos_) fail_short(n);
   }
   [[noreturn]] void fail_short(std::size_t n) const {
-    fail(what_ + ": the message ends at byte " + std::to_string(b_.size()) + ", a field at byte " +
+    fail(ErrorKind::corrupt, what_ + ": the message ends at byte " + std::to_string(b_.size()) + ", a field at byte " +
          std::to_string(pos_) + " needs " + std::to_string(n) + " more");
   }
   static double f64_of(std::uint64_t bits) {
@@ -90,7 +90,7 @@ class CdrReader : public MessageReader<CdrReader> {
     if (b_.size() < 4) fail_short(4);
     const auto id = static_cast<unsigned char>(b_[1]);
     if (b_[0] != 0 || (id != 0x00 && id != 0x01 && id != 0x06 && id != 0x07))
-      fail(what_ + ": unknown CDR encapsulation " + hex(b_[0]) + " " + hex(b_[1]) +
+      fail(ErrorKind::corrupt, what_ + ": unknown CDR encapsulation " + hex(b_[0]) + " " + hex(b_[1]) +
            " (vmap reads plain CDR and XCDR2, little- or big-endian)");
     little_ = (id & 1) != 0;
     max_align_ = id >= 0x06 ? 4 : 8;

@@ -135,11 +135,11 @@ class Ros1Bag final : public MessageStream {
     char magic[13];
     if (file_.size() < ros1_bag_magic.size() || !file_.read(0, magic, sizeof magic) ||
         std::string_view(magic, sizeof magic) != ros1_bag_magic)
-      fail(what + " is not a ROS 1 bag of format 2.0: it does not start with \"#ROSBAG V2.0\"");
+      fail(ErrorKind::corrupt, what + " is not a ROS 1 bag of format 2.0: it does not start with \"#ROSBAG V2.0\"");
     Record bag_header;
     std::string why;
     if (!read_record(ros1_bag_magic.size(), bag_header, why) || bag_header.head.op != 0x03)
-      fail(what + ": no bag header record at byte 13" + (why.empty() ? std::string() : ": " + why));
+      fail(ErrorKind::corrupt, what + ": no bag header record at byte 13" + (why.empty() ? std::string() : ": " + why));
     data_start_ = bag_header.end;
     data_end_ = file_.size();
     const std::uint64_t index_pos = bag_header.head.index_pos.value_or(0);

@@ -268,17 +268,17 @@ inline BinaryReader memory_open_section(BinaryReader& file, const char (&tag)[5]
   const std::string name = file.source() + " section '" + std::string(tag, 4) + "'";
   const std::size_t at = file.offset();
   if (file.remaining() < 16)
-    fail(name + ": truncated (the file ends at byte " + std::to_string(at + file.remaining()) + " inside its header)");
+    fail(ErrorKind::corrupt, name + ": truncated (the file ends at byte " + std::to_string(at + file.remaining()) + " inside its header)");
   if (file.bytes(4, "section tag") != std::string_view(tag, 4))
-    fail(name + ": missing (another tag at byte " + std::to_string(at) + ")");
+    fail(ErrorKind::corrupt, name + ": missing (another tag at byte " + std::to_string(at) + ")");
   const std::uint64_t len = file.u64("section length");
   const std::uint32_t crc = file.u32("section checksum");
   if (len > file.remaining())
-    fail(name + ": truncated (" + std::to_string(len) + " bytes announced, " + std::to_string(file.remaining()) +
+    fail(ErrorKind::corrupt, name + ": truncated (" + std::to_string(len) + " bytes announced, " + std::to_string(file.remaining()) +
          " left)");
   const std::size_t base = file.offset();
   const std::string_view bytes = file.bytes(len, "section");
-  if (crc32(bytes) != crc) fail(name + ": checksum mismatch (the file is corrupt)");
+  if (crc32(bytes) != crc) fail(ErrorKind::corrupt, name + ": checksum mismatch (the file is corrupt)");
   return BinaryReader(bytes, name, base);
 }
 

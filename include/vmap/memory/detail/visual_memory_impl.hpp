@@ -63,7 +63,7 @@ MemoryRecords VisualMemory<D, M, E, S>::records(const RecordsHeld& held, bool co
 template <Descriptor D, Matcher M, Estimator E, Similarity S>
 VisualMemory<D, M, E, S> VisualMemory<D, M, E, S>::from_records(MemoryRecords r, const std::string& name, D descriptor,
                                                                   M matcher, E estimator, S similarity, bool pixels_unread) {
-    const auto bad = [&](const std::string& what) { detail::fail(name + ": " + what); };
+    const auto bad = [&](const std::string& what) { detail::fail(ErrorKind::corrupt, name + ": " + what); };
     if (r.first_key != 0 || r.first_loop != 0 || r.first_bow != 0 || r.first_session != 0 || !r.vocabulary || !r.gcs_written)
       bad("the records are not a whole memory");
     std::optional<VisualMemory> built;
@@ -163,15 +163,17 @@ VisualMemory<D, M, E, S> VisualMemory<D, M, E, S>::from_records(MemoryRecords r,
 
 template <Descriptor D, Matcher M, Estimator E, Similarity S>
 void VisualMemory<D, M, E, S>::merge(VisualMemory&& other, const std::string& name, const std::string& other_name) {
-    const auto refuse = [&](const std::string& why) {
-      detail::fail("cannot merge " + other_name + " into " + name + ": " + why);
+    const auto refuse = [&](const std::string& why, ErrorKind kind = ErrorKind::invalid_argument) {
+      detail::fail(kind, "cannot merge " + other_name + " into " + name + ": " + why);
     };
     if (other.frames() == 0) return;
     if (policies_ != other.policies_)
-      refuse("they were made with other policies (" + policies_[0] + " against " + other.policies_[0] + ", ...)");
+      refuse("they were made with other policies (" + policies_[0] + " against " + other.policies_[0] + ", ...)",
+             ErrorKind::policy_mismatch);
     if (options_record() != other.options_record())
       refuse("they were made with other options (threshold, key images' storage, vocabulary, loop, label or decision "
-             "options)");
+             "options)",
+             ErrorKind::policy_mismatch);
     if (frames() > 0 && labels_.labelled != other.labels_.labelled)
       refuse(std::string("the frames of ") + (labels_.labelled ? name : other_name) +
              " came with detections, the other's without");
@@ -223,6 +225,7 @@ MemoryLocalization VisualMemory<D, M, E, S>::localize(const cv::Mat& image, cons
     if (map.keys.empty()) return out;
     const Features q = selector_.front_end().descriptor().extract(image);
     if (q.empty()) {
+      out.reason_code = DecisionReason::no_query_features;
       out.reason = "the query image has no features";
       return out;
     }
@@ -238,6 +241,7 @@ MemoryLocalization VisualMemory<D, M, E, S>::localize(const cv::Mat& image, cons
       d = all.localize(q, options_.localize_candidates, lookup, map.keys.size(), decision);
     }
     out.status = d.status;
+    out.reason_code = d.reason_code;
     out.reason = d.reason;
     out.confidence = d.confidence;
     out.evidence = d.evidence;
@@ -416,7 +420,7 @@ void VisualMemory<D, M, E, S>::check_policies(const std::array<std::string, 4>& 
     static constexpr const char* roles[4] = {"descriptor", "matcher", "estimator", "similarity"};
     for (std::size_t i = 0; i < 4; ++i)
       if (!recorded[i].empty() && recorded[i] != policies_[i])
-        detail::fail(name + ": the " + roles[i] + " given to load (" +
+        detail::fail(ErrorKind::policy_mismatch, name + ": the " + roles[i] + " given to load (" +
                      (policies_[i].empty() ? std::string("not recorded") : policies_[i]) +
                      ") is not the one the memory was built with (" + recorded[i] + ")");
   }

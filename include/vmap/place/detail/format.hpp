@@ -56,8 +56,9 @@ inline BinaryReader open_payload(std::string_view file, std::string_view magic, 
   if (r.bytes(8, "magic") != magic) r.corrupt("not a vmap " + what + " (wrong magic bytes)");
   const std::uint32_t v = r.u32("version");
   if (v != version)
-    r.corrupt("format version " + std::to_string(v) + " is not supported (this build reads " + std::to_string(version) +
-              ")");
+    r.fail_here(v > version ? ErrorKind::unsupported_version : ErrorKind::corrupt,
+                "format version " + std::to_string(v) + " is not supported (this build reads " +
+                    std::to_string(version) + ")");
   const std::uint64_t size = r.u64("payload size");
   const std::uint32_t crc = r.u32("checksum");
   if (size != r.remaining())
@@ -71,12 +72,12 @@ inline BinaryReader open_payload(std::string_view file, std::string_view magic, 
 /// iteration); a missing or unreadable file is an Error naming it.
 inline std::string read_whole_file(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) fail("cannot open '" + path.string() + "'");
+  if (!in) fail(std::filesystem::exists(path) ? ErrorKind::io : ErrorKind::not_found, "cannot open '" + path.string() + "'");
   const std::streamoff size = in.tellg();
-  if (size < 0) fail("cannot read the size of '" + path.string() + "'");
+  if (size < 0) fail(ErrorKind::io, "cannot read the size of '" + path.string() + "'");
   std::string data(static_cast<std::size_t>(size), '\0');
   in.seekg(0);
-  if (!in.read(data.data(), static_cast<std::streamsize>(size))) fail("reading '" + path.string() + "' failed");
+  if (!in.read(data.data(), static_cast<std::streamsize>(size))) fail(ErrorKind::io, "reading '" + path.string() + "' failed");
   return data;
 }
 
@@ -98,10 +99,10 @@ inline void f32_from_little_endian(float* p, std::size_t n) noexcept {
 inline std::ifstream open_regular_file(const std::filesystem::path& path) {
   std::error_code ec;
   const auto status = std::filesystem::status(path, ec);
-  if (ec || !std::filesystem::exists(status)) fail("cannot open '" + path.string() + "': no such file");
+  if (ec || !std::filesystem::exists(status)) fail(ErrorKind::not_found, "cannot open '" + path.string() + "': no such file");
   if (!std::filesystem::is_regular_file(status)) fail("'" + path.string() + "' is not a regular file");
   std::ifstream in(path, std::ios::binary);
-  if (!in) fail("cannot open '" + path.string() + "'");
+  if (!in) fail(ErrorKind::io, "cannot open '" + path.string() + "'");
   return in;
 }
 
@@ -201,8 +202,9 @@ inline PayloadHeader parse_header(std::string_view head, std::uint64_t available
   PayloadHeader h;
   h.version = r.u32("version");
   if (h.version < oldest || h.version > newest)
-    r.corrupt("format version " + std::to_string(h.version) + " is not supported (this build reads " +
-              std::to_string(oldest) + ".." + std::to_string(newest) + ")");
+    r.fail_here(h.version > newest ? ErrorKind::unsupported_version : ErrorKind::corrupt,
+                "format version " + std::to_string(h.version) + " is not supported (this build reads " +
+                    std::to_string(oldest) + ".." + std::to_string(newest) + ")");
   h.size = r.u64("payload size");
   h.checksum = r.u32("checksum");
   if (h.size != available)

@@ -44,7 +44,7 @@ class BagFile {
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
     if (fd_ < 0) {
       const int e = errno;
-      fail("cannot open " + what_ + ": " + os_reason(e));
+      fail(e == ENOENT ? ErrorKind::not_found : ErrorKind::io, "cannot open " + what_ + ": " + os_reason(e));
     }
     struct stat st {};
     if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode)) {
@@ -81,7 +81,7 @@ class BagFile {
       if (r < 0 && errno == EINTR) continue;
       if (r < 0) {
         const int e = errno;
-        fail("reading " + what_ + " at byte " + std::to_string(offset + got) + " failed: " + os_reason(e));
+        fail(ErrorKind::io, "reading " + what_ + " at byte " + std::to_string(offset + got) + " failed: " + os_reason(e));
       }
       if (r == 0) return false;
       got += static_cast<std::size_t>(r);
@@ -94,10 +94,10 @@ class BagFile {
   [[nodiscard]] std::string read_string(std::uint64_t offset, std::uint64_t n, std::uint64_t limit,
                                         const char* role) const {
     if (n > limit)
-      fail(what_ + ": " + role + " at byte " + std::to_string(offset) + " claims " + std::to_string(n) +
+      fail(ErrorKind::corrupt, what_ + ": " + role + " at byte " + std::to_string(offset) + " claims " + std::to_string(n) +
            " bytes, more than the limit of " + std::to_string(limit));
     if (offset > size_ || n > size_ - offset)
-      fail(what_ + ": " + role + " at byte " + std::to_string(offset) + " claims " + std::to_string(n) +
+      fail(ErrorKind::corrupt, what_ + ": " + role + " at byte " + std::to_string(offset) + " claims " + std::to_string(n) +
            " bytes, past the end of the file (" + std::to_string(size_) + " bytes): the file is truncated");
     std::string s;
     try {
@@ -107,7 +107,7 @@ class BagFile {
            std::to_string(offset));
     }
     if (!read(offset, s.data(), s.size()))
-      fail(what_ + ": the file ended while reading the " + role + " at byte " + std::to_string(offset));
+      fail(ErrorKind::corrupt, what_ + ": the file ended while reading the " + role + " at byte " + std::to_string(offset));
     return s;
   }
 
