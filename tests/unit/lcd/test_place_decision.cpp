@@ -3,6 +3,7 @@
 #include <vmap/geometry/fundamental.hpp>
 #include <vmap/io/calibration.hpp>
 #include <vmap/io/files.hpp>
+#include <vmap/io/frame_source.hpp>
 #include <vmap/lcd/evaluation.hpp>
 #include <vmap/lcd/loop_detector.hpp>
 #include <vmap/lcd/loop_engine.hpp>
