@@ -1073,7 +1073,7 @@ TEST_CASE("cli: no memory is lost to --out, and a refused or failed run leaves n
   CHECK(fs::file_size(old / "memory.vmdb") == fs::file_size(sample_memory().first));
   // Refused or failed runs remove the folders they created.
   const fs::path fresh = dir / "new" / "deeper";
-  fails_with({"build", (dir / "missing.txt").string(), "--out", fresh.string()}, 1, "missing.txt");
+  fails_with({"build", (dir / "missing.txt").string(), "--out", fresh.string()}, 3, "missing.txt");
   CHECK(!fs::exists(dir / "new"));
   write(dir / "bad.yaml", "%YAML:1.0\nCamera.fx: 1e-300\nCamera.fy: 500\nCamera.cx: 320\nCamera.cy: 240\n");
   fails_with({"build", sample, "--out", fresh.string(), "--camera", (dir / "bad.yaml").string()}, 1, "focal lengths");
@@ -1403,7 +1403,7 @@ TEST_CASE("cli: a memory store is replaced only with --force, resumed only from 
   CHECK(nlohmann::json::parse(resumed.out)["frames"] == 60);
   // A refused fresh run leaves no memory behind.
   const std::string none = (dir / "none.vmdb").string();
-  fails_with({"memory", "build", (dir / "missing.txt").string(), "--memory", none}, 1, "missing.txt");
+  fails_with({"memory", "build", (dir / "missing.txt").string(), "--memory", none}, 3, "missing.txt");
   CHECK(!fs::exists(none));
 }
 
@@ -1517,7 +1517,7 @@ TEST_CASE("cli: memory convert turns .vmem files of every version into stores th
   // A .vmem is read as it is but not resumed: convert it first.
   usage_error({"memory", "build", sample, "--memory", "tests/fuzz/corpus/memory/labels_gcs.vmem", "--resume"},
               "convert it to a memory store first");
-  fails_with({"memory", "convert", sample, (dir / "x.vmdb").string()}, 1, "is not a vmap memory");
+  fails_with({"memory", "convert", sample, (dir / "x.vmdb").string()}, 4, "is not a vmap memory");
   CHECK(!fs::exists(dir / "x.vmdb"));
 }
 
@@ -1608,7 +1608,7 @@ TEST_CASE("cli: --session new adds a run to a memory; memory merge of two memori
   // Other options: refused, naming both, and nothing written.
   const std::string d = (dir / "d.vmdb").string();
   REQUIRE(run_vmap({"memory", "build", sample, "--memory", d, "--end", "10", "--threshold", "0.5"}).code == 0);
-  fails_with({"memory", "merge", a, d, "--out", (dir / "e.vmdb").string()}, 1,
+  fails_with({"memory", "merge", a, d, "--out", (dir / "e.vmdb").string()}, 6,
              "cannot merge memory '" + d + "' into memory '" + a + "'");
   CHECK(!fs::exists(dir / "e.vmdb"));
 }
