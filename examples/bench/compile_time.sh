@@ -16,13 +16,15 @@ flags=(-std=c++20 -O2 -Iinclude -isystem /usr/include/opencv4 -isystem /usr/incl
 
 # seconds and peak KB of one compile, the best of `rounds`
 measure() {
-  local best_s="" best_kb=""
+  local best_s="" best_kb="" out
+  out=$(mktemp)
   for ((r = 0; r < rounds; r++)); do
-    local out
-    out=$( { /usr/bin/time -f "%e %M" g++ "${flags[@]}" "$@" >/dev/null 2>/dev/null; } 2>&1 | tail -1)
-    local s=${out% *} kb=${out#* }
-    if [ -z "$best_s" ] || awk "BEGIN{exit !($s < $best_s)}"; then best_s=$s best_kb=$kb; fi
+    /usr/bin/time -o "$out" -f "%e %M" g++ "${flags[@]}" "$@"
+    local s kb
+    read -r s kb <"$out"
+    if [ -z "$best_s" ] || awk -v a="$s" -v b="$best_s" 'BEGIN { exit !(a < b) }'; then best_s=$s best_kb=$kb; fi
   done
+  rm -f "$out"
   echo "$best_s $best_kb"
 }
 
@@ -31,7 +33,7 @@ read -r floor_s floor_kb < <(measure "$shared/bench/compile/floor.cpp")
 row() {
   local name=$1; shift
   read -r s kb < <(measure "$@")
-  printf '%-44s %8.1f %8.2f %8.0f\n' "$name" "$s" "$(awk "BEGIN{print $s / $floor_s}")" "$((kb / 1024))"
+  printf '%-44s %8.1f %8.2f %8.0f\n' "$name" "$s" "$(awk -v a="$s" -v b="$floor_s" 'BEGIN { print a / b }')" "$((kb / 1024))"
 }
 printf '%-44s %8.1f %8.2f %8.0f\n' "floor (OpenCV + Eigen headers)" "$floor_s" 1 "$((floor_kb / 1024))"
 row "consumer.cpp, header-only" "$shared/bench/compile/consumer.cpp"

@@ -403,7 +403,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
       if (!mem->holds_features(k)) whole->keys[k].features = mem->key_features(static_cast<std::uint32_t>(k));
   }
   // The pictures match key image pairs again with the memory's own policies.
-  const vmap::AnySelector sel(mem->stack(), mem->options().selector, "the memory's camera");
+  vmap::AnySelector sel(mem->stack(), mem->options().selector, "the memory's camera");
   return report(args, app, whole ? *whole : mem->map(), sel, src, run.record.pushed, run.record.seconds, out_dir,
                 run.stack.camera ? std::optional<ex::CameraOption>(ex::CameraOption{run.stack.camera_source, *run.stack.camera})
                                  : std::nullopt,
