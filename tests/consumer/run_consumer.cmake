@@ -15,7 +15,7 @@ run(${CMAKE_COMMAND} -S "${CONSUMER_SOURCE_DIR}" -B "${WORK_DIR}/build" -G "${GE
 run(${CMAKE_COMMAND} --build "${WORK_DIR}/build")
 run("${WORK_DIR}/build/vmap_consumer" "${SAMPLE_FRAMES}" "${WORK_DIR}/map.vmap")
 if(EXISTS "${WORK_DIR}/build/vmap_consumer_stacks")
-  run("${WORK_DIR}/build/vmap_consumer_stacks" "${SAMPLE_FRAMES}")
+  run("${WORK_DIR}/build/vmap_consumer_stacks" "${SAMPLE_FRAMES}" "${WORK_DIR}/stacks.vmdb")
 elseif(VMAP_STACKS)
   message(FATAL_ERROR "the installed package has no vmap::stacks component (find_package(vmap COMPONENTS stacks))")
 endif()
