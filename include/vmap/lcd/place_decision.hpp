@@ -1,7 +1,7 @@
 #pragma once
 
-// "Same place?" as a decision with evidence and a reason (DESIGN.md sec. 1.4), one for
-// loop closure and for localization. A verified candidate is accepted only when its
+// "Same place?" as a decision with evidence and a reason (examples/methods.md, sec. 4),
+// one for loop closure and for localization. A verified candidate is accepted only when its
 // evidence tells places apart; otherwise the answer says why: the query shows an unknown
 // place, two places are equally likely, the evidence is too little, or the camera never
 // left the candidate's place (not a revisit).
@@ -11,10 +11,10 @@
 //   - the significance of the inliers: -log10 of the probability that at least that many
 //     of the tentative matches fit the model by chance (a binomial tail, each match an
 //     inlier by chance with probability `chance_inlier_rate`, the model's minimal sample
-//     always fitting). Two unrelated images still give a fundamental matrix with about
-//     20 inliers out of 200 mutual ORB matches (1 px band): few inliers out of many
-//     matches are what chance gives, many out of few are not (examples/loops.md, "The
-//     place decision", measured on every shared sequence);
+//     always fitting). Two unrelated images still give a fundamental matrix with some
+//     inliers among many mutual ORB matches (1 px band): few inliers out of many
+//     matches are what chance gives, many out of few are not (measured on every shared
+//     sequence: examples/results/loops.md, "How the decision's defaults were chosen");
 //   - the spread of the inliers over each image (the fraction of cells of a grid over
 //     the keypoints' extent that hold an inlier, the smaller of the two views): a
 //     repeated texture gives many inliers in one small patch;
@@ -133,25 +133,25 @@ struct PlaceDecisionOptions {
   /// A place is accepted at this confidence or above (0.5: a significance of
   /// half_significance with the inliers spread over the image). Chosen from the evidence
   /// of true and false candidates on every shared sequence (examples/loops.md, "The
-  /// place decision").
+  /// place decision"; the figures in examples/results/loops.md).
   double min_confidence = 0.5;
   /// Below this many inliers a model is not weighed at all (too little evidence).
   int min_inliers = 12;
-  /// The probability that one tentative match fits the model by chance. 0.1: the
-  /// fundamental matrix at 1 px over unrelated image pairs (mutual ORB matches gather
-  /// 10 % inliers on average beyond the minimal sample, examples/loops.md).
+  /// The probability that one tentative match fits the model by chance. 0.1: the rate
+  /// at which mutual ORB matches of unrelated image pairs fit a fundamental matrix at
+  /// 1 px beyond the minimal sample (examples/results/loops.md, "How the decision's
+  /// defaults were chosen").
   double chance_inlier_rate = 0.1;
-  /// The significance at which the confidence is 0.5: a chance alignment of 1 in 10^12.
-  /// The strongest unrelated pair of all shared sequences reached 8.9.
+  /// The significance at which the confidence is 0.5: a chance alignment of 1 in 10^12,
+  /// above the strongest unrelated pair of the shared sequences (the same page).
   double half_significance = 12.0;
   /// Grid (cells per side) for the spread of the inliers.
   int spread_grid = 4;
   /// A spread at or above this fraction of cells leaves the confidence as it is; below,
   /// the confidence is scaled down in proportion (inliers bunched in one patch). 0.35:
-  /// the only false loop above the confidence threshold on the shared sequences
-  /// (tum_fr3_cabinet_kf, 41 of 66 matches on a quarter of the cells) falls below it,
-  /// and rtabmap_loop keeps recall 0.886 at precision 1.0 (0.932 at 0.25 with that one
-  /// false loop).
+  /// the only false loop above the confidence threshold on the shared sequences (its
+  /// inliers on a quarter of the cells, on tum_fr3_cabinet_kf) falls below it while
+  /// rtabmap_loop keeps its recall at precision 1.0 (the same page).
   double full_spread = 0.35;
   /// Two places are ambiguous when the second's confidence is at least this fraction of
   /// the best's and both reach min_confidence.

@@ -1,6 +1,6 @@
 #pragma once
 
-// One visual memory a robot keeps (DESIGN.md sec. 1.4): frames are pushed one by one;
+// One visual memory a robot keeps (examples/methods.md, sec. 4): frames are pushed one by one;
 // the key-image selector (Algorithm 1 / eq. 6 of García-Pintos et al. 2023, unchanged:
 // keyframe/selector.hpp) keeps key images; each new key image is described by its bag of
 // words (TF-IDF over a vocabulary tree, place/) from the features the selector already
@@ -12,7 +12,7 @@
 // (sec. 1) with the engine's decision: the key image the query shows, or "unknown place"
 // with the reason.
 //
-// Object labels (LFM-LCD, Zhu et al., Sensors 2021; DESIGN.md sec. 1.2): frames pushed
+// Object labels (LFM-LCD, Zhu et al., Sensors 2021; examples/methods.md, sec. 2): frames pushed
 // with detections make the loop search go through the binary classified tree: each key
 // image's label vector (eq. 3-4) leads to a leaf, backtracked to m candidates (sec.
 // 3.3), ranked by BoW score and the best verified (tree_ranked) or all (tree). The
@@ -20,7 +20,7 @@
 // from then on; the key images before it are then checked in order, so the result is
 // the one a schema known from the start gives.
 //
-// GCS (Trujillo-Romero 2024, DESIGN.md sec. 1.3): train_gcs() learns a GCS on the key
+// GCS (Trujillo-Romero 2024, examples/methods.md, sec. 3): train_gcs() learns a GCS on the key
 // images that have SE(2) poses, from their own features; localize() then also gives the
 // position estimate of Algorithm 5.
 //

@@ -41,8 +41,9 @@
 namespace vmap {
 
 /// The candidate source when the user names none: the label tree ranked by bag of words
-/// with labels and a vocabulary (DESIGN.md sec. 1.4), the whole database ranked with a
-/// vocabulary alone, LFM-LCD's tree with labels alone, and every older frame with neither.
+/// with labels and a vocabulary (examples/methods.md, sec. 4), the whole database ranked
+/// with a vocabulary alone, LFM-LCD's tree with labels alone, and every older frame with
+/// neither.
 [[nodiscard]] constexpr CandidateIndex default_candidate_index(bool labels, bool vocabulary) noexcept {
   if (labels) return vocabulary ? CandidateIndex::tree_ranked : CandidateIndex::tree;
   return vocabulary ? CandidateIndex::bow : CandidateIndex::brute_force;
