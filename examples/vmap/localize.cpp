@@ -442,7 +442,7 @@ std::function<int()> setup(CLI::App& app) {
     }
     if (s->histogram == "grid") return run_with(*s, vmap::GridHistogram{}, app);
     vmap::BowHistogramOptions bo;
-    bo.vocabulary.words = s->words;
+    bo.vocabulary.branching = s->words;
     bo.vocabulary.seed = s->seed;
     return run_with(*s, vmap::BowHistogram(bo), app);
   };

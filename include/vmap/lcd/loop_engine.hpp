@@ -40,6 +40,7 @@
 #include <vmap/lcd/place_decision.hpp>
 #include <vmap/lcd/place_ranking.hpp>
 #include <vmap/place/consistency.hpp>
+#include <vmap/place/match.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -411,16 +412,16 @@ class LoopEngine {
           d.candidates = older;
         }
         if (d.candidates == 0) break;
-        const std::vector<RankedFrame> ranked = ranker_.rank(
+        const std::vector<PlaceMatch<std::size_t>> ranked = ranker_.rank(
             *bow, options_.top_k, options_.index == CandidateIndex::tree_ranked ? &leaf : nullptr, older);
         d.not_in_top_k = d.candidates - std::min(d.candidates, ranked.size());
-        for (const RankedFrame& r : ranked) {
+        for (const PlaceMatch<std::size_t>& r : ranked) {
           if (r.score < options_.min_bow_score) {
             ++d.below_bow_score;
-            d.considered.push_back({r.frame, r.score, 0, 0.0, CandidateStage::below_bow_score});
+            d.considered.push_back({r.id, r.score, 0, 0.0, CandidateStage::below_bow_score});
             continue;
           }
-          to_verify.emplace_back(r.frame, r.score);
+          to_verify.emplace_back(r.id, r.score);
         }
         break;
       }
@@ -440,25 +441,25 @@ class LoopEngine {
     return d;
   }
 
-  /// Where image features `q` were taken, among every frame added: the best `top` frames
+  /// Where image features `q` were taken, among every frame added: the best `top_k` frames
   /// by bag-of-words score are verified and decided; without a ranker every one of the
   /// `unranked` frames the lookup knows (default: the frames added). No revisit rule, no
   /// temporal consistency: a single image. `decision` overrides the options' decision for
   /// this query.
   template <FeatureLookup L>
-  PlaceDecision localize(const Features& q, std::size_t top, const L& lookup,
+  PlaceDecision localize(const Features& q, std::size_t top_k, const L& lookup,
                          std::optional<std::size_t> unranked = std::nullopt,
                          const PlaceDecisionOptions* decision = nullptr) const {
     const PlaceDecisionOptions& dec = decision ? *decision : options_.decision;
     if (decision) detail::check_place_decision_options(*decision, "LoopEngine::localize");
-    detail::check(top >= 1, "LoopEngine::localize: top must be >= 1");
+    detail::check(top_k >= 1, "LoopEngine::localize: top_k must be >= 1");
     PlaceDecision d;
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<std::pair<std::size_t, double>> to_verify;
     std::optional<typename Rank::Bow> bow;
     if (ranker_.ready()) {
       bow = ranker_.describe(q);
-      for (const RankedFrame& r : ranker_.rank(*bow, top, nullptr)) to_verify.emplace_back(r.frame, r.score);
+      for (const PlaceMatch<std::size_t>& r : ranker_.rank(*bow, top_k, nullptr)) to_verify.emplace_back(r.id, r.score);
       d.candidates = frames_;
       d.not_in_top_k = frames_ - std::min(frames_, to_verify.size());
     } else {
