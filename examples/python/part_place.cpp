@@ -210,9 +210,7 @@ BowVector bow_only(const py::handle& h, const std::string& what) {
 }
 
 BowScoring scoring_named(const std::string& s) {
-  if (s == "l1") return BowScoring::l1;
-  if (s == "l2") return BowScoring::l2;
-  if (s == "cosine") return BowScoring::cosine;
+  if (const auto scoring = from_string<BowScoring>(s)) return *scoring;
   fail("scoring must be 'l1', 'l2' or 'cosine', not '" + s + "'");
 }
 

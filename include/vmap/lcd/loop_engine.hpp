@@ -141,17 +141,17 @@ enum class CandidateStage : std::uint8_t {
   not_a_revisit,        ///< verified, but the camera never left its place
 };
 
-[[nodiscard]] constexpr std::string_view to_string(CandidateStage s) noexcept {
-  switch (s) {
-    case CandidateStage::chosen: return "chosen";
-    case CandidateStage::not_in_top_k: return "not in top k";
-    case CandidateStage::below_bow_score: return "below bag-of-words score";
-    case CandidateStage::verification_failed: return "verification failed";
-    case CandidateStage::weaker: return "less confidence than the chosen one";
-    case CandidateStage::not_a_revisit: return "not a revisit";
-  }
-  return "unknown";
+/// The stages' names, in words (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(CandidateStage) noexcept {
+  using S = CandidateStage;
+  return detail::NameTable<CandidateStage, 6>{{{{S::chosen, "chosen"},
+                                                {S::not_in_top_k, "not in top k"},
+                                                {S::below_bow_score, "below bag-of-words score"},
+                                                {S::verification_failed, "verification failed"},
+                                                {S::weaker, "less confidence than the chosen one"},
+                                                {S::not_a_revisit, "not a revisit"}}}};
 }
+[[nodiscard]] constexpr std::string_view to_string(CandidateStage s) noexcept { return names_of(s).name(s); }
 
 /// One candidate that reached the ranking or verification stage.
 struct PlaceCandidate {
