@@ -209,7 +209,7 @@ TEST_CASE("cli: outputs that are inputs are refused before any work, inputs unch
   // loops --gt gt.txt --out DIR where DIR/pr.csv is the ground truth.
   fs::create_directories(dir / "gt");
   write(dir / "gt" / "pr.csv", "0\n");
-  usage_error({"loops", sample, "--gt", (dir / "gt" / "pr.csv").string(), "--index", "all", "--out",
+  usage_error({"loops", sample, "--gt", (dir / "gt" / "pr.csv").string(), "--rank", "brute_force", "--out",
                (dir / "gt").string()},
               "is also an input");
   CHECK(slurp(dir / "gt" / "pr.csv") == "0\n");
@@ -220,9 +220,16 @@ TEST_CASE("cli: a symbolic link as an output file is refused") {
   fs::create_directories(dir / "out");
   write(dir / "target.csv", "keep\n");
   fs::create_symlink(dir / "target.csv", dir / "out" / "pr.csv");
-  usage_error({"loops", sample, "--gt", (dir / "target.csv").string(), "--index", "all", "--out",
-               (dir / "out").string()},
-              "is a symbolic link");
+  // The old spellings (--index, all) still work, each with a note naming the new one.
+  const Run old = run_vmap({"loops", sample, "--gt", (dir / "target.csv").string(), "--index", "all", "--out",
+                            (dir / "out").string()});
+  INFO("stderr: " << old.err);
+  CHECK(old.code == 2);
+  CHECK(old.err.find("is a symbolic link") != std::string::npos);
+  CHECK(old.err.find("vmap loops: note: --index is now --rank; --index will be removed in the next release") !=
+        std::string::npos);
+  CHECK(old.err.find("vmap loops: note: --rank all is now --rank brute_force; all will be removed in the next "
+                     "release") != std::string::npos);
   CHECK(slurp(dir / "target.csv") == "keep\n");
   // The same for sweep's table, refused before any frame is read.
   fs::create_symlink(dir / "target.csv", dir / "out" / "sweep.csv");

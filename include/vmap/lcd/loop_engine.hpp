@@ -66,15 +66,16 @@ enum class CandidateIndex : std::uint8_t {
   brute_force,  ///< every frame older than the window
 };
 
-/// tree, tree_ranked, bow, all (core/names.hpp): the names `vmap loops --rank` and the
-/// Python module take. brute_force, the enumerator's own name, reads back too; `all` is
-/// the one written.
+/// tree, tree_ranked, bow, brute_force (core/names.hpp): the enumerators' own names, which
+/// `vmap loops --rank` and the Python module take. `all`, brute_force's old name, still
+/// reads back (no file stores these names: the formats keep the enumerator's number) until
+/// the next release; the front ends say so when it is given.
 [[nodiscard]] constexpr auto names_of(CandidateIndex) noexcept {
   return detail::NameTable<CandidateIndex, 5>{{{{CandidateIndex::tree, "tree"},
                                                 {CandidateIndex::tree_ranked, "tree_ranked"},
                                                 {CandidateIndex::bow, "bow"},
-                                                {CandidateIndex::brute_force, "all"},
-                                                {CandidateIndex::brute_force, "brute_force"}}}};
+                                                {CandidateIndex::brute_force, "brute_force"},
+                                                {CandidateIndex::brute_force, "all"}}}};
 }
 [[nodiscard]] constexpr std::string_view to_string(CandidateIndex c) noexcept { return names_of(c).name(c); }
 

@@ -67,6 +67,11 @@ TEST_CASE("names: to_string and from_string agree for every enumerator") {
                               {CandidateStage::verification_failed, "verification failed"},
                               {CandidateStage::weaker, "less confidence than the chosen one"},
                               {CandidateStage::not_a_revisit, "not a revisit"}});
+  using vmap::CandidateIndex;
+  round_trip<CandidateIndex>({{CandidateIndex::tree, "tree"},
+                              {CandidateIndex::tree_ranked, "tree_ranked"},
+                              {CandidateIndex::bow, "bow"},
+                              {CandidateIndex::brute_force, "brute_force"}});
   using vmap::LensModel;
   round_trip<LensModel>({{LensModel::pinhole, "pinhole (radial-tangential)"},
                          {LensModel::fisheye, "fisheye (equidistant, Kannala-Brandt)"}});
@@ -88,4 +93,10 @@ TEST_CASE("names: to_string and from_string agree for every enumerator") {
                          {KeyReason::below_threshold, "similarity below tau"},
                          {KeyReason::bound_below_threshold, "match bound below tau (verification skipped)"},
                          {KeyReason::verification_failed, "verification failed"}});
+}
+
+TEST_CASE("names: an old spelling reads back but is neither written nor offered") {
+  CHECK(vmap::from_string<vmap::CandidateIndex>("all") == vmap::CandidateIndex::brute_force);
+  CHECK(vmap::names_of(vmap::CandidateIndex{}).choices() == "tree, tree_ranked, bow or brute_force");
+  CHECK(vmap::names_of(vmap::WallSide{}).choices() == "left or right");
 }
