@@ -463,10 +463,14 @@ std::function<int()> setup(CLI::App& app) {
       ->check(CLI::IsMember({"yolox", "nanodet", "fastestdet"}));
   app.add_option("--model", a->model, "ONNX model file of --detector");
   app.add_option("--names", a->names, "Class names, one a line (e.g. coco80.names): printed instead of label ids");
-  // `all` and --index: the old spellings of brute_force and --rank, for one more release
-  // (read, but not offered in the help).
-  const CLI::Validator sources = CLI::IsMember({"tree", "tree_ranked", "bow", "brute_force", "all"})
-                                     .description("{tree,tree_ranked,bow,brute_force}");
+  // The library's names (from_string), which also read `all`, brute_force's old spelling;
+  // the help and the message offer only the current ones. --index is --rank's old spelling.
+  const std::string offered = "{tree,tree_ranked,bow,brute_force}";
+  const CLI::Validator sources(
+      [offered](std::string& v) {
+        return vmap::from_string<vmap::CandidateIndex>(v) ? std::string() : v + " not in " + offered;
+      },
+      offered);
   app.add_option("--rank", a->rank,
                  "Candidates: tree (LFM-LCD), tree_ranked (the tree's leaf ranked by bag of words, top k verified), "
                  "bow (every older frame ranked, no labels) or brute_force (every frame older than the window). "
