@@ -85,6 +85,13 @@ vmap::GcsOptions gcs_options(std::size_t neurons, std::size_t lambda) {
   return {.lambda = lambda, .max_cells = neurons, .seed = 1};
 }
 
+/// The bag-of-words histogram's defaults (a flat vocabulary, seed 1) with 128 words.
+vmap::BowHistogramOptions bow_options() {
+  vmap::BowHistogramOptions o;
+  o.vocabulary.branching = 128;
+  return o;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -116,7 +123,7 @@ int main(int argc, char** argv) {
     for (const auto& im : rec.images) feats.push_back(akaze.extract(im));
     const double t_feat = seconds_since(t0);
     t0 = clock_type::now();
-    vmap::BowHistogram bow({.vocabulary = {.words = 128, .seed = 1}});
+    vmap::BowHistogram bow(bow_options());
     bow.fit(feats);
     std::vector<Eigen::VectorXf> train;
     for (const auto& f : feats) train.push_back(bow(f));
@@ -213,7 +220,7 @@ int main(int argc, char** argv) {
       even.push_back(cf[i]);
       even_poses.push_back(poses[i].pose);
     }
-    vmap::BowHistogram cbow({.vocabulary = {.words = 128, .seed = 1}});
+    vmap::BowHistogram cbow(bow_options());
     cbow.fit(even);
     std::vector<Eigen::VectorXf> ctrain;
     for (const auto& f : even) ctrain.push_back(cbow(f));

@@ -75,6 +75,15 @@ class UsageError : public vmap::Error {
 
 [[noreturn]] inline void usage_error(const std::string& what) { throw UsageError(what); }
 
+/// The one-line note of an old spelling that still works for one release, on stderr so
+/// that --json output stays parseable: "vmap loops: note: --index is now --rank; --index
+/// will be removed in the next release".
+inline void old_spelling(const std::string& command, const std::string& old, const std::string& now,
+                         const std::string& removed) {
+  std::fprintf(stderr, "vmap %s: note: %s is now %s; %s will be removed in the next release\n", command.c_str(),
+               old.c_str(), now.c_str(), removed.c_str());
+}
+
 /// The inputs of the running subcommand, so that an error from deep inside OpenCV or the
 /// standard library is still reported with the input it came from.
 inline std::vector<std::string>& current_inputs() {
@@ -381,13 +390,15 @@ inline nlohmann::json typed_value(const std::string& s) {
 
 /// Every option of a subcommand with its value (given on the command line, in --config,
 /// or the default), keyed by its long name with "_" for "-": the JSON's `options`.
-/// Positional inputs, --help, --config and --json itself are not options of the run.
+/// Positional inputs, --help, --config and --json itself are not options of the run, and
+/// an old spelling (a hidden option) is not one apart from the option it names.
 inline nlohmann::json options_json(const CLI::App& app) {
   nlohmann::json out = nlohmann::json::object();
   for (const CLI::Option* opt : app.get_options()) {
     if (opt->get_lnames().empty()) continue;  // positional
     const std::string name = opt->get_lnames().front();
     if (name == "help" || name == "config" || name == "json") continue;
+    if (opt->get_group().empty()) continue;  // a hidden old spelling: its value is under the new name
     std::string key = name;
     std::replace(key.begin(), key.end(), '-', '_');
     if (opt->get_expected_max() == 0) {  // a flag

@@ -74,8 +74,13 @@ struct EngineArgs {
   }
 };
 
-/// The candidate source named by `rank`, else the default for what is given.
+/// The candidate source named by `rank`, else the default for what is given. "all", the old
+/// name of brute_force, still reads for one release, with a DeprecationWarning.
 CandidateIndex candidate_index(const std::optional<std::string>& rank, bool labels, bool vocabulary) {
+  if (rank == "all" && PyErr_WarnEx(PyExc_DeprecationWarning,
+                                    "rank='all' is now rank='brute_force'; 'all' will be removed in the next release",
+                                    1) != 0)
+    throw py::error_already_set();
   return rank ? parse_option<CandidateIndex>(*rank, "rank", "") : default_candidate_index(labels, vocabulary);
 }
 
@@ -516,7 +521,7 @@ void bind_results(py::module_& m) {
       .def_readonly("skipped_frames", &LoopRun::skipped, "unreadable frames (not in the run)")
       .def_property_readonly(
           "rank", [](const LoopRun& r) { return std::string(to_string(r.options.index)); },
-          "the candidate source: tree, tree_ranked, bow or all")
+          "the candidate source: tree, tree_ranked, bow or brute_force")
       .def_property_readonly("min_confidence", [](const LoopRun& r) { return r.options.decision.min_confidence; },
                              "the confidence a loop needed")
       .def_property_readonly("window", [](const LoopRun& r) { return r.options.window; },
@@ -617,7 +622,7 @@ constexpr const char* detect_loops_doc =
     "or per frame a list of (label, score, x, y, w, h).\n"
     "rank: tree (LFM-LCD: every frame of the label tree's leaf), tree_ranked (the leaf ranked by bag-of-words\n"
     "score, top_k verified; the default with labels), bow (every older frame ranked, no labels; the default\n"
-    "without), all (every frame older than the window: brute force).\n"
+    "without), brute_force (every frame older than the window).\n"
     "window: frames this recent are never candidates. min_candidates: m, backtrack up the tree until this many.\n"
     "top_k / min_bow_score: ranked sources verify this many best-ranked candidates, none below the score.\n"
     "temporal_consistency: accept a loop only when this many previous frames matched a nearby place (within\n"
@@ -685,7 +690,7 @@ void bind(py::module_& m) {
       "vocabulary: a vocabulary file, or a list of vmap.Features to learn one from (words, depth, seed as in\n"
       "detect_loops); needed by the ranked sources (bow, tree_ranked). label_order: the label tree's label ids,\n"
       "large objects first (needed by tree and tree_ranked). rank: default tree_ranked with labels and a\n"
-      "vocabulary, bow with a vocabulary, tree with labels, else all. The other options are detect_loops'.")
+      "vocabulary, bow with a vocabulary, tree with labels, else brute_force. The other options are detect_loops'.")
       .def(py::init([](const std::string& features, int nfeatures, const std::string& model,
                        const std::string& refine_model, const py::object& vocabulary, std::size_t words, int depth,
                        std::uint64_t seed, const std::optional<std::vector<int>>& label_order,
@@ -744,7 +749,7 @@ void bind(py::module_& m) {
           [](const PyLoopDetector& d) {
             return d.read([](const AnyLoopDetector& b) { return std::string(to_string(b.options().index)); });
           },
-          "tree, tree_ranked, bow or all")
+          "tree, tree_ranked, bow or brute_force")
       .def_property_readonly(
           "features",
           [](const PyLoopDetector& d) {

@@ -210,9 +210,7 @@ BowVector bow_only(const py::handle& h, const std::string& what) {
 }
 
 BowScoring scoring_named(const std::string& s) {
-  if (s == "l1") return BowScoring::l1;
-  if (s == "l2") return BowScoring::l2;
-  if (s == "cosine") return BowScoring::cosine;
+  if (const auto scoring = from_string<BowScoring>(s)) return *scoring;
   fail("scoring must be 'l1', 'l2' or 'cosine', not '" + s + "'");
 }
 
@@ -300,10 +298,10 @@ class PyDatabase {
     return chosen;
   }
 
-  [[nodiscard]] std::vector<Match> query(const py::handle& x, std::size_t top, std::optional<std::vector<std::uint32_t>> only,
-                                         std::optional<std::uint32_t> exclude_from) const {
+  [[nodiscard]] std::vector<Match> query(const py::handle& x, std::size_t top_k, std::optional<std::vector<std::uint32_t>> only,
+                                         std::optional<std::uint32_t> before) const {
     const BowVector bow = bow_of(x, "PlaceDatabase.query");
-    return db_.query(bow, top, {.only = std::move(only), .exclude_from = exclude_from});
+    return db_.query(bow, top_k, {.only = std::move(only), .before = before});
   }
 
   [[nodiscard]] const Database& db() const noexcept { return db_; }
@@ -540,12 +538,12 @@ void bind(py::module_& m) {
            "Adds an entry (a bag of words, or descriptors with a vocabulary) and returns its id: `id` when given, else\n"
            "one above the largest id added so far (0 first). A duplicate id, or an invalid bag (a word outside the\n"
            "vocabulary, a negative or non-finite weight) is a vmap.Error. An empty bag is stored and never returned.")
-      .def("query", &PyDatabase::query, py::arg("entry"), py::arg("top") = 10, py::kw_only(), py::arg("only") = py::none(),
-           py::arg("exclude_from") = py::none(),
-           "The `top` entries of highest score among those sharing a word with `entry` (a bag of words, or\n"
+      .def("query", &PyDatabase::query, py::arg("entry"), py::arg("top_k") = 10, py::kw_only(), py::arg("only") = py::none(),
+           py::arg("before") = py::none(),
+           "The `top_k` entries of highest score among those sharing a word with `entry` (a bag of words, or\n"
            "descriptors with a vocabulary), best first, equal scores by increasing id, as PlaceMatch (id, score).\n"
-           "only: the ids that are candidates (others ignored); exclude_from: ids >= this are ignored (the most\n"
-           "recent frames, trivially similar to the query).")
+           "only: the ids that are candidates (others ignored); before: only ids < this are candidates (the most\n"
+           "recent frames, from `before` on, are trivially similar to the query).")
       .def("erase", [](PyDatabase& d, std::uint32_t id) { return d.db().erase(id); }, py::arg("id"),
            "Removes an entry; False if it was not there.")
       .def("clear", [](PyDatabase& d) { d.db().clear(); }, "Removes every entry.")

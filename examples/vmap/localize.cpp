@@ -392,7 +392,7 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--max-epochs", s->max_epochs, "Stop after this many epochs")->check(ex::count_in(1, 1000000));
   app.add_option("--histogram", s->histogram, "bow (bag of binary words) | grid (keypoint grid)")
       ->check(CLI::IsMember({"bow", "grid"}));
-  app.add_option("--words", s->words, "Vocabulary size of the bow histogram")->check(ex::count_in(2, 100000));
+  app.add_option("--words", s->words, "Words of the bow histogram (the branching of its flat, depth-1 vocabulary)")->check(ex::count_in(2, 100000));
   app.add_option("--images-per-estimate", s->query_images, "Query images per estimate (the paper: 1 or 2)")
       ->check(ex::count_in(1, 10));
   app.add_option("--seed", s->seed, "Seed of the room's noise, the vocabulary and the GCS")
@@ -442,7 +442,7 @@ std::function<int()> setup(CLI::App& app) {
     }
     if (s->histogram == "grid") return run_with(*s, vmap::GridHistogram{}, app);
     vmap::BowHistogramOptions bo;
-    bo.vocabulary.words = s->words;
+    bo.vocabulary.branching = s->words;
     bo.vocabulary.seed = s->seed;
     return run_with(*s, vmap::BowHistogram(bo), app);
   };

@@ -8,8 +8,8 @@
 //
 // Candidates (--rank): tree (LFM-LCD: every frame of the label tree's leaf), tree_ranked
 // (the leaf ranked by bag-of-words score, the top k verified; the default with labels),
-// bow (every older frame ranked, no labels; the default without), all (every frame older
-// than the window: brute force). The ranked modes need a vocabulary: --vocabulary FILE
+// bow (every older frame ranked, no labels; the default without), brute_force (every frame
+// older than the window). The ranked modes need a vocabulary: --vocabulary FILE
 // (from `vmap vocabulary`), else one is learned on the sequence itself.
 // Labels come from precomputed-detections files (--labels; several files, e.g. of
 // different COCO detectors, are pooled into one label source) or from a cv::dnn detector
@@ -463,11 +463,20 @@ std::function<int()> setup(CLI::App& app) {
       ->check(CLI::IsMember({"yolox", "nanodet", "fastestdet"}));
   app.add_option("--model", a->model, "ONNX model file of --detector");
   app.add_option("--names", a->names, "Class names, one a line (e.g. coco80.names): printed instead of label ids");
-  app.add_option("--rank,--index", a->rank,
+  // The library's names (from_string), which also read `all`, brute_force's old spelling;
+  // the help and the message offer only the current ones. --index is --rank's old spelling.
+  const std::string offered = "{tree,tree_ranked,bow,brute_force}";
+  const CLI::Validator sources(
+      [offered](std::string& v) {
+        return vmap::from_string<vmap::CandidateIndex>(v) ? std::string() : v + " not in " + offered;
+      },
+      offered);
+  app.add_option("--rank", a->rank,
                  "Candidates: tree (LFM-LCD), tree_ranked (the tree's leaf ranked by bag of words, top k verified), "
-                 "bow (every older frame ranked, no labels) or all (every frame older than the window). Default: "
-                 "tree_ranked with labels, bow without")
-      ->check(CLI::IsMember({"tree", "tree_ranked", "bow", "all", "brute_force"}));
+                 "bow (every older frame ranked, no labels) or brute_force (every frame older than the window). "
+                 "Default: tree_ranked with labels, bow without")
+      ->check(sources);
+  app.add_option("--index", a->rank, "Old spelling of --rank")->check(sources)->group("");
   app.add_option("--top-k", d.top_k, "tree_ranked / bow: verify this many best-ranked candidates")
       ->check(ex::count_in(1, 1000000));
   app.add_option("--min-bow-score", d.min_bow_score, "tree_ranked / bow: do not verify candidates scoring below this")
@@ -520,6 +529,13 @@ std::function<int()> setup(CLI::App& app) {
                  "DIR/memory.vmdb), evaluated over its key images with --gt / --gt-poses");
   app.add_flag("--edges", a->edges, "With --memory: list every loop edge (default: a summary and the 5 strongest)");
   return [a, &app] {
+    if (app.count("--index") > 0) {
+      ex::old_spelling("loops", "--index", "--rank", "--index");
+      if (app.count("--rank") > 0) ex::usage_error("give --rank only (--index is its old spelling)");
+      // The JSON's options name the value by its new spelling, as if --rank had been given.
+      app.get_option("--rank")->add_result(a->rank);
+    }
+    if (a->rank == "all") ex::old_spelling("loops", "--rank all", "--rank brute_force", "all");
     if (!a->memory.empty()) return run_memory(*a, app);
     if (a->input.empty()) ex::usage_error("give INPUT (the frames) or --memory M (a saved visual memory)");
     return run(*a, app);

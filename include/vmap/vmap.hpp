@@ -48,6 +48,7 @@
 #include <vmap/place/bow.hpp>
 #include <vmap/place/consistency.hpp>
 #include <vmap/place/database.hpp>
+#include <vmap/place/match.hpp>
 #include <vmap/place/vocabulary.hpp>
 
 #include <vmap/keyframe/front_end.hpp>

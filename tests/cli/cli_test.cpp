@@ -209,7 +209,7 @@ TEST_CASE("cli: outputs that are inputs are refused before any work, inputs unch
   // loops --gt gt.txt --out DIR where DIR/pr.csv is the ground truth.
   fs::create_directories(dir / "gt");
   write(dir / "gt" / "pr.csv", "0\n");
-  usage_error({"loops", sample, "--gt", (dir / "gt" / "pr.csv").string(), "--index", "all", "--out",
+  usage_error({"loops", sample, "--gt", (dir / "gt" / "pr.csv").string(), "--rank", "brute_force", "--out",
                (dir / "gt").string()},
               "is also an input");
   CHECK(slurp(dir / "gt" / "pr.csv") == "0\n");
@@ -220,9 +220,16 @@ TEST_CASE("cli: a symbolic link as an output file is refused") {
   fs::create_directories(dir / "out");
   write(dir / "target.csv", "keep\n");
   fs::create_symlink(dir / "target.csv", dir / "out" / "pr.csv");
-  usage_error({"loops", sample, "--gt", (dir / "target.csv").string(), "--index", "all", "--out",
-               (dir / "out").string()},
-              "is a symbolic link");
+  // The old spellings (--index, all) still work, each with a note naming the new one.
+  const Run old = run_vmap({"loops", sample, "--gt", (dir / "target.csv").string(), "--index", "all", "--out",
+                            (dir / "out").string()});
+  INFO("stderr: " << old.err);
+  CHECK(old.code == 2);
+  CHECK(old.err.find("is a symbolic link") != std::string::npos);
+  CHECK(old.err.find("vmap loops: note: --index is now --rank; --index will be removed in the next release") !=
+        std::string::npos);
+  CHECK(old.err.find("vmap loops: note: --rank all is now --rank brute_force; all will be removed in the next "
+                     "release") != std::string::npos);
   CHECK(slurp(dir / "target.csv") == "keep\n");
   // The same for sweep's table, refused before any frame is read.
   fs::create_symlink(dir / "target.csv", dir / "out" / "sweep.csv");
@@ -280,10 +287,10 @@ TEST_CASE("cli: bad input files exit 1 (3 when missing) with a one-line message 
   const Run missing = run_vmap({"build", (dir / "nothing.txt").string()});
   CHECK(missing.code == 3);
   CHECK(missing.err.find("nothing.txt") != std::string::npos);
-  const Run gtdir = run_vmap({"loops", sample, "--gt", dir.string(), "--index", "all"});
+  const Run gtdir = run_vmap({"loops", sample, "--gt", dir.string(), "--rank", "brute_force"});
   CHECK(gtdir.code == 2);
   CHECK(gtdir.err.find("--gt: '" + dir.string() + "' is a folder") != std::string::npos);
-  const Run dev = run_vmap({"loops", sample, "--gt", "/dev/zero", "--index", "all"});
+  const Run dev = run_vmap({"loops", sample, "--gt", "/dev/zero", "--rank", "brute_force"});
   CHECK(dev.code == 2);
   CHECK(dev.err.find("is not a regular file") != std::string::npos);
   const Run cam = run_vmap({"build", sample, "--camera", (dir / "none.yaml").string()});
@@ -349,8 +356,9 @@ TEST_CASE("cli: loops, command line and --config give the same JSON") {
     rows += "\n";
   }
   write(gt, rows);
-  same_json({"loops", sample, "--gt", gt.string()}, {"--index", "all", "--window", "50", "--nfeatures", "300", "--json"},
-            "index: all\nwindow: 50\nnfeatures: 300\njson: 1\n", "loops");
+  same_json({"loops", sample, "--gt", gt.string()},
+            {"--rank", "brute_force", "--window", "50", "--nfeatures", "300", "--json"},
+            "rank: brute_force\nwindow: 50\nnfeatures: 300\njson: 1\n", "loops");
 }
 
 TEST_CASE("cli: localize, command line and --config give the same JSON") {
@@ -700,7 +708,7 @@ TEST_CASE("cli: loops --memory prints the memory's loop edges; --gt evaluates th
   CHECK(edge_lines(every.out) == j["loops"].size());
   // Errors: the sequence mode's input and options, no input at all, a non-memory file.
   usage_error({"loops", sample, "--memory", file.string()}, "--memory and INPUT conflict");
-  usage_error({"loops", "--memory", file.string(), "--rank", "all"}, "--memory and --rank conflict");
+  usage_error({"loops", "--memory", file.string(), "--rank", "brute_force"}, "--memory and --rank conflict");
   usage_error({"loops"}, "give INPUT (the frames) or --memory M");
   const Run bad = run_vmap({"loops", "--memory", gt.string()});
   CHECK(bad.code == 4);
@@ -1018,7 +1026,7 @@ TEST_CASE("cli: a YAML map where an option takes a value, and empty values, are 
              "--config: the value of 'threshold' is a map; an option takes a number, a string or a list of them");
   write(dir / "section.yaml", "build:\n  threshold: {value: 0.9}\n");
   fails_with({"build", sample, "--config", (dir / "section.yaml").string()}, 2, "the value of 'threshold' is a map");
-  write(dir / "other.yaml", "loops:\n  index: all\nbuild:\n  end: 8\n");  // another subcommand's section is fine
+  write(dir / "other.yaml", "loops:\n  rank: brute_force\nbuild:\n  end: 8\n");  // another subcommand's section is fine
   const Run ok = run_vmap({"build", sample, "--config", (dir / "other.yaml").string(), "--json"});
   INFO(ok.err);
   CHECK(ok.code == 0);

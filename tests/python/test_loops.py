@@ -111,9 +111,9 @@ def test_options_reach_the_detector_as_on_the_command_line(rtabmap, vmap_cli):
 def test_poses_ground_truth_equals_the_command_line(shared, vmap_cli):
     folder = shared / "data" / "tum_fr3_cabinet_kf"
     frames, poses = folder / "rgb.txt", folder / "truth_cam_poses.txt"
-    opts = ["--rank", "all", "--min-confidence", 0.2]
+    opts = ["--rank", "brute_force", "--min-confidence", 0.2]
     cli = cli_loops(vmap_cli, frames, "--gt-poses", poses, "--gt-distance", 1.0, "--gt-angle", 45, *opts)
-    run = vmap.detect_loops(str(frames), rank="all", min_confidence=0.2)
+    run = vmap.detect_loops(str(frames), rank="brute_force", min_confidence=0.2)
     assert edges(run.loops) == edges(cli["loops"])
     by_file = vmap.evaluate(run, poses=str(poses), max_distance=1.0, max_angle=45.0)
     assert by_file.positives == cli["loops_gt"] > 0
@@ -298,9 +298,15 @@ def test_bad_input_raises_vmap_error(tmp_path, sample_frames):
         vmap.LoopDetector().add(frames[0], detections=[(1, 0.9)])
 
 
+def test_rank_all_is_the_old_name_of_brute_force():
+    with pytest.warns(DeprecationWarning, match="rank='all' is now rank='brute_force'"):
+        detector = vmap.LoopDetector(rank="all")
+    assert detector.rank == "brute_force"
+
+
 def test_detector_without_vocabulary_verifies_every_older_frame(sample_frames):
     detector = vmap.LoopDetector(window=2)
-    assert detector.rank == "all"
+    assert detector.rank == "brute_force"
     for image, _, _ in sample_frames[:6]:
         d = detector.add(image)
     # Frame 5 with window 2: frames 0, 1 and 2 are its candidates, each verified.

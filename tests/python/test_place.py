@@ -335,7 +335,7 @@ def test_database_filters_and_erase(features, database):
     q = features[30]
     assert [r.id for r in database.query(q, 5, only=[3, 30, 40])][0] == 30
     assert {r.id for r in database.query(q, 5, only=[3, 40, 999])} <= {3, 40}
-    assert all(r.id < 20 for r in database.query(q, 5, exclude_from=20))
+    assert all(r.id < 20 for r in database.query(q, 5, before=20))
     assert database.query(q, 0) == []
     assert 30 in database
     assert database.erase(30) and not database.erase(30)

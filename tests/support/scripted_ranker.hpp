@@ -27,13 +27,14 @@ class ScriptedRanker {
     CHECK(id == bow);  // the detector adds frame j with the bag of words it described for j
     indexed_.push_back(id);
   }
-  [[nodiscard]] std::vector<vmap::RankedFrame> rank(Bow query, std::size_t n, const std::vector<std::size_t>* only,
-                                                    std::size_t below = static_cast<std::size_t>(-1)) const {
-    std::vector<vmap::RankedFrame> out;
+  [[nodiscard]] std::vector<vmap::PlaceMatch<std::size_t>> rank(Bow query, std::size_t top_k,
+                                                                 const std::vector<std::size_t>* only,
+                                                                 std::size_t before = static_cast<std::size_t>(-1)) const {
+    std::vector<vmap::PlaceMatch<std::size_t>> out;
     for (std::size_t id : only ? *only : indexed_)
-      if (only || id < below) out.push_back({id, score_(query, id)});
+      if (only || id < before) out.push_back({id, score_(query, id)});
     std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.score > b.score; });
-    if (out.size() > n) out.resize(n);
+    if (out.size() > top_k) out.resize(top_k);
     return out;
   }
   // The bag of words is the frame index, so one overload scores a query and two frames alike.

@@ -108,7 +108,7 @@ class LoopRun:
     def skipped_frames(self) -> int: ...
     @property
     def rank(self) -> str:
-        """the candidate source: tree, tree_ranked, bow or all (brute force; rank="brute_force" reads too)"""
+        """the candidate source: tree, tree_ranked, bow or brute_force"""
     @property
     def min_confidence(self) -> float: ...
     @property
@@ -198,7 +198,7 @@ class LoopDetector:
     def memory_bytes(self) -> int: ...
     @property
     def rank(self) -> str:
-        """the candidate source: tree, tree_ranked, bow or all (brute force; rank="brute_force" reads too)"""
+        """the candidate source: tree, tree_ranked, bow or brute_force"""
     @property
     def features(self) -> str: ...
     @property

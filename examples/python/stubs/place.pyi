@@ -94,10 +94,10 @@ class PlaceDatabase:
     def query(
         self,
         entry: _Bow | _Descriptors,
-        top: int = 10,
+        top_k: int = 10,
         *,
         only: Sequence[int] | None = None,
-        exclude_from: int | None = None,
+        before: int | None = None,
     ) -> list[PlaceMatch]: ...
     def erase(self, id: int) -> bool: ...
     def clear(self) -> None: ...

@@ -30,14 +30,27 @@ struct NameTable {
       if (n == text) return v;
     return std::nullopt;
   }
-  /// "a, b or c": for messages.
+  /// "a, b or c": for messages. Only a value's first name: a later one is an old spelling
+  /// that still reads back but is no longer offered.
   [[nodiscard]] std::string choices() const {
+    std::size_t offered = 0;
+    for (std::size_t i = 0; i < N; ++i) offered += first_name(i);
     std::string out;
+    std::size_t written = 0;
     for (std::size_t i = 0; i < N; ++i) {
-      if (i > 0) out += i + 1 == N ? " or " : ", ";
+      if (!first_name(i)) continue;
+      if (written > 0) out += written + 1 == offered ? " or " : ", ";
       out += entries[i].second;
+      ++written;
     }
     return out;
+  }
+
+ private:
+  [[nodiscard]] constexpr bool first_name(std::size_t i) const noexcept {
+    for (std::size_t j = 0; j < i; ++j)
+      if (entries[j].first == entries[i].first) return false;
+    return true;
   }
 };
 

@@ -1,5 +1,7 @@
 #pragma once
 
+#include <vmap/core/name_table.hpp>
+
 #include <opencv2/core.hpp>
 
 #include <algorithm>
@@ -28,19 +30,22 @@ enum class Degeneracy : std::uint8_t {
   homography,  ///< a homography explains (nearly) all model inliers
 };
 
-[[nodiscard]] constexpr std::string_view to_string(VerificationStatus s) noexcept {
-  switch (s) {
-    case VerificationStatus::verified: return "verified";
-    case VerificationStatus::too_few_matches: return "too few matches";
-    case VerificationStatus::no_model: return "no model";
-    case VerificationStatus::too_few_inliers: return "too few inliers";
-  }
-  return "unknown";
+/// The statuses' names, in words (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(VerificationStatus) noexcept {
+  using V = VerificationStatus;
+  return detail::NameTable<VerificationStatus, 4>{{{{V::verified, "verified"},
+                                                    {V::too_few_matches, "too few matches"},
+                                                    {V::no_model, "no model"},
+                                                    {V::too_few_inliers, "too few inliers"}}}};
 }
+[[nodiscard]] constexpr std::string_view to_string(VerificationStatus s) noexcept { return names_of(s).name(s); }
 
-[[nodiscard]] constexpr std::string_view to_string(Degeneracy d) noexcept {
-  return d == Degeneracy::none ? "none" : "homography (planar scene or pure rotation)";
+/// none, and the homography case in words (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(Degeneracy) noexcept {
+  return detail::NameTable<Degeneracy, 2>{
+      {{{Degeneracy::none, "none"}, {Degeneracy::homography, "homography (planar scene or pure rotation)"}}}};
 }
+[[nodiscard]] constexpr std::string_view to_string(Degeneracy d) noexcept { return names_of(d).name(d); }
 
 /// The motion between two calibrated views, from an essential matrix (cv::recoverPose):
 /// a point X_a in camera a's coordinates is X_b = rotation * X_a + translation in camera

@@ -12,6 +12,7 @@
 // io/calibration.hpp.
 
 #include <vmap/core/error.hpp>
+#include <vmap/core/name_table.hpp>
 #include <vmap/core/numeric.hpp>
 
 #include <opencv2/calib3d.hpp>
@@ -45,9 +46,12 @@ enum class LensModel : std::uint8_t {
   fisheye,  ///< equidistant fisheye, Kannala-Brandt k1..k4 (cv::fisheye)
 };
 
-[[nodiscard]] constexpr std::string_view to_string(LensModel m) noexcept {
-  return m == LensModel::pinhole ? "pinhole (radial-tangential)" : "fisheye (equidistant, Kannala-Brandt)";
+/// The lens models' names, in words (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(LensModel) noexcept {
+  return detail::NameTable<LensModel, 2>{{{{LensModel::pinhole, "pinhole (radial-tangential)"},
+                                           {LensModel::fisheye, "fisheye (equidistant, Kannala-Brandt)"}}}};
 }
+[[nodiscard]] constexpr std::string_view to_string(LensModel m) noexcept { return names_of(m).name(m); }
 
 /// Intrinsics and distortion of one camera. An aggregate: build it with designated
 /// initializers and call `validate()` (the readers of io/calibration.hpp do).

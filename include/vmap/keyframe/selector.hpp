@@ -94,16 +94,16 @@ enum class KeyReason : std::uint8_t {
   verification_failed,  ///< no F-matrix (too few matches, no model, too few inliers)
 };
 
-[[nodiscard]] constexpr std::string_view to_string(KeyReason r) noexcept {
-  switch (r) {
-    case KeyReason::none: return "similar to the key image";
-    case KeyReason::first_frame: return "first frame";
-    case KeyReason::below_threshold: return "similarity below tau";
-    case KeyReason::bound_below_threshold: return "match bound below tau (verification skipped)";
-    case KeyReason::verification_failed: return "verification failed";
-  }
-  return "unknown";
+/// The reasons' names, in words (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(KeyReason) noexcept {
+  using R = KeyReason;
+  return detail::NameTable<KeyReason, 5>{{{{R::none, "similar to the key image"},
+                                           {R::first_frame, "first frame"},
+                                           {R::below_threshold, "similarity below tau"},
+                                           {R::bound_below_threshold, "match bound below tau (verification skipped)"},
+                                           {R::verification_failed, "verification failed"}}}};
 }
+[[nodiscard]] constexpr std::string_view to_string(KeyReason r) noexcept { return names_of(r).name(r); }
 
 /// What push() did with one frame.
 struct FrameResult {

@@ -40,6 +40,7 @@
 #include <vmap/lcd/place_decision.hpp>
 #include <vmap/lcd/place_ranking.hpp>
 #include <vmap/place/consistency.hpp>
+#include <vmap/place/match.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -65,15 +66,16 @@ enum class CandidateIndex : std::uint8_t {
   brute_force,  ///< every frame older than the window
 };
 
-/// tree, tree_ranked, bow, all (core/names.hpp): the names `vmap loops --rank` and the
-/// Python module take. brute_force, the enumerator's own name, reads back too; `all` is
-/// the one written.
+/// tree, tree_ranked, bow, brute_force (core/names.hpp): the enumerators' own names, which
+/// `vmap loops --rank` and the Python module take. `all`, brute_force's old name, still
+/// reads back (no file stores these names: the formats keep the enumerator's number) until
+/// the next release; the front ends say so when it is given.
 [[nodiscard]] constexpr auto names_of(CandidateIndex) noexcept {
   return detail::NameTable<CandidateIndex, 5>{{{{CandidateIndex::tree, "tree"},
                                                 {CandidateIndex::tree_ranked, "tree_ranked"},
                                                 {CandidateIndex::bow, "bow"},
-                                                {CandidateIndex::brute_force, "all"},
-                                                {CandidateIndex::brute_force, "brute_force"}}}};
+                                                {CandidateIndex::brute_force, "brute_force"},
+                                                {CandidateIndex::brute_force, "all"}}}};
 }
 [[nodiscard]] constexpr std::string_view to_string(CandidateIndex c) noexcept { return names_of(c).name(c); }
 
@@ -140,17 +142,17 @@ enum class CandidateStage : std::uint8_t {
   not_a_revisit,        ///< verified, but the camera never left its place
 };
 
-[[nodiscard]] constexpr std::string_view to_string(CandidateStage s) noexcept {
-  switch (s) {
-    case CandidateStage::chosen: return "chosen";
-    case CandidateStage::not_in_top_k: return "not in top k";
-    case CandidateStage::below_bow_score: return "below bag-of-words score";
-    case CandidateStage::verification_failed: return "verification failed";
-    case CandidateStage::weaker: return "less confidence than the chosen one";
-    case CandidateStage::not_a_revisit: return "not a revisit";
-  }
-  return "unknown";
+/// The stages' names, in words (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(CandidateStage) noexcept {
+  using S = CandidateStage;
+  return detail::NameTable<CandidateStage, 6>{{{{S::chosen, "chosen"},
+                                                {S::not_in_top_k, "not in top k"},
+                                                {S::below_bow_score, "below bag-of-words score"},
+                                                {S::verification_failed, "verification failed"},
+                                                {S::weaker, "less confidence than the chosen one"},
+                                                {S::not_a_revisit, "not a revisit"}}}};
 }
+[[nodiscard]] constexpr std::string_view to_string(CandidateStage s) noexcept { return names_of(s).name(s); }
 
 /// One candidate that reached the ranking or verification stage.
 struct PlaceCandidate {
@@ -411,16 +413,16 @@ class LoopEngine {
           d.candidates = older;
         }
         if (d.candidates == 0) break;
-        const std::vector<RankedFrame> ranked = ranker_.rank(
+        const std::vector<PlaceMatch<std::size_t>> ranked = ranker_.rank(
             *bow, options_.top_k, options_.index == CandidateIndex::tree_ranked ? &leaf : nullptr, older);
         d.not_in_top_k = d.candidates - std::min(d.candidates, ranked.size());
-        for (const RankedFrame& r : ranked) {
+        for (const PlaceMatch<std::size_t>& r : ranked) {
           if (r.score < options_.min_bow_score) {
             ++d.below_bow_score;
-            d.considered.push_back({r.frame, r.score, 0, 0.0, CandidateStage::below_bow_score});
+            d.considered.push_back({r.id, r.score, 0, 0.0, CandidateStage::below_bow_score});
             continue;
           }
-          to_verify.emplace_back(r.frame, r.score);
+          to_verify.emplace_back(r.id, r.score);
         }
         break;
       }
@@ -440,25 +442,25 @@ class LoopEngine {
     return d;
   }
 
-  /// Where image features `q` were taken, among every frame added: the best `top` frames
+  /// Where image features `q` were taken, among every frame added: the best `top_k` frames
   /// by bag-of-words score are verified and decided; without a ranker every one of the
   /// `unranked` frames the lookup knows (default: the frames added). No revisit rule, no
   /// temporal consistency: a single image. `decision` overrides the options' decision for
   /// this query.
   template <FeatureLookup L>
-  PlaceDecision localize(const Features& q, std::size_t top, const L& lookup,
+  PlaceDecision localize(const Features& q, std::size_t top_k, const L& lookup,
                          std::optional<std::size_t> unranked = std::nullopt,
                          const PlaceDecisionOptions* decision = nullptr) const {
     const PlaceDecisionOptions& dec = decision ? *decision : options_.decision;
     if (decision) detail::check_place_decision_options(*decision, "LoopEngine::localize");
-    detail::check(top >= 1, "LoopEngine::localize: top must be >= 1");
+    detail::check(top_k >= 1, "LoopEngine::localize: top_k must be >= 1");
     PlaceDecision d;
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<std::pair<std::size_t, double>> to_verify;
     std::optional<typename Rank::Bow> bow;
     if (ranker_.ready()) {
       bow = ranker_.describe(q);
-      for (const RankedFrame& r : ranker_.rank(*bow, top, nullptr)) to_verify.emplace_back(r.frame, r.score);
+      for (const PlaceMatch<std::size_t>& r : ranker_.rank(*bow, top_k, nullptr)) to_verify.emplace_back(r.id, r.score);
       d.candidates = frames_;
       d.not_in_top_k = frames_ - std::min(frames_, to_verify.size());
     } else {

@@ -47,9 +47,12 @@ enum class PlaceModel : std::uint8_t {
   essential,    ///< a calibrated camera, 5 degrees of freedom
 };
 
-[[nodiscard]] constexpr std::string_view to_string(PlaceModel m) noexcept {
-  return m == PlaceModel::essential ? "essential" : "fundamental";
+/// fundamental, essential (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(PlaceModel) noexcept {
+  return detail::NameTable<PlaceModel, 2>{
+      {{{PlaceModel::fundamental, "fundamental"}, {PlaceModel::essential, "essential"}}}};
 }
+[[nodiscard]] constexpr std::string_view to_string(PlaceModel m) noexcept { return names_of(m).name(m); }
 
 /// What one verified pair says about "same place?".
 struct PlaceEvidence {
@@ -72,16 +75,15 @@ enum class PlaceStatus : std::uint8_t {
   not_a_revisit,        ///< the best candidate is the place the camera never left
 };
 
-[[nodiscard]] constexpr std::string_view to_string(PlaceStatus s) noexcept {
-  switch (s) {
-    case PlaceStatus::accepted: return "accepted";
-    case PlaceStatus::unknown_place: return "unknown place";
-    case PlaceStatus::ambiguous: return "ambiguous";
-    case PlaceStatus::too_little_evidence: return "too little evidence";
-    case PlaceStatus::not_a_revisit: return "not a revisit";
-  }
-  return "unknown";
+/// The statuses' names, in words (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(PlaceStatus) noexcept {
+  return detail::NameTable<PlaceStatus, 5>{{{{PlaceStatus::accepted, "accepted"},
+                                             {PlaceStatus::unknown_place, "unknown place"},
+                                             {PlaceStatus::ambiguous, "ambiguous"},
+                                             {PlaceStatus::too_little_evidence, "too little evidence"},
+                                             {PlaceStatus::not_a_revisit, "not a revisit"}}}};
 }
+[[nodiscard]] constexpr std::string_view to_string(PlaceStatus s) noexcept { return names_of(s).name(s); }
 
 /// Why a decision has its status, one value per case, so that a program can act on it
 /// (wait for more frames, move the camera, retrain) without reading the text. The five

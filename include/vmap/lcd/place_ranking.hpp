@@ -9,6 +9,7 @@
 #include <vmap/core/features.hpp>
 #include <vmap/place/bow.hpp>
 #include <vmap/place/database.hpp>
+#include <vmap/place/match.hpp>
 #include <vmap/place/vocabulary.hpp>
 
 #include <opencv2/core.hpp>
@@ -23,28 +24,22 @@
 
 namespace vmap {
 
-/// One frame of the ranked list a ranker returns.
-struct RankedFrame {
-  std::size_t frame = 0;
-  double score = 0.0;  ///< bag-of-words score, higher is more similar
-};
-
 /// What the ranked candidate sources need from a place-recognition index: a bag of
 /// words per frame (computed once, when the frame is pushed), an inverted file the
-/// detector adds frames to when they leave the window, and a top-n query that may be
+/// detector adds frames to when they leave the window, and a top-k query that may be
 /// restricted to a set of frames (the tree's leaf). PlaceRanker below adapts the place/ layer;
 /// a test may script one.
 template <class R>
 concept PlaceRanking = std::move_constructible<R> &&
-    requires(R& r, const R& cr, const Features& f, const typename R::Bow& bow, std::size_t id, std::size_t n,
+    requires(R& r, const R& cr, const Features& f, const typename R::Bow& bow, std::size_t id, std::size_t k,
              const std::vector<std::size_t>* only) {
       typename R::Bow;
       { cr.ready() } -> std::convertible_to<bool>;                      // can describe and rank
       { cr.describe(f) } -> std::same_as<typename R::Bow>;              // the frame's bag of words
       { r.add(id, bow) };                                               // indexes a frame
-      // Best first among the indexed frames with id < below (only == nullptr) or among
-      // `*only`.
-      { cr.rank(bow, n, only, id) } -> std::same_as<std::vector<RankedFrame>>;
+      // Best first among the indexed frames with id < before (only == nullptr) or among
+      // `*only`; the id is the frame's index.
+      { cr.rank(bow, k, only, id) } -> std::same_as<std::vector<PlaceMatch<std::size_t>>>;
       { cr.similarity(bow, id) } -> std::convertible_to<double>;        // score against an indexed frame
       { cr.similarity(id, id) } -> std::convertible_to<double>;         // score of two indexed frames
       { cr.memory_bytes() } -> std::convertible_to<std::size_t>;        // the index's memory
@@ -97,19 +92,20 @@ class BasicPlaceRanker {
 
   void add(std::size_t frame, const Bow& bow) { database_.add(static_cast<Id>(frame), bow); }
 
-  /// The `n` best-scoring indexed frames, best first: among `*only` when given, else
-  /// among those with an id below `below`.
-  [[nodiscard]] std::vector<RankedFrame> rank(const Bow& bow, std::size_t n, const std::vector<std::size_t>* only,
-                                              std::size_t below = static_cast<std::size_t>(-1)) const {
+  /// The `top_k` best-scoring indexed frames, best first: among `*only` when given, else
+  /// among those with an id < `before`.
+  [[nodiscard]] std::vector<PlaceMatch<std::size_t>> rank(const Bow& bow, std::size_t top_k,
+                                                          const std::vector<std::size_t>* only,
+                                                          std::size_t before = static_cast<std::size_t>(-1)) const {
     QueryFilter<Id> filter;
     if (only) {
       filter.only.emplace();
       for (std::size_t id : *only) filter.only->push_back(static_cast<Id>(id));
-    } else if (below != static_cast<std::size_t>(-1)) {
-      filter.exclude_from = static_cast<Id>(below);
+    } else if (before != static_cast<std::size_t>(-1)) {
+      filter.before = static_cast<Id>(before);
     }
-    std::vector<RankedFrame> out;
-    for (const auto& m : database_.query(bow, n, filter)) out.push_back({static_cast<std::size_t>(m.id), m.score});
+    std::vector<PlaceMatch<std::size_t>> out;
+    for (const auto& m : database_.query(bow, top_k, filter)) out.push_back({static_cast<std::size_t>(m.id), m.score});
     return out;
   }
 

@@ -7,6 +7,7 @@
 // so that every level can be measured and tested on one machine.
 
 #include <vmap/core/error.hpp>
+#include <vmap/core/name_table.hpp>
 
 #include <cstdlib>
 #include <optional>
@@ -23,20 +24,18 @@ enum class HammingLevel {
   avx512,    ///< AVX-512F + VPOPCNTDQ: 512-bit XOR + popcount, 16 train descriptors at a time
 };
 
-[[nodiscard]] constexpr std::string_view to_string(HammingLevel level) noexcept {
-  switch (level) {
-    case HammingLevel::portable: return "portable";
-    case HammingLevel::popcnt: return "popcnt";
-    case HammingLevel::avx2: return "avx2";
-    case HammingLevel::avx512: return "avx512";
-  }
-  return "?";
+/// portable, popcnt, avx2, avx512 (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(HammingLevel) noexcept {
+  return detail::NameTable<HammingLevel, 4>{{{{HammingLevel::portable, "portable"},
+                                              {HammingLevel::popcnt, "popcnt"},
+                                              {HammingLevel::avx2, "avx2"},
+                                              {HammingLevel::avx512, "avx512"}}}};
 }
+[[nodiscard]] constexpr std::string_view to_string(HammingLevel level) noexcept { return names_of(level).name(level); }
 
 /// The level named `name` (portable, popcnt, avx2, avx512); an Error naming `where` otherwise.
 [[nodiscard]] inline HammingLevel parse_hamming_level(std::string_view name, std::string_view where) {
-  for (const HammingLevel l : {HammingLevel::portable, HammingLevel::popcnt, HammingLevel::avx2, HammingLevel::avx512})
-    if (name == to_string(l)) return l;
+  if (const auto level = from_string<HammingLevel>(name)) return *level;
   detail::fail(std::string(where) + ": unknown Hamming kernel level '" + std::string(name) +
                "' (expected portable, popcnt, avx2 or avx512)");
 }

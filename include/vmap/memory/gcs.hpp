@@ -41,7 +41,7 @@ struct MemoryGcs {
   [[nodiscard]] std::string bytes() const {
     detail::BinaryWriter w;
     const BowHistogramOptions& h = options.histogram;
-    w.i32(h.vocabulary.words);
+    w.i32(h.vocabulary.branching);  // depth is always 1: not stored
     w.i32(h.vocabulary.iterations);
     w.u64(h.vocabulary.max_descriptors);
     w.u64(h.vocabulary.seed);
@@ -65,7 +65,7 @@ struct MemoryGcs {
   /// at least 3, each winning a neuron of the network.
   [[nodiscard]] static MemoryGcs read(detail::BinaryReader& r, const std::vector<OdometryPose>& poses) {
     MemoryGcsOptions o;
-    o.histogram.vocabulary.words = r.i32("histogram words");
+    o.histogram.vocabulary.branching = r.i32("histogram words");
     o.histogram.vocabulary.iterations = r.i32("histogram iterations");
     o.histogram.vocabulary.max_descriptors = static_cast<std::size_t>(r.u64("histogram max_descriptors"));
     o.histogram.vocabulary.seed = r.u64("histogram seed");

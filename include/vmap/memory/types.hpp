@@ -87,9 +87,9 @@ struct MemoryOptions {
   /// the revisit rule. `index` is used with detections (tree or tree_ranked); without,
   /// the memory ranks every key image by bag of words (bow).
   LoopOptions loops{};
-  /// localize() verifies the best `localize_candidates` key images by BoW score (>= 1)
+  /// localize() verifies the best `localize_top_k` key images by BoW score (>= 1)
   /// and decides with loops.decision.
-  std::size_t localize_candidates = 5;
+  std::size_t localize_top_k = 5;
   /// The label-tree loop detection, used when frames are pushed with detections.
   MemoryLabelOptions labels{};
 };

@@ -169,7 +169,7 @@ class VisualMemory {
   }
 
   /// Where `image` was taken (visual-map paper, sec. 1): key images ranked by BoW score
-  /// (every key image while no vocabulary exists yet), the best `localize_candidates`
+  /// (every key image while no vocabulary exists yet), the best `localize_top_k`
   /// verified, and the loop engine's place decision (loops.decision) over them: the key
   /// image it shows, or "unknown place" / "ambiguous" / "too little evidence" with the
   /// reason. `decision` overrides loops.decision for this query.

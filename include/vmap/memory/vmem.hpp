@@ -13,7 +13,7 @@
 //             (f64 tau, u8 rule, u8 fast path), u8 image storage, i32 JPEG quality, u64
 //             vocabulary_after, the vocabulary tree's (i32 branching, i32 depth, i32
 //             iterations, u64 max_descriptors, u64 seed), u8 scoring, the loop options
-//             (lcd/loop_engine.hpp, write_loop_options), u64 localize_candidates, the
+//             (lcd/loop_engine.hpp, write_loop_options), u64 localize_top_k, the
 //             label options (u64 sample, f64 min/max influence, u32 n + n x i32 order)
 //     "keys"  u64 frames pushed, u32 key images m, m x key record (u64 frame index, f64
 //             time s, i64 time ns, str name, features as in map files, u8 image kind

@@ -10,6 +10,7 @@
 // non-negative weights can be scored.
 
 #include <vmap/core/error.hpp>
+#include <vmap/core/name_table.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -59,14 +60,13 @@ enum class BowScoring {
   cosine  ///< <v, w> / (|v|_2 |w|_2)
 };
 
-[[nodiscard]] inline const char* to_string(BowScoring s) noexcept {
-  switch (s) {
-    case BowScoring::l1: return "l1";
-    case BowScoring::l2: return "l2";
-    case BowScoring::cosine: return "cosine";
-  }
-  return "?";
+/// l1, l2, cosine (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(BowScoring) noexcept {
+  return detail::NameTable<BowScoring, 3>{
+      {{{BowScoring::l1, "l1"}, {BowScoring::l2, "l2"}, {BowScoring::cosine, "cosine"}}}};
 }
+/// A C string (every name is a literal), for messages built with std::string's +.
+[[nodiscard]] inline const char* to_string(BowScoring s) noexcept { return names_of(s).name(s).data(); }
 
 namespace detail {
 

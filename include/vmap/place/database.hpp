@@ -22,6 +22,7 @@
 #include <vmap/io/binary.hpp>
 #include <vmap/place/bow.hpp>
 #include <vmap/place/detail/format.hpp>
+#include <vmap/place/match.hpp>
 
 #include <algorithm>
 #include <bit>
@@ -43,26 +44,19 @@
 namespace vmap {
 
 template <class Id = std::uint32_t>
-struct PlaceMatch {
-  Id id{};
-  double score = 0.0;  ///< in (0, 1], of the database's BowScoring
-
-  friend bool operator==(const PlaceMatch&, const PlaceMatch&) = default;
-};
-
-template <class Id = std::uint32_t>
 struct QueryFilter {
   /// Only these ids are candidates (e.g. the frames of a label-tree leaf); ids not in
   /// the database are ignored. Unset: every image.
   std::optional<std::vector<Id>> only{};
-  /// Ids >= this are ignored (the most recent frames, trivially similar to the query).
-  std::optional<Id> exclude_from{};
+  /// Only ids < this are candidates: the most recent frames (from `before` on) are
+  /// trivially similar to the query. Unset: no bound.
+  std::optional<Id> before{};
 };
 
 /// Inverted-file place database.
 ///
 /// Costs: `add` O(|bow| + log size); `erase` O(sum of the posting lists of its words);
-/// `query` O(sum of the posting lists of the query's words + candidates log top_n), or,
+/// `query` O(sum of the posting lists of the query's words + candidates log top_k), or,
 /// with a small `only` set, O(|only| (|q| + |v|)) by scoring those images directly
 /// (whichever the lists' lengths say is cheaper; both give the same scores).
 ///
@@ -125,14 +119,14 @@ class PlaceDatabase {
     slot_of_.clear();
   }
 
-  /// The `top_n` images of highest score among those sharing a word with `q` and passing
+  /// The `top_k` images of highest score among those sharing a word with `q` and passing
   /// the filter, best first; equal scores by increasing id.
-  [[nodiscard]] std::vector<PlaceMatch<Id>> query(const BowVector& q, std::size_t top_n,
+  [[nodiscard]] std::vector<PlaceMatch<Id>> query(const BowVector& q, std::size_t top_k,
                                                   const QueryFilter<Id>& filter = {}) const {
     detail::check_bow(q, words_, "PlaceDatabase::query");
     std::vector<PlaceMatch<Id>> out;
     const double norm = detail::scoring_norm(q, scoring_);
-    if (top_n == 0 || norm <= 0.0 || slot_of_.empty()) return out;
+    if (top_k == 0 || norm <= 0.0 || slot_of_.empty()) return out;
     std::vector<BowEntry> qn;
     qn.reserve(q.size());
     std::size_t work = 0;  // posting entries the inverted file would visit
@@ -146,7 +140,7 @@ class PlaceDatabase {
     // vector scores 1 against itself up to 1e-16 and not 1e-8 (1 - sqrt(1 - dot)
     // would turn 1e-8 into 1e-4).
     const double qnorm = scoring_ == BowScoring::l1 ? 1.0 : BowVector{qn}.l2_norm();
-    auto excluded = [&](const Id& id) { return filter.exclude_from && !(id < *filter.exclude_from); };
+    auto excluded = [&](const Id& id) { return filter.before && !(id < *filter.before); };
     auto keep = [&](std::uint32_t slot, double shared) {
       const Slot& s = slots_[slot];
       if (shared > 0.0 && !excluded(s.id))
@@ -187,9 +181,9 @@ class PlaceDatabase {
       if (a.score != b.score) return a.score > b.score;
       return a.id < b.id;
     };
-    if (out.size() > top_n) {
-      std::partial_sort(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(top_n), out.end(), better);
-      out.resize(top_n);
+    if (out.size() > top_k) {
+      std::partial_sort(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(top_k), out.end(), better);
+      out.resize(top_k);
     } else {
       std::sort(out.begin(), out.end(), better);
     }

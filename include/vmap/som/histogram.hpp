@@ -45,39 +45,51 @@ inline void normalise(Eigen::VectorXf& v, HistogramNorm n) {
 }
 }  // namespace detail
 
-/// The flat vocabulary a BowHistogram learns: `words` k-majority clusters of the
-/// training descriptors (a BinaryVocabularyTree of branching `words` and depth 1).
-struct VocabularyOptions {
-  int words = 64;                       ///< vocabulary size k, 2..4096 (empty clusters are dropped)
-  int iterations = 8;                   ///< k-majority rounds, >= 1
-  std::size_t max_descriptors = 20000;  ///< random sample learned from, >= words (bounds the time)
-  std::uint64_t seed = 1;               ///< the sample and the k-means++ seeding
-};
-
 struct BowHistogramOptions {
-  VocabularyOptions vocabulary{};       ///< how the words are learned in fit()
+  /// How the words are learned in fit(): a flat vocabulary, i.e. a BinaryVocabularyTree
+  /// of depth 1 (any other depth is an Error) whose `branching` k-majority clusters of the
+  /// training descriptors are the words (2..4096; empty clusters are dropped). Fewer words
+  /// and descriptors than a place-recognition tree's defaults: a GCS map is learned from
+  /// a few hundred images. A designated initializer starts from VocabularyTreeOptions'
+  /// own defaults (depth 3), so it names all five: `{.branching = 128, .depth = 1, ...}`.
+  VocabularyTreeOptions vocabulary{.branching = 64, .depth = 1, .iterations = 8, .max_descriptors = 20000, .seed = 1};
   HistogramNorm norm = HistogramNorm::l2;  ///< normalisation of the word counts
 };
+
+namespace detail {
+/// BowHistogramOptions a histogram can learn with, or an Error naming the option.
+inline void check_bow_histogram_options(const BowHistogramOptions& o) {
+  check(o.vocabulary.depth == 1, [&] {
+    return "BowHistogramOptions.vocabulary.depth must be 1 (the histogram's vocabulary is flat), got " +
+           std::to_string(o.vocabulary.depth);
+  });
+  try {
+    check_vocabulary_tree_options(o.vocabulary);
+  } catch (const Error& e) {
+    fail(e.kind(), std::string("BowHistogramOptions.vocabulary: ") + e.what());
+  }
+}
+}  // namespace detail
 
 /// Bag of binary words: counts of each vocabulary word among the image's descriptors,
 /// normalised. An image without descriptors gives the zero vector.
 class BowHistogram {
  public:
-  explicit BowHistogram(const BowHistogramOptions& options = {}) : options_(options) {}
+  explicit BowHistogram(const BowHistogramOptions& options = {}) : options_(options) {
+    detail::check_bow_histogram_options(options_);
+  }
+  /// Over a vocabulary already learned (a loaded map): the options' vocabulary is only
+  /// used by a later fit(), which checks it.
   BowHistogram(BinaryVocabularyTree vocabulary, const BowHistogramOptions& options = {})
       : options_(options), vocabulary_(std::move(vocabulary)) {}
 
   /// Learns the vocabulary from the training images' descriptors.
   void fit(const std::vector<Features>& training) {
+    detail::check_bow_histogram_options(options_);
     std::vector<cv::Mat> d;
     d.reserve(training.size());
     for (const auto& f : training) d.push_back(f.descriptors);
-    const auto& o = options_.vocabulary;
-    vocabulary_ = BinaryVocabularyTree::learn(d, {.branching = o.words,
-                                                  .depth = 1,
-                                                  .iterations = o.iterations,
-                                                  .max_descriptors = o.max_descriptors,
-                                                  .seed = o.seed});
+    vocabulary_ = BinaryVocabularyTree::learn(d, options_.vocabulary);
   }
 
   [[nodiscard]] Eigen::VectorXf operator()(const Features& f) const {

@@ -8,6 +8,7 @@
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
+#include <vmap/core/name_table.hpp>
 
 #include <opencv2/core.hpp>
 
@@ -18,7 +19,11 @@ namespace vmap {
 
 enum class WallSide { left, right };
 
-inline std::string_view to_string(WallSide s) { return s == WallSide::left ? "left" : "right"; }
+/// left, right (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(WallSide) noexcept {
+  return detail::NameTable<WallSide, 2>{{{{WallSide::left, "left"}, {WallSide::right, "right"}}}};
+}
+[[nodiscard]] constexpr std::string_view to_string(WallSide s) noexcept { return names_of(s).name(s); }
 
 struct NearestWall {
   WallSide side = WallSide::left;  ///< the half with more keypoints (left on a tie)

@@ -249,7 +249,7 @@ TEST_CASE("memory: invalid options are errors naming the option") {
   };
   CHECK(with([](vmap::MemoryOptions& o) { o.vocabulary_after = 0; }).find("vocabulary_after") != std::string::npos);
   CHECK(with([](vmap::MemoryOptions& o) { o.loops.top_k = 0; }).find("loops.top_k") != std::string::npos);
-  CHECK(with([](vmap::MemoryOptions& o) { o.localize_candidates = 0; }).find("localize_candidates") != std::string::npos);
+  CHECK(with([](vmap::MemoryOptions& o) { o.localize_top_k = 0; }).find("localize_top_k") != std::string::npos);
   CHECK(with([](vmap::MemoryOptions& o) { o.loops.decision.min_inliers = -1; }).find("min_inliers") != std::string::npos);
   CHECK(with([](vmap::MemoryOptions& o) { o.loops.decision.min_confidence = 2; }).find("min_confidence") !=
         std::string::npos);

@@ -237,7 +237,7 @@ TEST_CASE("memory GCS: trained on the key images' poses, answers a position, the
   CHECK(!mem.has_gcs());
   CHECK(!mem.localize(frames[5].image).position);
   vmap::MemoryGcsOptions g;
-  g.histogram.vocabulary.words = 16;
+  g.histogram.vocabulary.branching = 16;
   g.gcs.max_cells = 8;
   g.gcs.seed = 3;
   const auto stats = mem.train_gcs(g);
@@ -442,7 +442,7 @@ TEST_CASE("memory files v2: truncated or flipped label, GCS and policy sections 
   auto mem = make_memory(small_options());
   for (std::size_t i = 0; i < 30; ++i) mem.push(frames[i], pose_of(i), scripted(i));
   vmap::MemoryGcsOptions g;
-  g.histogram.vocabulary.words = 8;
+  g.histogram.vocabulary.branching = 8;
   g.gcs.max_cells = 5;
   (void)mem.train_gcs(g);
   REQUIRE(mem.label_schema().has_value());

@@ -37,7 +37,7 @@ RandomDb random_db(std::size_t n, std::size_t words, vmap::BowScoring s, unsigne
 
 }  // namespace
 
-TEST_CASE("the inverted file returns exactly the brute-force top-n") {
+TEST_CASE("the inverted file returns exactly the brute-force top k") {
   for (auto scoring : {vmap::BowScoring::l1, vmap::BowScoring::l2, vmap::BowScoring::cosine})
     for (std::size_t n : {1U, 10U, 100U, 1000U}) {
       CAPTURE(vmap::to_string(scoring));
@@ -69,11 +69,11 @@ TEST_CASE("filters: only a candidate set, and excluding recent ids") {
   std::mt19937 rng(5);
   for (int qi = 0; qi < 10; ++qi) {
     const vmap::BowVector q = vmap::test::random_bow(60, 20, rng);
-    // exclude_from: ids >= 150 ignored
-    std::vector<bool> below(300, false);
-    for (std::size_t i = 0; i < 150; ++i) below[i] = true;
-    vmap::test::check_same_ranking(r.db.query(q, 10, {.exclude_from = 150U}),
-                                   vmap::test::brute_force_top(r.bows, r.present, q, 10, vmap::BowScoring::l1, &below));
+    // before: only ids < 150 are candidates
+    std::vector<bool> early(300, false);
+    for (std::size_t i = 0; i < 150; ++i) early[i] = true;
+    vmap::test::check_same_ranking(r.db.query(q, 10, {.before = 150U}),
+                                   vmap::test::brute_force_top(r.bows, r.present, q, 10, vmap::BowScoring::l1, &early));
     // only: a small set (scored directly) and a large one (through the inverted file),
     // with an unknown id and a repeated one that must not matter
     for (std::size_t k : {3U, 250U}) {
@@ -91,7 +91,7 @@ TEST_CASE("filters: only a candidate set, and excluding recent ids") {
       // both filters at once
       std::vector<bool> both(300, false);
       for (std::size_t i = 0; i < 300; ++i) both[i] = allowed[i] && i < 100;
-      vmap::test::check_same_ranking(r.db.query(q, 10, {.only = only, .exclude_from = 100U}),
+      vmap::test::check_same_ranking(r.db.query(q, 10, {.only = only, .before = 100U}),
                                      vmap::test::brute_force_top(r.bows, r.present, q, 10, vmap::BowScoring::l1, &both));
     }
     CHECK(r.db.query(q, 10, {.only = std::vector<std::uint32_t>{}}).empty());
@@ -169,7 +169,7 @@ TEST_CASE("signed ids, any order of insertion, ties by increasing id") {
   CHECK(m[0].score == doctest::Approx(1.0));
   CHECK(m[3].id == 5);
   CHECK(m[3].score == doctest::Approx(0.5));
-  const auto ex = db.query(a, 10, {.exclude_from = 2});
+  const auto ex = db.query(a, 10, {.before = 2});
   REQUIRE(ex.size() == 1);
   CHECK(ex[0].id == -3);
 }
@@ -190,7 +190,7 @@ TEST_CASE("concurrent const queries give the serial results") {
         for (int round = 0; round < 5; ++round)
           for (std::size_t i = 0; i < queries.size(); ++i) {
             const std::size_t k = (i + static_cast<std::size_t>(t) * 7) % queries.size();
-            const auto filter = k % 3 == 0 ? vmap::QueryFilter<std::uint32_t>{.exclude_from = 1000U}
+            const auto filter = k % 3 == 0 ? vmap::QueryFilter<std::uint32_t>{.before = 1000U}
                                            : vmap::QueryFilter<std::uint32_t>{};
             const auto got = r.db.query(queries[k], 10, filter);
             const auto want = k % 3 == 0 ? std::vector<vmap::PlaceMatch<std::uint32_t>>{} : serial[k];

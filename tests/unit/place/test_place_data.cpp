@@ -53,7 +53,7 @@ double top3_hit_rate(const Vocabulary& voc, const std::vector<cv::Mat>& frames,
     const vmap::BowVector b = voc.transform(frames[q]);
     if (gt.has_loop(q) && q > window) {
       ++queries;
-      const auto top = db.query(b, 3, {.exclude_from = static_cast<std::uint32_t>(q - window)});
+      const auto top = db.query(b, 3, {.before = static_cast<std::uint32_t>(q - window)});
       for (const auto& m : top)
         if (gt(q, m.id)) {
           ++hits;

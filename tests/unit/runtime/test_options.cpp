@@ -32,13 +32,13 @@ TEST_CASE("option names: keywords as given, flags with dashes, a front end's own
   CHECK(error_of([&] { (void)vmap::parse_option<vmap::KeyRule>("next", "rule", "rule", cli); }) ==
         "--rule: unknown rule 'next' (choose previous or current)");
   CHECK(error_of([&] { (void)vmap::parse_option<CandidateIndex>("fast", "rank", "", py); }) ==
-        "rank: unknown 'fast' (choose tree, tree_ranked, bow, all or brute_force)");
+        "rank: unknown 'fast' (choose tree, tree_ranked, bow or brute_force)");
 }
 
-TEST_CASE("candidate sources: the command line's names, brute_force read too, all written") {
+TEST_CASE("candidate sources: the enumerators' names, the old spelling all read too") {
   for (auto c : {CandidateIndex::tree, CandidateIndex::tree_ranked, CandidateIndex::bow, CandidateIndex::brute_force})
     CHECK(vmap::from_string<CandidateIndex>(vmap::to_string(c)) == c);
-  CHECK(vmap::to_string(CandidateIndex::brute_force) == "all");
+  CHECK(vmap::to_string(CandidateIndex::brute_force) == "brute_force");
   CHECK(vmap::from_string<CandidateIndex>("all") == CandidateIndex::brute_force);
   CHECK(vmap::from_string<CandidateIndex>("brute_force") == CandidateIndex::brute_force);
   CHECK(vmap::to_string(CandidateIndex::tree_ranked) == "tree_ranked");

@@ -10,6 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include <random>
+#include <string>
 #include <vector>
 
 namespace {
@@ -95,11 +96,24 @@ TEST_CASE("BowHistogram counts words exactly and normalises") {
   // fit() learns a vocabulary of the asked size, and is deterministic for a seed
   const cv::Mat data = noisy_copies(random_centres(8, 2), 30, 0.05, 4);
   std::vector<vmap::Features> training{with_descriptors(data.rowRange(0, 120)), with_descriptors(data.rowRange(120, 240))};
-  vmap::BowHistogram a({.vocabulary = {.words = 8, .seed = 9}}), b({.vocabulary = {.words = 8, .seed = 9}});
+  vmap::BowHistogramOptions options;
+  options.vocabulary.branching = 8;
+  options.vocabulary.seed = 9;
+  vmap::BowHistogram a(options), b(options);
   a.fit(training);
   b.fit(training);
   CHECK(a.dimension() == 8);
   CHECK(a(training[0]) == b(training[0]));
+
+  // The histogram's vocabulary is flat: another depth is an Error naming the option.
+  options.vocabulary.depth = 2;
+  try {
+    vmap::BowHistogram deep(options);
+    FAIL("a vocabulary of depth 2 was accepted");
+  } catch (const vmap::Error& e) {
+    CHECK(e.kind() == vmap::ErrorKind::invalid_argument);
+    CHECK(std::string(e.what()).find("BowHistogramOptions.vocabulary.depth") != std::string::npos);
+  }
 }
 
 TEST_CASE("GridHistogram: exact shares and responses per cell") {

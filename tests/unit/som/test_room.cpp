@@ -95,7 +95,9 @@ TEST_CASE("virtual room: nearest-wall choice and localization error below a boun
   MESSAGE("nearest wall = outer wall in " << right << " of " << rec.choices.size());
   CHECK(right >= static_cast<long>(rec.choices.size() * 7 / 10));
 
-  vmap::AkazeBowLocalizer loc(vmap::AkazeDescriptor{}, vmap::BowHistogram({.vocabulary = {.words = 64, .seed = 1}}),
+  vmap::BowHistogramOptions histogram;  // seed 1 and depth 1: the defaults
+  histogram.vocabulary.branching = 64;
+  vmap::AkazeBowLocalizer loc(vmap::AkazeDescriptor{}, vmap::BowHistogram(histogram),
                               {.lambda = 40, .max_cells = 100, .seed = 1});
   const auto report = loc.train(rec.images, rec.odometry);
   CHECK(report.gcs.cells == 100);
@@ -138,7 +140,9 @@ TEST_CASE("TUM fr3 cabinet: train on even frames, localize odd ones" * doctest::
     (i % 2 ? query : train).push_back(images[i]);
     (i % 2 ? query_truth : train_poses).push_back(poses[i].pose);
   }
-  vmap::AkazeBowLocalizer loc(vmap::AkazeDescriptor{}, vmap::BowHistogram({.vocabulary = {.words = 128, .seed = 1}}),
+  vmap::BowHistogramOptions histogram;  // seed 1 and depth 1: the defaults
+  histogram.vocabulary.branching = 128;
+  vmap::AkazeBowLocalizer loc(vmap::AkazeDescriptor{}, vmap::BowHistogram(histogram),
                               {.lambda = 20, .max_cells = 40, .seed = 1});
   loc.train(train, train_poses);
   std::vector<double> e1, e2;

@@ -11,6 +11,7 @@
 // file's size and BagLimits before anything is allocated.
 
 #include <vmap/core/error.hpp>
+#include <vmap/core/name_table.hpp>
 
 #include <cstdint>
 #include <filesystem>
@@ -28,9 +29,13 @@ enum class BagFormat : std::uint8_t {
   mcap,            ///< MCAP (`.mcap`), ROS 2's default storage since Iron
 };
 
-[[nodiscard]] constexpr std::string_view to_string(BagFormat f) noexcept {
-  return f == BagFormat::ros1 ? "ROS 1 bag 2.0" : f == BagFormat::rosbag2_sqlite ? "rosbag2 sqlite3" : "MCAP";
+/// The containers' names (core/names.hpp).
+[[nodiscard]] constexpr auto names_of(BagFormat) noexcept {
+  return detail::NameTable<BagFormat, 3>{{{{BagFormat::ros1, "ROS 1 bag 2.0"},
+                                           {BagFormat::rosbag2_sqlite, "rosbag2 sqlite3"},
+                                           {BagFormat::mcap, "MCAP"}}}};
 }
+[[nodiscard]] constexpr std::string_view to_string(BagFormat f) noexcept { return names_of(f).name(f); }
 
 /// Bounds of what one read may allocate.
 struct BagLimits {

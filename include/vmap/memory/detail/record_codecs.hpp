@@ -44,7 +44,7 @@ namespace vmap::detail {
 /// check of the constructor and of every reader.
 [[nodiscard]] inline MemoryOptions checked_memory_options(MemoryOptions o) {
   check(o.vocabulary_after >= 1, "MemoryOptions.vocabulary_after must be >= 1");
-  check(o.localize_candidates >= 1, "MemoryOptions.localize_candidates must be >= 1");
+  check(o.localize_top_k >= 1, "MemoryOptions.localize_top_k must be >= 1");
   check_loop_options(o.loops, "MemoryOptions.loops");
   check(o.loops.top_k >= 1, "MemoryOptions.loops.top_k must be >= 1");
   check(o.jpeg_quality >= 1 && o.jpeg_quality <= 100,
@@ -100,7 +100,7 @@ inline void write_memory_options(BinaryWriter& w, const MemoryOptions& o, ImageS
   write_vocabulary_tree_options(w, o.vocabulary);
   w.u8(static_cast<std::uint8_t>(o.scoring));
   write_loop_options(w, o.loops);
-  w.u64(o.localize_candidates);
+  w.u64(o.localize_top_k);
   w.u64(o.labels.sample);
   w.f64(o.labels.influence.min_influence);
   w.f64(o.labels.influence.max_influence);
@@ -136,7 +136,7 @@ inline MemoryOptions checked_or_corrupt(BinaryReader& r, const MemoryOptions& o)
 inline MemoryOptions read_memory_options(BinaryReader& r) {
   MemoryOptions o = read_options_head(r);
   o.loops = read_loop_options(r, "MemoryOptions.loops");
-  o.localize_candidates = static_cast<std::size_t>(r.u64("localize_candidates"));
+  o.localize_top_k = static_cast<std::size_t>(r.u64("localize_top_k"));
   o.labels.sample = static_cast<std::size_t>(r.u64("label sample"));
   o.labels.influence.min_influence = r.f64("min_influence");
   o.labels.influence.max_influence = r.f64("max_influence");
@@ -154,7 +154,7 @@ inline MemoryOptions read_options_v4(BinaryReader& r, std::uint32_t version) {
   o.loops.window = static_cast<std::size_t>(r.u64("window"));
   o.loops.top_k = static_cast<std::size_t>(r.u64("top k"));
   o.loops.decision.min_inliers = r.i32("min_loop_inliers");
-  o.localize_candidates = static_cast<std::size_t>(r.u64("localize_candidates"));
+  o.localize_top_k = static_cast<std::size_t>(r.u64("localize_top_k"));
   // Version 2 had a separate floor for localization; version 3 one floor for both.
   if (const int again = r.i32("min_localize_inliers"); version >= 3 && again != o.loops.decision.min_inliers)
     r.corrupt("the two inlier floors differ");

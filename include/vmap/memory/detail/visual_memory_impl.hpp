@@ -232,13 +232,13 @@ MemoryLocalization VisualMemory<D, M, E, S>::localize(const cv::Mat& image, cons
     const auto lookup = [this](std::size_t k) -> const Features& { return feature_ref(k); };
     PlaceDecision d;
     if (engine_) {
-      d = engine_->localize(q, options_.localize_candidates, lookup, std::nullopt, decision);
+      d = engine_->localize(q, options_.localize_top_k, lookup, std::nullopt, decision);
     } else {
       // No vocabulary yet: every key image is verified, by an engine without a ranker.
       LoopOptions o = options_.loops;
       o.index = CandidateIndex::brute_force;
       const Engine all(selector_.front_end().matcher(), selector_.front_end().estimator(), o);
-      d = all.localize(q, options_.localize_candidates, lookup, map.keys.size(), decision);
+      d = all.localize(q, options_.localize_top_k, lookup, map.keys.size(), decision);
     }
     out.status = d.status;
     out.reason_code = d.reason_code;
