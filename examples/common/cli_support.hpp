@@ -75,15 +75,6 @@ class UsageError : public vmap::Error {
 
 [[noreturn]] inline void usage_error(const std::string& what) { throw UsageError(what); }
 
-/// The one-line note of an old spelling that still works for one release, on stderr so
-/// that --json output stays parseable: "vmap loops: note: --index is now --rank; --index
-/// will be removed in the next release".
-inline void old_spelling(const std::string& command, const std::string& old, const std::string& now,
-                         const std::string& removed) {
-  std::fprintf(stderr, "vmap %s: note: %s is now %s; %s will be removed in the next release\n", command.c_str(),
-               old.c_str(), now.c_str(), removed.c_str());
-}
-
 /// The inputs of the running subcommand, so that an error from deep inside OpenCV or the
 /// standard library is still reported with the input it came from.
 inline std::vector<std::string>& current_inputs() {

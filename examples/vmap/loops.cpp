@@ -442,6 +442,13 @@ int run(LoopsArgs& a, const CLI::App& app) {
   return 0;
 }
 
+/// The one-line note of an old spelling that still works for one release, on stderr so
+/// that --json output stays parseable: "vmap loops: note: --index is now --rank; --index
+/// will be removed in the next release".
+void old_spelling(const char* old, const char* now, const char* removed) {
+  std::fprintf(stderr, "vmap loops: note: %s is now %s; %s will be removed in the next release\n", old, now, removed);
+}
+
 std::function<int()> setup(CLI::App& app) {
   auto a = std::make_shared<LoopsArgs>();
   auto& d = a->options.detector;
@@ -530,12 +537,12 @@ std::function<int()> setup(CLI::App& app) {
   app.add_flag("--edges", a->edges, "With --memory: list every loop edge (default: a summary and the 5 strongest)");
   return [a, &app] {
     if (app.count("--index") > 0) {
-      ex::old_spelling("loops", "--index", "--rank", "--index");
+      old_spelling("--index", "--rank", "--index");
       if (app.count("--rank") > 0) ex::usage_error("give --rank only (--index is its old spelling)");
       // The JSON's options name the value by its new spelling, as if --rank had been given.
       app.get_option("--rank")->add_result(a->rank);
     }
-    if (a->rank == "all") ex::old_spelling("loops", "--rank all", "--rank brute_force", "all");
+    if (a->rank == "all") old_spelling("--rank all", "--rank brute_force", "all");
     if (!a->memory.empty()) return run_memory(*a, app);
     if (a->input.empty()) ex::usage_error("give INPUT (the frames) or --memory M (a saved visual memory)");
     return run(*a, app);
