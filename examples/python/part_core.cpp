@@ -4,6 +4,7 @@
 #include "bindings.hpp"
 
 #include <vmap/hooks/any_descriptor.hpp>
+#include <vmap/io/bag/bag.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/matching/brute_force.hpp>
 #include <vmap/runtime/policies.hpp>

@@ -1,6 +1,8 @@
 #pragma once
 
-// Umbrella header: everything vmap offers. Include the area headers directly to keep
+// Umbrella header: everything vmap offers but the run-time layer (runtime/*.hpp, the
+// stacks chosen at run time, which a program without vmap::stacks would instantiate in
+// every file that includes them). Including the area headers directly instead keeps
 // compile times down.
 
 #include <vmap/version.hpp>
@@ -28,7 +30,9 @@
 
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/files.hpp>
+#include <vmap/io/bag/bag.hpp>
 #include <vmap/io/calibration.hpp>
+#include <vmap/io/exports.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/image.hpp>
 #include <vmap/io/poses.hpp>
@@ -44,6 +48,8 @@
 #include <vmap/hooks/pair_matcher_adapters.hpp>
 #include <vmap/hooks/precomputed_detections.hpp>
 #include <vmap/hooks/xfeat.hpp>
+#include <vmap/hooks/xfeat_dense.hpp>
+#include <vmap/hooks/xfeat_fine.hpp>
 
 #include <vmap/place/bow.hpp>
 #include <vmap/place/consistency.hpp>
@@ -74,4 +80,6 @@
 #include <vmap/som/virtual_room.hpp>
 
 // memory/: the visual memory a robot keeps (key images, loops, localization, resume)
+#include <vmap/memory/replace.hpp>
+#include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>

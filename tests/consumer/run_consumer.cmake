@@ -1,5 +1,6 @@
-# Installs the vmap build tree into a scratch prefix, then configures, builds and runs a
-# separate project that finds it with find_package(vmap). Any failure fails the test.
+# Configures, builds and runs a separate project that uses vmap: either vmap's build
+# tree installed into a scratch prefix and found with find_package(vmap), or (with
+# VMAP_SOURCE_DIR) vmap's source tree added as its subfolder. Any failure fails the test.
 file(REMOVE_RECURSE "${WORK_DIR}")
 set(prefix "${WORK_DIR}/prefix")
 function(run)
@@ -9,9 +10,17 @@ function(run)
   endif()
   message(STATUS "${out}")
 endfunction()
-run(${CMAKE_COMMAND} --install "${VMAP_BUILD_DIR}" --prefix "${prefix}")
-run(${CMAKE_COMMAND} -S "${CONSUMER_SOURCE_DIR}" -B "${WORK_DIR}/build" -G "${GENERATOR}"
-    "-DCMAKE_PREFIX_PATH=${prefix}" -DCMAKE_BUILD_TYPE=Release)
+if(VMAP_SOURCE_DIR)
+  # vmap's source tree as a subfolder of the consumer (add_subdirectory). vmap's own
+  # targets are then compiled by this build, with no optimisation: what is checked is
+  # that the targets are there and link, not the speed of the program.
+  run(${CMAKE_COMMAND} -S "${CONSUMER_SOURCE_DIR}" -B "${WORK_DIR}/build" -G "${GENERATOR}"
+      "-DVMAP_SOURCE_DIR=${VMAP_SOURCE_DIR}" -DCMAKE_BUILD_TYPE=)
+else()
+  run(${CMAKE_COMMAND} --install "${VMAP_BUILD_DIR}" --prefix "${prefix}")
+  run(${CMAKE_COMMAND} -S "${CONSUMER_SOURCE_DIR}" -B "${WORK_DIR}/build" -G "${GENERATOR}"
+      "-DCMAKE_PREFIX_PATH=${prefix}" -DCMAKE_BUILD_TYPE=Release)
+endif()
 run(${CMAKE_COMMAND} --build "${WORK_DIR}/build")
 run("${WORK_DIR}/build/vmap_consumer" "${SAMPLE_FRAMES}" "${WORK_DIR}/map.vmap")
 if(EXISTS "${WORK_DIR}/build/vmap_consumer_stacks")
@@ -27,7 +36,7 @@ elseif(VMAP_BAGS)
 endif()
 # The Python package, when the build made one: installed beside the headers, it imports
 # from the prefix (the extension, its stubs and py.typed) and reads the sample frames.
-if(PYTHON_EXECUTABLE AND PYTHON_INSTALL_DIR)
+if(PYTHON_EXECUTABLE AND PYTHON_INSTALL_DIR AND NOT VMAP_SOURCE_DIR)
   foreach(_f __init__.py __init__.pyi py.typed)
     if(NOT EXISTS "${prefix}/${PYTHON_INSTALL_DIR}/vmap/${_f}")
       message(FATAL_ERROR "cmake --install did not put vmap/${_f} in ${prefix}/${PYTHON_INSTALL_DIR}")

@@ -1,6 +1,7 @@
 // Frame sources on files made by the test: folders, lists, TUM lists, videos, and the
 // errors a user meets (missing paths, empty folders, corrupt frames).
 #include <vmap/io/atomic_file.hpp>
+#include <vmap/io/detail/natural_order.hpp>
 #include <vmap/io/frame_source.hpp>
 
 #include "support/images.hpp"

@@ -40,13 +40,6 @@
 
 namespace vmap {
 
-/// A calibration found in a bag and where it came from.
-struct BagCamera {
-  Camera camera;
-  std::string topic;   ///< "/cam0/camera_info"
-  std::string source;  ///< "bag 'x.bag', topic '/cam0/camera_info' (its first CameraInfo)"
-};
-
 namespace detail {
 
 inline constexpr std::string_view mcap_magic{"\x89MCAP0\r\n", 8};

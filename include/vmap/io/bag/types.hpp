@@ -12,6 +12,7 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/core/name_table.hpp>
+#include <vmap/geometry/camera.hpp>
 
 #include <cstdint>
 #include <filesystem>
@@ -56,6 +57,13 @@ struct BagTopic {
   std::string type;      ///< "sensor_msgs/Image" (ROS 1) or "sensor_msgs/msg/Image" (ROS 2)
   std::string encoding;  ///< serialization: "ros1" or "cdr"
   std::uint64_t messages = 0;
+};
+
+/// A calibration found in a bag and where it came from.
+struct BagCamera {
+  Camera camera;
+  std::string topic;   ///< "/cam0/camera_info"
+  std::string source;  ///< "bag 'x.bag', topic '/cam0/camera_info' (its first CameraInfo)"
 };
 
 /// What a bag holds, from its index where it has one (else from reading it through).
