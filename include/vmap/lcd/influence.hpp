@@ -9,6 +9,7 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/lcd/label_vector.hpp>
+#include <vmap/lcd/options.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -18,17 +19,6 @@
 #include <vector>
 
 namespace vmap {
-
-/// The band of eq. 5 influence a label must fall in to become a tree level.
-struct InfluenceOptions {
-  /// Labels present in fewer than this share of the sample are dropped. 0.05: a label
-  /// must be seen in at least one frame in twenty, so one-off (often false) detections
-  /// never shape the tree.
-  double min_influence = 0.05;
-  /// Labels present in more than this share are dropped. 0.95: a label in (nearly)
-  /// every frame puts every frame on the same side, so its level is wasted depth.
-  double max_influence = 0.95;
-};
 
 namespace detail {
 

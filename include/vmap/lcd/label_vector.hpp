@@ -8,6 +8,7 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/hooks/detection.hpp>
+#include <vmap/lcd/options.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -22,11 +23,6 @@ namespace vmap {
 
 /// c(i) in {0, 1} for each label of a LabelSchema, in the schema's order (eq. 3-4).
 using LabelVector = std::vector<std::uint8_t>;
-
-/// Which detections count (eq. 3: "keep labels with score >= 0.5").
-struct LabelVectorOptions {
-  float min_score = 0.5f;  ///< detections below this score are ignored, in [0, 1]
-};
 
 namespace detail {
 

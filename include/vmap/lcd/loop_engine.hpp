@@ -37,6 +37,7 @@
 #include <vmap/io/binary.hpp>
 #include <vmap/lcd/binary_tree.hpp>
 #include <vmap/lcd/label_vector.hpp>
+#include <vmap/lcd/options.hpp>
 #include <vmap/lcd/place_decision.hpp>
 #include <vmap/lcd/place_ranking.hpp>
 #include <vmap/place/consistency.hpp>
@@ -57,80 +58,6 @@
 #include <vector>
 
 namespace vmap {
-
-/// Where loop candidates come from (see the file comment).
-enum class CandidateIndex : std::uint8_t {
-  tree,         ///< every frame of the leaf after backtracking (LFM-LCD)
-  tree_ranked,  ///< the leaf's frames ranked by bag-of-words score, top k verified
-  bow,          ///< every indexed frame ranked by bag-of-words score, top k verified
-  brute_force,  ///< every frame older than the window
-};
-
-/// tree, tree_ranked, bow, brute_force (core/names.hpp): the enumerators' own names, which
-/// `vmap loops --rank` and the Python module take. `all`, brute_force's old name, still
-/// reads back (no file stores these names: the formats keep the enumerator's number) until
-/// the next release; the front ends say so when it is given.
-[[nodiscard]] constexpr auto names_of(CandidateIndex) noexcept {
-  return detail::NameTable<CandidateIndex, 5>{{{{CandidateIndex::tree, "tree"},
-                                                {CandidateIndex::tree_ranked, "tree_ranked"},
-                                                {CandidateIndex::bow, "bow"},
-                                                {CandidateIndex::brute_force, "brute_force"},
-                                                {CandidateIndex::brute_force, "all"}}}};
-}
-[[nodiscard]] constexpr std::string_view to_string(CandidateIndex c) noexcept { return names_of(c).name(c); }
-
-/// The candidate sources that rank by bag-of-words score (and so need a ranker).
-[[nodiscard]] constexpr bool ranks(CandidateIndex c) noexcept {
-  return c == CandidateIndex::tree_ranked || c == CandidateIndex::bow;
-}
-
-/// The candidate sources that need label vectors.
-[[nodiscard]] constexpr bool uses_labels(CandidateIndex c) noexcept {
-  return c == CandidateIndex::tree || c == CandidateIndex::tree_ranked;
-}
-
-/// The most previous queries temporal consistency may ask for (LoopOptions).
-inline constexpr std::size_t max_temporal_consistency = 1000;
-
-/// The options of the loop engine, the same names for LoopDetector, VisualMemory and the
-/// command line.
-struct LoopOptions {
-  LabelVectorOptions labels{};  ///< score threshold of eq. 3 (0.5)
-  /// Frames j with j + window >= i are never candidates of frame i: consecutive frames
-  /// are trivially similar. 10 as in the rtabmap_loop baseline. The revisit rule, not
-  /// the window, decides whether an older frame is a revisit.
-  std::size_t window = 10;
-  /// m of sec. 3.3: backtrack up the tree until at least this many candidates. 5: a
-  /// leaf of a handful of frames is one place seen from a few positions.
-  std::size_t min_candidates = 5;
-  /// tree_ranked: the paper's tree with bag-of-words ranking (needs labels and a
-  /// vocabulary); VisualMemory uses bow for frames without detections.
-  CandidateIndex index = CandidateIndex::tree_ranked;
-  /// Ranked sources: how many of the best-scored candidates are verified. 2: the top k
-  /// at which bow keeps brute force's recall on rtabmap_loop (see
-  /// examples/bench/bench_loops.cpp; results in examples/results/loops.md). ORB-SLAM3
-  /// verifies 3.
-  std::size_t top_k = 2;
-  /// Ranked sources: candidates scoring below this bag-of-words score are not verified.
-  /// 0: none is dropped for its score.
-  double min_bow_score = 0.0;
-  /// A loop stands when the previous `temporal_consistency` queries also matched places
-  /// within `temporal_tolerance` frames of the next one's (DBoW2's islands). 0 (off) by
-  /// default: one confirmation costs true loops while the decision alone keeps precision
-  /// 1.0 on the shared sequences (see examples/loops.md, "The place decision"; results in
-  /// examples/results/loops.md).
-  std::size_t temporal_consistency = 0;
-  std::size_t temporal_tolerance = 3;
-  /// The revisit rule: candidate j was left when a frame between j and the query scores
-  /// below `left_ratio` times the query's bag-of-words score against j. 0.2: frames of a
-  /// resting camera with sensor noise and sub-pixel jitter score well above it against
-  /// each other (their ORB keypoints move); at 0.2 a noisy still clip closes no loop
-  /// (tests/unit/lcd/test_place_decision.cpp) and rtabmap_loop keeps its recall (see
-  /// examples/loops.md, "The place decision"; results in examples/results/loops.md).
-  double left_ratio = 0.2;
-  /// The decision (confidence threshold, evidence).
-  PlaceDecisionOptions decision{};
-};
 
 /// Why one candidate frame was not the answer.
 enum class CandidateStage : std::uint8_t {

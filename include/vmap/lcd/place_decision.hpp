@@ -27,6 +27,7 @@
 #include <vmap/core/features.hpp>
 #include <vmap/core/name_table.hpp>
 #include <vmap/core/verification.hpp>
+#include <vmap/lcd/options.hpp>
 
 #include <opencv2/core.hpp>
 
@@ -130,35 +131,6 @@ enum class DecisionReason : std::uint8_t {
     default: return PlaceStatus::too_little_evidence;
   }
 }
-
-struct PlaceDecisionOptions {
-  /// A place is accepted at this confidence or above (0.5: a significance of
-  /// half_significance with the inliers spread over the image). Chosen from the evidence
-  /// of true and false candidates on every shared sequence (examples/loops.md, "The
-  /// place decision"; the figures in examples/results/loops.md).
-  double min_confidence = 0.5;
-  /// Below this many inliers a model is not weighed at all (too little evidence).
-  int min_inliers = 12;
-  /// The probability that one tentative match fits the model by chance. 0.1: the rate
-  /// at which mutual ORB matches of unrelated image pairs fit a fundamental matrix at
-  /// 1 px beyond the minimal sample (examples/results/loops.md, "How the decision's
-  /// defaults were chosen").
-  double chance_inlier_rate = 0.1;
-  /// The significance at which the confidence is 0.5: a chance alignment of 1 in 10^12,
-  /// above the strongest unrelated pair of the shared sequences (the same page).
-  double half_significance = 12.0;
-  /// Grid (cells per side) for the spread of the inliers.
-  int spread_grid = 4;
-  /// A spread at or above this fraction of cells leaves the confidence as it is; below,
-  /// the confidence is scaled down in proportion (inliers bunched in one patch). 0.35:
-  /// the only false loop above the confidence threshold on the shared sequences (its
-  /// inliers on a quarter of the cells, on tum_fr3_cabinet_kf) falls below it while
-  /// rtabmap_loop keeps its recall at precision 1.0 (the same page).
-  double full_spread = 0.35;
-  /// Two places are ambiguous when the second's confidence is at least this fraction of
-  /// the best's and both reach min_confidence.
-  double ambiguity_ratio = 0.9;
-};
 
 namespace detail {
 

@@ -1,9 +1,10 @@
 #pragma once
 
-// The visual memory's public value types (memory/visual_memory.hpp): its options, what
-// push() and localize() answer, its sessions and graph. Apart from the memory itself so
-// that a program that only passes these around (a configuration, a log of answers) does
-// not compile the memory's templates.
+// The visual memory's public value types (memory/visual_memory.hpp): its options
+// (memory/options.hpp, which a program that only configures a memory includes alone),
+// what push() and localize() answer, its sessions and graph. Apart from the memory itself
+// so that a program that only passes these around (a log of answers) does not compile
+// the memory's templates.
 
 #include <vmap/core/verification.hpp>
 #include <vmap/geometry/pose2.hpp>
@@ -11,6 +12,7 @@
 #include <vmap/lcd/influence.hpp>
 #include <vmap/lcd/loop_engine.hpp>
 #include <vmap/lcd/place_decision.hpp>
+#include <vmap/memory/options.hpp>
 #include <vmap/place/bow.hpp>
 #include <vmap/place/vocabulary_tree.hpp>
 #include <vmap/som/gcs.hpp>
@@ -29,14 +31,6 @@
 
 namespace vmap {
 
-/// How key images' pixels are kept and saved.
-enum class ImageStorage : std::uint8_t {
-  none,  ///< features only (the smallest memory; localize and loops need no pixels)
-  png,   ///< lossless
-  jpeg,  ///< lossy, MemoryOptions::jpeg_quality (smaller than PNG; sizes per key image: see
-         ///< examples/bench/bench_memory.cpp; results in examples/results/memory.md)
-};
-
 /// An odometry pose given with a frame: none, SE(2) (a ground robot) or SE(3).
 using OdometryPose = std::variant<std::monostate, Pose2, cv::Affine3d>;
 
@@ -46,53 +40,6 @@ namespace detail {
 /// uninitialised storage (a false -Wmaybe-uninitialized).
 inline const OdometryPose no_odometry_pose{};
 }  // namespace detail
-
-/// LFM-LCD's label tree inside the memory (Zhu et al., Sensors 2021, sec. 3.2-3.3;
-/// examples/methods.md, sec. 2), used when the frames are pushed with object detections.
-/// (Eq. 3's score threshold, the candidate source and m of sec. 3.3 are the loop
-/// engine's: MemoryOptions::loops.labels, .index, .min_candidates.)
-struct MemoryLabelOptions {
-  /// The label order, large objects first. Given: it is the schema from the first key
-  /// image on, as given (no eq. 5 pruning). Empty: the schema is learned online (below).
-  std::vector<int> order{};
-  /// Without an order: the detections of the first `sample` key images are the eq. 5
-  /// sample M; the schema (labels by mean box area, pruned to the `influence` band) is
-  /// then fixed, the tree built and the earlier key images caught up in order (>= 1).
-  std::size_t sample = 20;
-  InfluenceOptions influence{};
-};
-
-/// The GCS localizer trained on the memory's key images (Trujillo-Romero 2024,
-/// examples/methods.md, sec. 3): their own features -> BowHistogram -> GCS -> a pose per neuron.
-struct MemoryGcsOptions {
-  BowHistogramOptions histogram{};  ///< its vocabulary is learned from the key images
-  GcsOptions gcs{};                 ///< the network's options (max_cells 100, seed 1)
-};
-
-struct MemoryOptions {
-  /// The key-image selector's options (tau, eq. 6 / Algorithm 1 rule, fast path).
-  /// `keep_images` is set from `images`.
-  SelectorOptions selector{};
-  ImageStorage images = ImageStorage::none;
-  int jpeg_quality = 90;  ///< 1..100, for ImageStorage::jpeg
-  /// Without a vocabulary given to the constructor, one is learned from the descriptors
-  /// of the first `vocabulary_after` key images (>= 1); loop detection then runs for
-  /// those in order, as if the vocabulary had been there from the start.
-  std::size_t vocabulary_after = 20;
-  /// The learned vocabulary's shape (DBoW2-like tree; default 10^3 words, seeded).
-  VocabularyTreeOptions vocabulary{};
-  BowScoring scoring = BowScoring::l1;
-  /// The loop engine's options (lcd/loop_engine.hpp): the window of recent key images
-  /// that are not candidates, the top k verified, the decision (confidence threshold),
-  /// the revisit rule. `index` is used with detections (tree or tree_ranked); without,
-  /// the memory ranks every key image by bag of words (bow).
-  LoopOptions loops{};
-  /// localize() verifies the best `localize_top_k` key images by BoW score (>= 1)
-  /// and decides with loops.decision.
-  std::size_t localize_top_k = 5;
-  /// The label-tree loop detection, used when frames are pushed with detections.
-  MemoryLabelOptions labels{};
-};
 
 /// A verified match between two key images (a loop edge) or a query and a key image.
 struct PlaceLink {

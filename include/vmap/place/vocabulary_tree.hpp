@@ -58,6 +58,7 @@
 #include <vmap/place/detail/format.hpp>
 #include <vmap/place/detail/hamming_rows.hpp>
 #include <vmap/place/detail/large_array.hpp>
+#include <vmap/place/options.hpp>
 
 #include <opencv2/core.hpp>
 #include <opencv2/core/hal/hal.hpp>
@@ -167,14 +168,6 @@ enum class BowWeighting : std::uint8_t {
 inline BowScoring bow_scoring_of(BowWeighting w) noexcept {
   return w == BowWeighting::tf_idf_l1 || w == BowWeighting::idf_l1 ? BowScoring::l1 : BowScoring::l2;
 }
-
-struct VocabularyTreeOptions {
-  int branching = 10;                   ///< children per node k, 2..4096
-  int depth = 3;                        ///< levels L, 1..64 (at most k^L words)
-  int iterations = 10;                  ///< k-means / k-majority rounds per node, >= 1
-  std::size_t max_descriptors = 200000; ///< random sample learned from (bounds the time), >= branching
-  std::uint64_t seed = 1;               ///< the sample and the k-means++ seeding
-};
 
 namespace detail {
 

@@ -16,6 +16,7 @@
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/binary.hpp>
+#include <vmap/som/options.hpp>
 
 #include <Eigen/Core>
 
@@ -65,22 +66,6 @@ static_assert(VectorMetric<EuclideanDistance, Eigen::VectorXf>);
 static_assert(VectorMetric<ManhattanDistance, Eigen::VectorXd>);
 
 // ---- options and results ------------------------------------------------------------
-
-/// Options with the paper's names (Trujillo-Romero 2024, Algorithm 1; Fritzke 1994).
-struct GcsOptions {
-  double eps_b = 0.06;   ///< winner learning rate, in (0, 1]
-  double eps_n = 0.002;  ///< learning rate of the winner's direct neighbours, in (0, 1]
-  double alpha = 0.005;  ///< every counter is multiplied by (1 - alpha) each step, in (0, 1)
-  std::size_t lambda = 100;  ///< a cell is inserted every lambda adaptation steps, >= 1
-  /// Removal threshold on a cell's estimated probability density relative to the mean
-  /// density (1 = average; see GrowingCellStructures::relative_density). Cells below it
-  /// are removed every lambda steps. 0 disables removal: the paper's maps hold more
-  /// neurons than training images, so most cells rarely win and must be kept.
-  double eta = 0.0;
-  std::size_t max_cells = 100;    ///< training stops after the epoch in which this many cells exist
-  std::size_t max_epochs = 1000;  ///< ... or after this many passes over the data, >= 1
-  std::uint64_t seed = 1;         ///< initial cells and the order of inputs
-};
 
 /// What happened to the topology; passed to a training observer.
 enum class GcsEvent { inserted, removed };

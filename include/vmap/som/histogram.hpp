@@ -12,6 +12,7 @@
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
 #include <vmap/place/vocabulary.hpp>
+#include <vmap/som/options.hpp>
 
 #include <Eigen/Core>
 
@@ -36,25 +37,12 @@ concept FeatureHistogram =
          { h.dimension() } -> std::convertible_to<std::size_t>;  // its length (0 before fit)
        };
 
-enum class HistogramNorm { l1, l2 };
-
 namespace detail {
 inline void normalise(Eigen::VectorXf& v, HistogramNorm n) {
   const float s = n == HistogramNorm::l1 ? v.lpNorm<1>() : v.norm();
   if (s > 0.0f) v /= s;
 }
 }  // namespace detail
-
-struct BowHistogramOptions {
-  /// How the words are learned in fit(): a flat vocabulary, i.e. a BinaryVocabularyTree
-  /// of depth 1 (any other depth is an Error) whose `branching` k-majority clusters of the
-  /// training descriptors are the words (2..4096; empty clusters are dropped). Fewer words
-  /// and descriptors than a place-recognition tree's defaults: a GCS map is learned from
-  /// a few hundred images. A designated initializer starts from VocabularyTreeOptions'
-  /// own defaults (depth 3), so it names all five: `{.branching = 128, .depth = 1, ...}`.
-  VocabularyTreeOptions vocabulary{.branching = 64, .depth = 1, .iterations = 8, .max_descriptors = 20000, .seed = 1};
-  HistogramNorm norm = HistogramNorm::l2;  ///< normalisation of the word counts
-};
 
 namespace detail {
 /// BowHistogramOptions a histogram can learn with, or an Error naming the option.
