@@ -148,8 +148,9 @@ VMAP_INLINE std::vector<ListEntry> read_euroc_csv(const std::filesystem::path& f
   return out;
 }
 
-/// The times of image files named by numbers (see the top of this file), or nothing when
-/// one name is not a number: seconds, and the same in nanoseconds (exact from the digits).
+/// The times of image files named by numbers (see the top of io/frame_source.hpp), or
+/// nothing when one name is not a number: seconds, and the same in nanoseconds (exact
+/// from the digits).
 struct NameTimes {
   std::vector<double> seconds;
   std::vector<std::int64_t> ns;
