@@ -12,6 +12,8 @@
 #include <vmap/io/bag/bag.hpp>
 #include <vmap/io/sqlite.hpp>
 
+#include <opencv2/core.hpp>
+
 #include <mcap/writer.hpp>
 
 #include <unistd.h>
@@ -31,13 +33,9 @@
 
 namespace vmap::test {
 
-inline std::string read_bytes(const std::filesystem::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-inline void write_bytes(const std::filesystem::path& p, std::string_view bytes) {
-  std::ofstream(p, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+/// Two images with the same size, type and pixels.
+inline bool same_pixels(const cv::Mat& a, const cv::Mat& b) {
+  return a.size() == b.size() && a.type() == b.type() && cv::norm(a, b, cv::NORM_INF) == 0;
 }
 
 /// The folder of the ROS 1 test bags, written once per test run by Debian's rosbag.

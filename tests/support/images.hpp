@@ -26,4 +26,12 @@ inline cv::Mat textured_image(std::uint64_t seed = 3, cv::Size size = {640, 480}
   return img;
 }
 
+/// Frame k of a test sequence: a 64x48 textured image (seed `seed + k`) whose top-left
+/// pixel encodes k.
+inline cv::Mat numbered_image(int k, std::uint64_t seed) {
+  cv::Mat img = textured_image(static_cast<std::uint64_t>(k) + seed, {64, 48});
+  img.at<std::uint8_t>(0, 0) = static_cast<std::uint8_t>(k);
+  return img;
+}
+
 }  // namespace vmap::test

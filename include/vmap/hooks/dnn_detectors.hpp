@@ -45,9 +45,10 @@ struct DnnDetectorOptions {
 namespace detail {
 
 inline void check_detector_options(const DnnDetectorOptions& o, std::string_view who) {
-  check(std::isfinite(o.score_threshold) && o.score_threshold >= 0.0f && o.score_threshold <= 1.0f,
-        std::string(who) + ": DnnDetectorOptions.score_threshold must be in [0, 1], got " +
-            std::to_string(o.score_threshold));
+  check(std::isfinite(o.score_threshold) && o.score_threshold >= 0.0f && o.score_threshold <= 1.0f, [&] {
+    return std::string(who) + ": DnnDetectorOptions.score_threshold must be in [0, 1], got " +
+           std::to_string(o.score_threshold);
+  });
   (void)nms({}, o.nms);  // validates the NMS options now rather than at the first image
 }
 

@@ -141,7 +141,7 @@ class XFeatNet {
   XFeatNet(const std::filesystem::path& model, cv::Size input_size, std::string_view who)
       : who_(who), user_size_(input_size) {
     check(input_size.width >= 0 && input_size.height >= 0 && (input_size.width > 0) == (input_size.height > 0),
-          std::string(who) + ": XFeatOptions.input_size must be (0, 0) or a positive size");
+          [&] { return std::string(who) + ": XFeatOptions.input_size must be (0, 0) or a positive size"; });
     declared_ = xfeat_declared_size(model);
     net_ = DnnNet(model, who);
     // A size that is not a multiple of 8 cannot be an XFeat input (stride-8 maps).

@@ -110,9 +110,10 @@ inline void fine_input(const cv::Mat& raw_a, const cv::Mat& raw_b, const Matches
 class XFeatRefiner {
  public:
   explicit XFeatRefiner(XFeatFineOptions options) : options_(std::move(options)), net_(options_.model, who) {
-    detail::check(options_.min_confidence >= 0.0f && options_.min_confidence < 1.0f,
-                  std::string(who) + ": XFeatFineOptions.min_confidence must be in [0, 1), got " +
-                      std::to_string(options_.min_confidence));
+    detail::check(options_.min_confidence >= 0.0f && options_.min_confidence < 1.0f, [&] {
+      return std::string(who) + ": XFeatFineOptions.min_confidence must be in [0, 1), got " +
+             std::to_string(options_.min_confidence);
+    });
     for (const int rows : {1, 2}) {
       net_.forward(cv::Mat::zeros(rows, 128, CV_32F), who, expects);
       const cv::Mat& out = net_.outputs.empty() ? cv::Mat() : net_.outputs.front();

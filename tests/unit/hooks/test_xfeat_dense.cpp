@@ -7,6 +7,7 @@
 #include <vmap/matching/brute_force.hpp>
 
 #include "support/errors.hpp"
+#include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
 
 #include <doctest/doctest.h>
@@ -35,21 +36,8 @@ vmap::Features unit_vectors(int n, std::uint64_t seed) {
   return f;
 }
 
-/// The first `n` frames of the repository's TUM sample, grey.
-std::vector<cv::Mat> sample_frames(std::size_t n) {
-  vmap::FrameSourceOptions o;
-  o.end = n;
-  o.grey = true;
-  auto src = vmap::FrameSource::open(vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt", o);
-  std::vector<cv::Mat> frames;
-  while (auto f = src.next()) frames.push_back(f->image);
-  REQUIRE(frames.size() == n);
-  return frames;
-}
-
-vmap::FundamentalEstimator estimator() {
-  return vmap::FundamentalEstimator({.check_degeneracy = false, .seed = 7});
-}
+using vmap::test::memory_estimator;
+using vmap::test::sample_images;
 
 template <class Selector>
 std::vector<std::size_t> keys_of(Selector&& sel, const std::vector<cv::Mat>& frames) {
@@ -146,7 +134,7 @@ TEST_SUITE("data") {
   }
 
   TEST_CASE("XFeatDenseMatcher: the grids of Descriptor + Matcher, each image through the network once") {
-    const std::vector<cv::Mat> frames = sample_frames(4);
+    const std::vector<cv::Mat> frames = sample_images(4);
     vmap::XFeatDenseMatcher pair({.model = vmap::test::model_path("xfeat_anysize.onnx")});
     vmap::XFeatDenseDescriptor grid({.model = vmap::test::model_path("xfeat_anysize.onnx")});
     const vmap::Features f0 = grid.extract(frames[0]), f1 = grid.extract(frames[1]);
@@ -172,12 +160,12 @@ TEST_SUITE("data") {
   }
 
   TEST_CASE("XFeat dense: PairKeyframeSelector and the Descriptor stack keep the same key images") {
-    const std::vector<cv::Mat> frames = sample_frames(30);
+    const std::vector<cv::Mat> frames = sample_images(30);
     const auto model = vmap::test::model_path("xfeat_anysize.onnx");
     const vmap::SelectorOptions o{.tau = 0.35};
-    vmap::PairKeyframeSelector pair_sel(vmap::XFeatDenseMatcher({.model = model}), estimator(), o);
+    vmap::PairKeyframeSelector pair_sel(vmap::XFeatDenseMatcher({.model = model}), memory_estimator(7), o);
     vmap::KeyframeSelector feature_sel(vmap::XFeatDenseDescriptor({.model = model}), vmap::DenseMutualMatcher{},
-                                       estimator(), vmap::InlierRatio{}, o);
+                                       memory_estimator(7), vmap::InlierRatio{}, o);
     const auto a = keys_of(pair_sel, frames), b = keys_of(feature_sel, frames);
     CHECK(a == b);
     CHECK(a.size() > 2);
@@ -195,21 +183,21 @@ TEST_SUITE("data") {
   }
 
   TEST_CASE("key images are deterministic for ORB, XFeat native and XFeat dense (same input, same seed)") {
-    const std::vector<cv::Mat> frames = sample_frames(30);
+    const std::vector<cv::Mat> frames = sample_images(30);
     const auto model = vmap::test::model_path("xfeat_anysize.onnx");
     const vmap::SelectorOptions o{.tau = 0.3};
     auto orb = [&] {
-      return keys_of(vmap::KeyframeSelector(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, estimator(),
+      return keys_of(vmap::KeyframeSelector(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(7),
                                             vmap::InlierRatio{}, o),
                      frames);
     };
     auto native = [&] {
       return keys_of(vmap::KeyframeSelector(vmap::XFeatDescriptor({.model = model}), vmap::BruteForceMatcher{},
-                                            estimator(), vmap::InlierRatio{}, o),
+                                            memory_estimator(7), vmap::InlierRatio{}, o),
                      frames);
     };
     auto dense = [&] {
-      return keys_of(vmap::PairKeyframeSelector(vmap::XFeatDenseMatcher({.model = model}), estimator(), o), frames);
+      return keys_of(vmap::PairKeyframeSelector(vmap::XFeatDenseMatcher({.model = model}), memory_estimator(7), o), frames);
     };
     const auto orb1 = orb(), native1 = native(), dense1 = dense();
     CHECK(orb1 == orb());

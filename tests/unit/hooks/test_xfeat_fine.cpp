@@ -14,6 +14,7 @@
 #include <vmap/memory/visual_memory.hpp>
 
 #include "support/errors.hpp"
+#include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
 
 #include <doctest/doctest.h>
@@ -53,18 +54,8 @@ vmap::XFeatDenseOptions dense_options() { return {.model = vmap::test::model_pat
 vmap::XFeatFineOptions fine_options() { return {.model = vmap::test::model_path("xfeat_fine.onnx")}; }
 std::optional<vmap::XFeatFineOptions> refine_with() { return fine_options(); }
 
-vmap::FundamentalEstimator estimator() { return vmap::FundamentalEstimator({.check_degeneracy = false, .seed = 7}); }
-
-std::vector<cv::Mat> sample_frames(std::size_t n) {
-  vmap::FrameSourceOptions o;
-  o.end = n;
-  o.grey = true;
-  auto src = vmap::FrameSource::open(vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt", o);
-  std::vector<cv::Mat> frames;
-  while (auto f = src.next()) frames.push_back(f->image);
-  REQUIRE(frames.size() == n);
-  return frames;
-}
+using vmap::test::memory_estimator;
+using vmap::test::sample_images;
 
 }  // namespace
 
@@ -135,7 +126,7 @@ TEST_SUITE("data") {
   }
 
   TEST_CASE("XFeat* refinable grid: corner keypoints, raw descriptors; refine() runs the hand-built rows") {
-    const std::vector<cv::Mat> frames = sample_frames(2);
+    const std::vector<cv::Mat> frames = sample_images(2);
     vmap::XFeatDenseOptions o = dense_options();
     vmap::XFeatDenseDescriptor unit(o);
     o.grid = vmap::XFeatGrid::refinable;
@@ -324,13 +315,13 @@ TEST_SUITE("data") {
   }
 
   TEST_CASE("XFeat*: PairKeyframeSelector and the Descriptor + XFeatRefined stack keep the same key images") {
-    const std::vector<cv::Mat> frames = sample_frames(16);
+    const std::vector<cv::Mat> frames = sample_images(16);
     const vmap::SelectorOptions o{.tau = 0.3};
-    vmap::PairKeyframeSelector pair_sel(vmap::XFeatDenseMatcher(dense_options(), fine_options()), estimator(), o);
+    vmap::PairKeyframeSelector pair_sel(vmap::XFeatDenseMatcher(dense_options(), fine_options()), memory_estimator(7), o);
     vmap::XFeatDenseOptions ro = dense_options();
     ro.grid = vmap::XFeatGrid::refinable;
     vmap::KeyframeSelector feature_sel(vmap::XFeatDenseDescriptor(ro), vmap::DenseMutualMatcher({.normalise = true}),
-                                       vmap::XFeatRefined(refine_with(), estimator()),
+                                       vmap::XFeatRefined(refine_with(), memory_estimator(7)),
                                        vmap::InlierRatio{}, o);
     for (const cv::Mat& f : frames) {
       pair_sel.push(f);
@@ -348,7 +339,7 @@ TEST_SUITE("data") {
   }
 
   TEST_CASE("XFeat*: copies answer as the original on two threads; runs are deterministic") {
-    const std::vector<cv::Mat> frames = sample_frames(6);
+    const std::vector<cv::Mat> frames = sample_images(6);
     vmap::XFeatDenseMatcher star(dense_options(), fine_options());
     const vmap::Correspondences ref = star.match_pair(frames[0], frames[5]);
     const vmap::Correspondences again = star.match_pair(frames[0], frames[5]);
@@ -371,7 +362,7 @@ TEST_SUITE("data") {
     vmap::XFeatDenseDescriptor grid(ro);
     const vmap::Features fa = grid.extract(frames[0]), fb = grid.extract(frames[5]);
     const vmap::Matches m = vmap::DenseMutualMatcher({.normalise = true}).match(fa, fb);
-    const vmap::XFeatRefined refined(refine_with(), estimator());
+    const vmap::XFeatRefined refined(refine_with(), memory_estimator(7));
     const vmap::Verification v0 = refined.verify(fa, fb, m);
     REQUIRE(v0.ok());
     CHECK(v0.matches == static_cast<int>(m.size()));
@@ -386,7 +377,7 @@ TEST_SUITE("data") {
     const vmap::XFeatRefined copy = refined;
     CHECK(copy.verify(fa, fb, m).inlier_mask == v0.inlier_mask);
     // Same inliers as the pair matcher's correspondences verified by the same estimator.
-    CHECK(v0.inliers == estimator().verify([&] {
+    CHECK(v0.inliers == memory_estimator(7).verify([&] {
       vmap::Features f;
       for (const auto& p : ref.points_a) f.keypoints.emplace_back(p, 1.0f);
       return f;
@@ -413,7 +404,7 @@ TEST_SUITE("data") {
     ro.grid = vmap::XFeatGrid::refinable;
     const auto make = [&](const vmap::MemoryOptions& o) {
       return XFeatStarMemory(vmap::XFeatDenseDescriptor(ro), vmap::DenseMutualMatcher({.normalise = true}),
-                             vmap::XFeatRefined(refine_with(), estimator()), vmap::InlierRatio{}, o);
+                             vmap::XFeatRefined(refine_with(), memory_estimator(7)), vmap::InlierRatio{}, o);
     };
     vmap::MemoryOptions o;
     o.selector.tau = 0.3;
@@ -422,7 +413,7 @@ TEST_SUITE("data") {
     // every image (an IDF of 0).
     o.vocabulary = {.branching = 8, .depth = 3, .seed = 5};
     o.loops.window = 2;
-    const std::vector<cv::Mat> frames = sample_frames(20);
+    const std::vector<cv::Mat> frames = sample_images(20);
     auto mem = make(o);
     for (std::size_t i = 0; i < frames.size(); ++i)
       if (i != 12) mem.push(frames[i], static_cast<double>(i));
@@ -440,7 +431,7 @@ TEST_SUITE("data") {
     // Its evidence and decision are those of the loaded copy (the refinement included).
     auto back = XFeatStarMemory::deserialize(mem.serialize(), "xfeat_star.vmem", vmap::XFeatDenseDescriptor(ro),
                                              vmap::DenseMutualMatcher({.normalise = true}),
-                                             vmap::XFeatRefined(refine_with(), estimator()), vmap::InlierRatio{});
+                                             vmap::XFeatRefined(refine_with(), memory_estimator(7)), vmap::InlierRatio{});
     const auto again = back.localize(frames[12]);
     CHECK(again.status == answer.status);
     CHECK(again.confidence == answer.confidence);

@@ -30,6 +30,8 @@ using vmap::test::error_of;
 
 namespace {
 
+using vmap::test::same_pixels;
+
 /// Pixel (x, y) of channel c of message k in the test bags (write_ros1_bags.py).
 int pattern(int x, int y, int c, int k) { return (x + 2 * y + 40 * c + 7 * k) % 256; }
 
@@ -67,10 +69,6 @@ cv::Mat expected_grey(const std::string& encoding, int k) {
   cv::Mat g;
   cv::cvtColor(e, g, e.channels() == 4 ? cv::COLOR_BGRA2GRAY : cv::COLOR_BGR2GRAY);
   return g;
-}
-
-bool same_pixels(const cv::Mat& a, const cv::Mat& b) {
-  return a.size() == b.size() && a.type() == b.type() && cv::norm(a, b, cv::NORM_INF) == 0;
 }
 
 struct Read {

@@ -31,6 +31,8 @@ using vmap::test::error_of;
 
 namespace {
 
+using vmap::test::same_pixels;
+
 std::vector<vmap::Frame> frames_of(const fs::path& input, vmap::FrameSourceOptions o = {}) {
   auto src = vmap::FrameSource::open(input, o);
   std::vector<vmap::Frame> out;
@@ -38,10 +40,6 @@ std::vector<vmap::Frame> frames_of(const fs::path& input, vmap::FrameSourceOptio
   CHECK(src.skipped().empty());
   CHECK(src.warnings().empty());
   return out;
-}
-
-bool same_pixels(const cv::Mat& a, const cv::Mat& b) {
-  return a.size() == b.size() && a.type() == b.type() && cv::norm(a, b, cv::NORM_INF) == 0;
 }
 
 /// TUM rgb.txt of the 60 sample frames: (time ns, JPEG path).

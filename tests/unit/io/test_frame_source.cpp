@@ -19,22 +19,13 @@ namespace fs = std::filesystem;
 
 namespace {
 
-/// Frame k of a test sequence: a textured image whose top-left pixel encodes k.
-cv::Mat numbered_image(int k) {
-  cv::Mat img = vmap::test::textured_image(static_cast<std::uint64_t>(k) + 11, {64, 48});
-  img.at<std::uint8_t>(0, 0) = static_cast<std::uint8_t>(k);
-  return img;
-}
+using vmap::test::numbered_image;
+using vmap::test::write_bytes;
 
 std::vector<std::size_t> indices(vmap::FrameSource& s) {
   std::vector<std::size_t> out;
   while (auto f = s.next()) out.push_back(f->index);
   return out;
-}
-
-void write_text(const fs::path& p, const std::string& text) {
-  std::ofstream out(p);
-  out << text;
 }
 
 }  // namespace
@@ -50,8 +41,8 @@ TEST_CASE("natural sort orders digit runs by value") {
 
 TEST_CASE("image folder: natural order, start/end/stride, resize, grey") {
   const auto dir = vmap::test::scratch_dir("folder");
-  for (int k = 0; k < 12; ++k) cv::imwrite((dir / ("f" + std::to_string(k) + ".png")).string(), numbered_image(k));
-  write_text(dir / "notes.txt", "not an image");
+  for (int k = 0; k < 12; ++k) cv::imwrite((dir / ("f" + std::to_string(k) + ".png")).string(), numbered_image(k, 11));
+  write_bytes(dir / "notes.txt", "not an image");
 
   auto all = vmap::FrameSource::open(dir);
   CHECK(all.kind() == vmap::SourceKind::image_folder);
@@ -73,16 +64,16 @@ TEST_CASE("image folder: natural order, start/end/stride, resize, grey") {
 TEST_CASE("list files: plain paths relative to the list, and TUM rgb.txt") {
   const auto dir = vmap::test::scratch_dir("lists");
   fs::create_directories(dir / "rgb");
-  for (int k = 0; k < 4; ++k) cv::imwrite((dir / "rgb" / (std::to_string(k) + ".png")).string(), numbered_image(k));
+  for (int k = 0; k < 4; ++k) cv::imwrite((dir / "rgb" / (std::to_string(k) + ".png")).string(), numbered_image(k, 11));
 
-  write_text(dir / "plain.txt", "# my frames\nrgb/3.png\n\nrgb/1.png\n" + (dir / "rgb" / "2.png").string() + "\n");
+  write_bytes(dir / "plain.txt", "# my frames\nrgb/3.png\n\nrgb/1.png\n" + (dir / "rgb" / "2.png").string() + "\n");
   auto plain = vmap::FrameSource::open(dir / "plain.txt");
   CHECK(plain.kind() == vmap::SourceKind::image_list);
   std::vector<int> pixel;
   while (auto f = plain.next()) pixel.push_back(f->image.at<std::uint8_t>(0, 0));
   CHECK(pixel == std::vector<int>{3, 1, 2});
 
-  write_text(dir / "rgb.txt", "# color images\n# timestamp filename\n100.5 rgb/0.png\n100.25 rgb/1.png\n101 rgb/2.png\n");
+  write_bytes(dir / "rgb.txt", "# color images\n# timestamp filename\n100.5 rgb/0.png\n100.25 rgb/1.png\n101 rgb/2.png\n");
   auto tum = vmap::FrameSource::open(dir / "rgb.txt", {.grey = true});
   CHECK(tum.kind() == vmap::SourceKind::tum_rgb);
   auto f = tum.next();
@@ -99,8 +90,8 @@ TEST_CASE("list files: plain paths relative to the list, and TUM rgb.txt") {
 
 TEST_CASE("a corrupt or missing frame inside a sequence is reported and skipped") {
   const auto dir = vmap::test::scratch_dir("corrupt");
-  for (int k = 0; k < 5; ++k) cv::imwrite((dir / (std::to_string(k) + ".png")).string(), numbered_image(k));
-  write_text(dir / "2.png", "this is not a PNG");
+  for (int k = 0; k < 5; ++k) cv::imwrite((dir / (std::to_string(k) + ".png")).string(), numbered_image(k, 11));
+  write_bytes(dir / "2.png", "this is not a PNG");
   std::vector<std::string> reported;
   auto s = vmap::FrameSource::open(dir, {.on_skip = [&](const vmap::SkippedFrame& sk) { reported.push_back(sk.name); }});
   CHECK(indices(s) == std::vector<std::size_t>{0, 1, 3, 4});
@@ -110,7 +101,7 @@ TEST_CASE("a corrupt or missing frame inside a sequence is reported and skipped"
   REQUIRE(reported.size() == 1);
   CHECK(reported[0].find("2.png") != std::string::npos);
 
-  write_text(dir / "list.txt", "0.png\nmissing.png\n1.png\n");
+  write_bytes(dir / "list.txt", "0.png\nmissing.png\n1.png\n");
   auto l = vmap::FrameSource::open(dir / "list.txt");
   CHECK(indices(l) == std::vector<std::size_t>{0, 2});
   REQUIRE(l.skipped().size() == 1);
@@ -122,13 +113,13 @@ TEST_CASE("frame source errors name the input") {
   CHECK_THROWS_WITH_AS(vmap::FrameSource::open(dir / "nope.mp4"), doctest::Contains("nope.mp4' does not exist"),
                        vmap::Error);
   fs::create_directories(dir / "empty");
-  write_text(dir / "empty" / "readme.md", "no images here");
+  write_bytes(dir / "empty" / "readme.md", "no images here");
   CHECK_THROWS_WITH_AS(vmap::FrameSource::open(dir / "empty"), doctest::Contains("contains no image"), vmap::Error);
-  write_text(dir / "blank.txt", "# only a comment\n\n");
+  write_bytes(dir / "blank.txt", "# only a comment\n\n");
   CHECK_THROWS_WITH_AS(vmap::FrameSource::open(dir / "blank.txt"), doctest::Contains("names no image"), vmap::Error);
-  write_text(dir / "bogus.avi", "");
+  write_bytes(dir / "bogus.avi", "");
   CHECK_THROWS_WITH_AS(vmap::FrameSource::open(dir / "bogus.avi"), doctest::Contains("bogus.avi"), vmap::Error);
-  write_text(dir / "all_bad.txt", "x.png\ny.png\n");
+  write_bytes(dir / "all_bad.txt", "x.png\ny.png\n");
   auto bad = vmap::FrameSource::open(dir / "all_bad.txt");
   CHECK_THROWS_WITH_AS((void)bad.next(), doctest::Contains("no frame of"), vmap::Error);
   CHECK_THROWS_WITH_AS(vmap::FrameSource::open(dir / "all_bad.txt", {.stride = 0}), doctest::Contains("stride"),
@@ -147,7 +138,7 @@ TEST_CASE("video files: frames, stride and an empty video") {
     REQUIRE_MESSAGE(w.isOpened(), "OpenCV cannot write MJPG video here");
     for (int k = 0; k < 10; ++k) {
       cv::Mat bgr;
-      cv::cvtColor(numbered_image(k), bgr, cv::COLOR_GRAY2BGR);
+      cv::cvtColor(numbered_image(k, 11), bgr, cv::COLOR_GRAY2BGR);
       w.write(bgr);
     }
   }
@@ -181,8 +172,8 @@ TEST_CASE("atomic writes replace a file whole or not at all") {
   CHECK_THROWS_WITH_AS(vmap::write_file_atomically(dir / "no" / "such" / "dir.txt", "x"), doctest::Contains("cannot write"),
                        vmap::Error);
   // An image: encoded by extension, decodable afterwards.
-  vmap::write_image_atomically(dir / "img.png", numbered_image(7));
+  vmap::write_image_atomically(dir / "img.png", numbered_image(7, 11));
   CHECK(cv::imread((dir / "img.png").string(), cv::IMREAD_GRAYSCALE).at<std::uint8_t>(0, 0) == 7);
-  CHECK_THROWS_AS(vmap::write_image_atomically(dir / "img.unknownext", numbered_image(1)), vmap::Error);
+  CHECK_THROWS_AS(vmap::write_image_atomically(dir / "img.unknownext", numbered_image(1, 11)), vmap::Error);
   CHECK_THROWS_WITH_AS(vmap::read_file(dir / "absent.bin"), doctest::Contains("absent.bin"), vmap::Error);
 }

@@ -32,18 +32,10 @@ using vmap::test::error_of;
 
 namespace {
 
-void write_text(const fs::path& p, const std::string& text) {
-  std::ofstream out(p, std::ios::binary);
-  out << text;
-}
+using vmap::test::numbered_image;
+using vmap::test::write_bytes;
 
 bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
-
-cv::Mat numbered_image(int k) {
-  cv::Mat img = vmap::test::textured_image(static_cast<std::uint64_t>(k) + 3, {64, 48});
-  img.at<std::uint8_t>(0, 0) = static_cast<std::uint8_t>(k);
-  return img;
-}
 
 /// A PNG signature and IHDR chunk claiming width x height, followed by garbage: a
 /// decoder would allocate width x height before noticing.
@@ -72,13 +64,13 @@ TEST_CASE("read_file: folders, devices, FIFOs and limits are errors naming the p
   REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
   CHECK(contains(error_of([&] { (void)vmap::read_file(fifo); }), "is not a regular file"));  // returns, no hang
 
-  write_text(dir / "big.txt", std::string(1000, 'x'));
+  write_bytes(dir / "big.txt", std::string(1000, 'x'));
   CHECK(contains(error_of([&] { (void)vmap::read_file(dir / "big.txt", 999); }), "more than the limit of 999"));
   CHECK(vmap::read_file(dir / "big.txt", 1000).size() == 1000);
   CHECK(contains(error_of([&] { (void)vmap::read_file(dir / "absent"); }), "absent': does not exist"));
 
   if (::geteuid() != 0) {  // root reads anything
-    write_text(dir / "secret.txt", "x");
+    write_bytes(dir / "secret.txt", "x");
     fs::permissions(dir / "secret.txt", fs::perms::none);
     CHECK(contains(error_of([&] { (void)vmap::read_file(dir / "secret.txt"); }), "Permission denied"));
     fs::permissions(dir / "secret.txt", fs::perms::owner_all);
@@ -87,7 +79,7 @@ TEST_CASE("read_file: folders, devices, FIFOs and limits are errors naming the p
 
 TEST_CASE("create_directories: a file in the way, /proc and read-only parents are errors") {
   const auto dir = vmap::test::scratch_dir("hardening_mkdir");
-  write_text(dir / "file", "x");
+  write_bytes(dir / "file", "x");
   CHECK(contains(error_of([&] { vmap::create_directories(dir / "file"); }), "exists and is not a folder"));
   CHECK(contains(error_of([&] { vmap::create_directories(dir / "file" / "sub"); }), "is a file, not a folder"));
   CHECK(contains(error_of([] { vmap::create_directories("/proc/vmap_test_out"); }), "/proc/vmap_test_out"));
@@ -102,7 +94,7 @@ TEST_CASE("create_directories: a file in the way, /proc and read-only parents ar
 }
 
 TEST_CASE("image headers give the size without decoding") {
-  const cv::Mat img = numbered_image(1);
+  const cv::Mat img = numbered_image(1, 3);
   for (const char* ext : {".png", ".jpg", ".bmp", ".pgm", ".tiff", ".webp"}) {
     std::vector<unsigned char> buf;
     REQUIRE(cv::imencode(ext, img, buf));
@@ -120,11 +112,11 @@ TEST_CASE("image headers give the size without decoding") {
 
 TEST_CASE("read_image: a huge header is refused before decoding; limits are options") {
   const auto dir = vmap::test::scratch_dir("hardening_image");
-  write_text(dir / "huge.png", png_header_claiming(30000, 30000));
+  write_bytes(dir / "huge.png", png_header_claiming(30000, 30000));
   const auto e = error_of([&] { (void)vmap::read_image(dir / "huge.png"); });
   CHECK(contains(e, "huge.png"));
   CHECK(contains(e, "30000x30000 pixels, more than the limit of 67108864"));
-  cv::imwrite((dir / "small.png").string(), numbered_image(2));
+  cv::imwrite((dir / "small.png").string(), numbered_image(2, 3));
   CHECK(vmap::read_image(dir / "small.png").size() == cv::Size(64, 48));
   CHECK(contains(error_of([&] { (void)vmap::read_image(dir / "small.png", {.max_pixels = 1000}); }),
                  "64x48 pixels, more than the limit of 1000"));
@@ -133,9 +125,9 @@ TEST_CASE("read_image: a huge header is refused before decoding; limits are opti
 
 TEST_CASE("frame source: symlink loops, FIFOs, huge headers and 1x1 frames are skipped with reasons") {
   const auto dir = vmap::test::scratch_dir("hardening_folder");
-  for (int k = 0; k < 3; ++k) cv::imwrite((dir / ("f" + std::to_string(k) + ".png")).string(), numbered_image(k));
+  for (int k = 0; k < 3; ++k) cv::imwrite((dir / ("f" + std::to_string(k) + ".png")).string(), numbered_image(k, 3));
   fs::create_symlink("self.jpg", dir / "self.jpg");  // a loop
-  write_text(dir / "f1a.png", png_header_claiming(30000, 30000));
+  write_bytes(dir / "f1a.png", png_header_claiming(30000, 30000));
   cv::imwrite((dir / "f1b.png").string(), cv::Mat(1, 1, CV_8UC1, cv::Scalar(9)));
   REQUIRE(::mkfifo((dir / "f1c.png").c_str(), 0600) == 0);
 
@@ -154,7 +146,7 @@ TEST_CASE("frame source: symlink loops, FIFOs, huge headers and 1x1 frames are s
   CHECK(s.delivered() == 3);
 
   // A list naming the FIFO: skipped, no hang.
-  write_text(dir / "list.txt", "f0.png\nf1c.png\nf2.png\n");
+  write_bytes(dir / "list.txt", "f0.png\nf1c.png\nf2.png\n");
   auto l = vmap::FrameSource::open(dir / "list.txt");
   std::size_t n = 0;
   while (l.next()) ++n;
@@ -177,11 +169,11 @@ TEST_CASE("frame source: symlink loops, FIFOs, huge headers and 1x1 frames are s
 
 TEST_CASE("frame source: a TUM rgb.txt with a bad line is an error naming the line") {
   const auto dir = vmap::test::scratch_dir("hardening_tum");
-  cv::imwrite((dir / "a.png").string(), numbered_image(0));
-  write_text(dir / "rgb.txt", "# color images\n1.0 a.png\n2.0 a.png\nthree a.png\n4.0 a.png\n");
+  cv::imwrite((dir / "a.png").string(), numbered_image(0, 3));
+  write_bytes(dir / "rgb.txt", "# color images\n1.0 a.png\n2.0 a.png\nthree a.png\n4.0 a.png\n");
   CHECK(contains(error_of([&] { (void)vmap::FrameSource::open(dir / "rgb.txt"); }),
                  "rgb.txt:4: 'three a.png' is not '<timestamp> <path>'"));
-  write_text(dir / "rgb2.txt", "1.0 a.png\n2.0 a.png extra\n");
+  write_bytes(dir / "rgb2.txt", "1.0 a.png\n2.0 a.png extra\n");
   CHECK(contains(error_of([&] { (void)vmap::FrameSource::open(dir / "rgb2.txt"); }), "rgb2.txt:2:"));
   // A list file that is a device: refused by name, never read.
   fs::create_symlink("/dev/zero", dir / "zero.txt");
@@ -190,7 +182,7 @@ TEST_CASE("frame source: a TUM rgb.txt with a bad line is an error naming the li
 
 TEST_CASE("frame source: a huge stride ends the sequence instead of wrapping around") {
   const auto dir = vmap::test::scratch_dir("hardening_stride");
-  for (int k = 0; k < 4; ++k) cv::imwrite((dir / ("f" + std::to_string(k) + ".png")).string(), numbered_image(k));
+  for (int k = 0; k < 4; ++k) cv::imwrite((dir / ("f" + std::to_string(k) + ".png")).string(), numbered_image(k, 3));
   auto s = vmap::FrameSource::open(dir, {.start = 1, .stride = std::numeric_limits<std::size_t>::max()});
   std::vector<std::size_t> idx;
   while (auto f = s.next()) idx.push_back(f->index);
@@ -341,10 +333,10 @@ TEST_CASE("atomic directory: a set of files appears whole; foreign folders are n
 
   // A folder holding files vmap did not write (e.g. the input frames) is refused.
   fs::create_directories(dir / "frames");
-  write_text(dir / "frames" / "f0.png", "x");
+  write_bytes(dir / "frames" / "f0.png", "x");
   CHECK(contains(error_of([&] { vmap::AtomicDirectory d(dir / "frames"); }), "holds files vmap did not write"));
   CHECK(fs::exists(dir / "frames" / "f0.png"));
-  write_text(dir / "plain", "x");
+  write_bytes(dir / "plain", "x");
   CHECK(contains(error_of([&] { vmap::AtomicDirectory d(dir / "plain"); }), "exists and is not a folder"));
   CHECK(contains(error_of([] { vmap::AtomicDirectory d("/proc/vmap_out"); }), "/proc/vmap_out"));
 

@@ -17,7 +17,7 @@
 
 namespace {
 
-std::filesystem::path sample_list() { return vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt"; }
+using vmap::test::sample_list;
 
 std::vector<vmap::Frame> sample_frames(std::size_t end) {
   auto src = vmap::FrameSource::open(sample_list(), {.end = end, .grey = true});

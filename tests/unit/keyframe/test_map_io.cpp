@@ -1,4 +1,5 @@
 // Map files: round trip, and a fuzz-style test that feeds thousands of mutated files.
+#include "support/map_file.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/keyframe/map_io.hpp>
@@ -100,18 +101,7 @@ void check_equal(const vmap::VisualMap& a, const vmap::VisualMap& b) {
   }
 }
 
-/// Rewrites the header's size and CRC so that a mutated payload passes the checksum:
-/// what a hostile (not merely damaged) file looks like.
-std::string with_valid_checksum(std::string bytes) {
-  if (bytes.size() < vmap::detail::map_header_size) return bytes;
-  const std::string_view payload(bytes.data() + vmap::detail::map_header_size,
-                                 bytes.size() - vmap::detail::map_header_size);
-  const std::uint64_t size = payload.size();
-  const std::uint32_t crc = vmap::detail::crc32(payload);
-  for (int i = 0; i < 8; ++i) bytes[12 + static_cast<std::size_t>(i)] = static_cast<char>((size >> (8 * i)) & 0xFF);
-  for (int i = 0; i < 4; ++i) bytes[20 + static_cast<std::size_t>(i)] = static_cast<char>((crc >> (8 * i)) & 0xFF);
-  return bytes;
-}
+using vmap::test::with_valid_checksum;
 
 std::string mutate(const std::string& in, cv::RNG& rng) {
   std::string s = in;

@@ -4,6 +4,7 @@
 #include <vmap/keyframe/map_io.hpp>
 
 #include "support/errors.hpp"
+#include "support/map_file.hpp"
 #include "support/shared_data.hpp"
 
 #include <doctest/doctest.h>
@@ -31,12 +32,7 @@ vmap::VisualMap map_with_image(int frames) {
   return m;
 }
 
-std::string with_valid_checksum(std::string bytes) {
-  const std::string_view payload(bytes.data() + vmap::detail::map_header_size, bytes.size() - vmap::detail::map_header_size);
-  const std::uint32_t crc = vmap::detail::crc32(payload);
-  for (int i = 0; i < 4; ++i) bytes[20 + static_cast<std::size_t>(i)] = static_cast<char>((crc >> (8 * i)) & 0xFF);
-  return bytes;
-}
+using vmap::test::with_valid_checksum;
 
 void put_le32(std::string& b, std::size_t at, std::uint32_t v) {
   for (int i = 0; i < 4; ++i) b[at + static_cast<std::size_t>(i)] = static_cast<char>((v >> (8 * i)) & 0xFF);

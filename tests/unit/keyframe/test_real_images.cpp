@@ -24,7 +24,7 @@ namespace {
 
 using Keys = std::vector<std::size_t>;
 
-std::filesystem::path sample_list() { return vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt"; }
+using vmap::test::sample_list;
 
 /// The benchmark stack: ORB 1000, mutual NN, MAGSAC 1 px 0.99, eq. 5.
 vmap::OrbMagsacSelector orb_selector(const vmap::SelectorOptions& o) {

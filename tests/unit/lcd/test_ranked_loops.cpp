@@ -29,10 +29,10 @@ using vmap::PlaceStatus;
 
 namespace {
 
-constexpr int places = 8;
+constexpr int ranked_places = 8;
 
-cv::Mat place_image(int place) { return vmap::test::place_image(5000 + static_cast<std::uint64_t>(place)); }
-cv::Mat lap_frame(int k) { return vmap::test::lap_frame(k, places, 5000); }
+cv::Mat ranked_place_image(int place) { return vmap::test::place_image(5000 + static_cast<std::uint64_t>(place)); }
+cv::Mat ranked_lap_frame(int k) { return vmap::test::lap_frame(k, ranked_places, 5000); }
 
 // Both laps through `source` with a vocabulary learned on the first lap's descriptors;
 // every frame of the second lap must close its loop with the first visit, verifying
@@ -41,16 +41,16 @@ template <class Desc>
 void check_two_laps(Desc descriptor, vmap::CandidateIndex source, std::size_t top_k = 1, double left_ratio = 0.5) {
   std::vector<vmap::Features> frames;
   std::vector<cv::Mat> first_lap;
-  for (int k = 0; k < 2 * places; ++k) {
-    frames.push_back(descriptor.extract(lap_frame(k)));
-    if (k < places) first_lap.push_back(frames.back().descriptors);
+  for (int k = 0; k < 2 * ranked_places; ++k) {
+    frames.push_back(descriptor.extract(ranked_lap_frame(k)));
+    if (k < ranked_places) first_lap.push_back(frames.back().descriptors);
   }
   const auto vocabulary = std::make_shared<const vmap::AnyVocabulary>(
       vmap::AnyVocabulary::learn(first_lap, {.branching = 8, .depth = 2, .seed = 3}));
   vmap::LoopDetector d(vmap::LabelSchema{}, std::move(descriptor), vmap::BruteForceMatcher{},
                        vmap::FundamentalEstimator({.seed = 7}),
                        {.window = 3, .index = source, .top_k = top_k, .left_ratio = left_ratio, .decision = {.min_inliers = 40}}, vmap::PlaceRanker(vocabulary));
-  for (int k = 0; k < 2 * places; ++k) {
+  for (int k = 0; k < 2 * ranked_places; ++k) {
     const vmap::LoopResult r = d.add(frames[static_cast<std::size_t>(k)], {});
     CAPTURE(k);
     CAPTURE(r.evidence.inliers);
@@ -60,17 +60,17 @@ void check_two_laps(Desc descriptor, vmap::CandidateIndex source, std::size_t to
     }
     CHECK(r.verifications == std::min<std::size_t>(top_k, r.candidates));
     CHECK(r.rank_ms >= 0.0);
-    if (k >= places) {
+    if (k >= ranked_places) {
       CHECK(r.status == PlaceStatus::accepted);
       REQUIRE(r.best.has_value());
-      CHECK(*r.best == static_cast<std::size_t>(k - places));
+      CHECK(*r.best == static_cast<std::size_t>(k - ranked_places));
       CHECK(r.evidence.bow_score > 0.0);
       CHECK(r.evidence.bow_score <= 1.0);
     } else {
       CHECK_FALSE(r.loop());
     }
   }
-  CHECK(d.ranker().database().size() == 2 * places);  // every frame; the window filters candidates
+  CHECK(d.ranker().database().size() == 2 * ranked_places);  // every frame; the window filters candidates
   CHECK(d.memory_bytes() > d.ranker().memory_bytes());
 }
 
@@ -94,13 +94,13 @@ TEST_CASE("ranked loops: float descriptors (SIFT) go through a float vocabulary"
 TEST_CASE("ranked loops: a vocabulary of the other descriptor kind is an Error naming it") {
   vmap::OrbDescriptor orb({.features = 300});
   vmap::SiftDescriptor sift({.features = 300});
-  const std::vector<cv::Mat> sets = {orb.extract(place_image(0)).descriptors, orb.extract(place_image(1)).descriptors};
+  const std::vector<cv::Mat> sets = {orb.extract(ranked_place_image(0)).descriptors, orb.extract(ranked_place_image(1)).descriptors};
   const auto binary =
       std::make_shared<const vmap::AnyVocabulary>(vmap::AnyVocabulary::learn(sets, {.branching = 4, .depth = 2}));
   vmap::LoopDetector d(vmap::LabelSchema{}, vmap::SiftDescriptor({.features = 300}), vmap::BruteForceMatcher{},
                        vmap::FundamentalEstimator{}, {.window = 0, .index = vmap::CandidateIndex::bow},
                        vmap::PlaceRanker(binary));
-  CHECK_THROWS_AS((void)d.add(sift.extract(place_image(0)), {}), vmap::Error);
+  CHECK_THROWS_AS((void)d.add(sift.extract(ranked_place_image(0)), {}), vmap::Error);
 }
 
 TEST_SUITE("data") {

@@ -31,9 +31,11 @@ static_assert(std::is_move_constructible_v<vmap::OrbVisualMemory> && std::is_mov
 
 namespace {
 
+using vmap::test::check_same_memory;
+
 using vmap::test::section_starts;
 
-std::filesystem::path sample_list() { return vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt"; }
+using vmap::test::sample_list;
 
 using vmap::test::sample_frames;
 using vmap::test::memory_estimator;
@@ -67,26 +69,6 @@ vmap::OrbVisualMemory run(const std::vector<vmap::Frame>& frames, const vmap::Me
   }
   return std::move(*mem);
 }
-
-void check_same(const vmap::OrbVisualMemory& a, const vmap::OrbVisualMemory& b) {
-  CHECK(a.frames() == b.frames());
-  CHECK(a.last_frame_index() == b.last_frame_index());
-  CHECK(a.map().key_indices() == b.map().key_indices());
-  REQUIRE(a.map().pairs.size() == b.map().pairs.size());
-  for (std::size_t i = 0; i < a.map().pairs.size(); ++i) {
-    CHECK(a.map().pairs[i].inliers == b.map().pairs[i].inliers);
-    CHECK(a.map().pairs[i].similarity == b.map().pairs[i].similarity);
-  }
-  REQUIRE(a.loops().size() == b.loops().size());
-  for (std::size_t i = 0; i < a.loops().size(); ++i) {
-    CHECK(a.loops()[i].from == b.loops()[i].from);
-    CHECK(a.loops()[i].link.key == b.loops()[i].link.key);
-    CHECK(a.loops()[i].link.inliers == b.loops()[i].link.inliers);
-    CHECK(a.loops()[i].link.bow_score == b.loops()[i].link.bow_score);
-  }
-  CHECK(a.database().ids() == b.database().ids());
-}
-
 
 bool names_a_part(const std::string& message) {
   return message.find("section '") != std::string::npos || message.find("header") != std::string::npos;
@@ -202,12 +184,12 @@ TEST_CASE("memory: save, load and push continue exactly where an uninterrupted r
     const auto whole = run(frames, o, 0, dir / "m.vmem");
     for (std::size_t every : {7U, 13U, 30U}) {
       CAPTURE(every);
-      check_same(run(frames, o, every, dir / "m.vmem"), whole);
+      check_same_memory(run(frames, o, every, dir / "m.vmem"), whole);
     }
     // A loaded memory keeps the images in the chosen storage.
     whole.save(dir / "w.vmem");
     const auto back = load_memory(dir / "w.vmem");
-    check_same(back, whole);
+    check_same_memory(back, whole);
     CHECK(back.options().images == images);
     for (std::size_t k = 0; k < back.key_images(); ++k) {
       CHECK(back.map().keys[k].image.empty() == (images == vmap::ImageStorage::none));
@@ -317,7 +299,7 @@ TEST_CASE("memory files: truncated at every section, flipped bytes, wrong versio
   CHECK(message_of(magic).find("not a vmap memory") != std::string::npos);
   CHECK(message_of(file + "x").find("unexpected bytes") != std::string::npos);
   // The intact file still loads.
-  check_same(deserialize_memory(file), mem);
+  check_same_memory(deserialize_memory(file), mem);
 }
 
 TEST_CASE("memory: bare images with timestamps and SE(3) poses; blank frames postpone the vocabulary") {
@@ -348,7 +330,7 @@ TEST_CASE("memory: bare images with timestamps and SE(3) poses; blank frames pos
     CHECK(p->translation()[0] == static_cast<double>(back.map().keys[k].frame_index) - 2.0);
     CHECK(back.map().keys[k].timestamp == 98.0 + static_cast<double>(back.map().keys[k].frame_index));
   }
-  check_same(back, mem);
+  check_same_memory(back, mem);
 }
 
 TEST_CASE("memory: two memories loaded from one file answer the same from two threads as serially") {
@@ -445,7 +427,7 @@ TEST_SUITE("data") {
       o.loops.window = 5;
       const auto whole = run(frames, o, 0, dir / "m.vmem");
       const auto resumed = run(frames, o, c.every, dir / "m.vmem");
-      check_same(resumed, whole);
+      check_same_memory(resumed, whole);
       CHECK(whole.key_images() >= 5);
       MESSAGE(c.input.string() << ": " << whole.key_images() << " key images, " << whole.loops().size() << " loops");
     }

@@ -30,6 +30,8 @@
 
 namespace {
 
+using vmap::test::check_same_memory;
+
 namespace fs = std::filesystem;
 using vmap::test::section_starts;
 
@@ -94,31 +96,6 @@ vmap::OrbVisualMemory run(const std::vector<vmap::Frame>& frames, const vmap::Me
   return std::move(*mem);
 }
 
-void check_same(const vmap::OrbVisualMemory& a, const vmap::OrbVisualMemory& b) {
-  CHECK(a.frames() == b.frames());
-  CHECK(a.map().key_indices() == b.map().key_indices());
-  REQUIRE(a.loops().size() == b.loops().size());
-  for (std::size_t i = 0; i < a.loops().size(); ++i) {
-    CHECK(a.loops()[i].from == b.loops()[i].from);
-    CHECK(a.loops()[i].link.key == b.loops()[i].link.key);
-    CHECK(a.loops()[i].link.inliers == b.loops()[i].link.inliers);
-    CHECK(a.loops()[i].link.bow_score == b.loops()[i].link.bow_score);
-  }
-  CHECK(a.database().ids() == b.database().ids());
-  CHECK(a.labelled() == b.labelled());
-  REQUIRE(a.label_schema().has_value() == b.label_schema().has_value());
-  if (a.label_schema()) CHECK(a.label_schema()->labels() == b.label_schema()->labels());
-  CHECK(a.label_tree().size() == b.label_tree().size());
-  REQUIRE(a.key_detections().size() == b.key_detections().size());
-  for (std::size_t k = 0; k < a.key_detections().size(); ++k) {
-    REQUIRE(a.key_detections()[k].size() == b.key_detections()[k].size());
-    for (std::size_t j = 0; j < a.key_detections()[k].size(); ++j) {
-      CHECK(a.key_detections()[k][j].label == b.key_detections()[k][j].label);
-      CHECK(a.key_detections()[k][j].score == b.key_detections()[k][j].score);
-    }
-  }
-}
-
 /// The offline schema: eq. 5 over the first `m` key images' detections.
 vmap::LabelSchema offline_schema(const vmap::OrbVisualMemory& mem, std::size_t m,
                                  const std::vector<std::vector<vmap::Detection>>& per_frame) {
@@ -126,7 +103,6 @@ vmap::LabelSchema offline_schema(const vmap::OrbVisualMemory& mem, std::size_t m
   for (std::size_t k = 0; k < m; ++k) stats.observe(per_frame[mem.map().keys[k].frame_index]);
   return vmap::make_label_schema(stats);
 }
-
 
 }  // namespace
 
@@ -163,10 +139,10 @@ TEST_CASE("memory with labels: the online schema is eq. 5 over the first M key i
   // key images, loops and tree: the online path catches up exactly.
   auto given = o;
   given.labels.order = mem.label_schema()->labels();
-  check_same(run(frames, given, 0, detections), mem);
+  check_same_memory(run(frames, given, 0, detections), mem);
 
   // Resumed every 9 frames (the schema not yet fixed at the first save): the same.
-  check_same(run(frames, o, 9, detections), mem);
+  check_same_memory(run(frames, o, 9, detections), mem);
 
   // tree with m = 0 verifies the whole leaf and nothing else: every loop joins key
   // images of equal label vectors, and it finds every loop tree_ranked with m = 0 finds
@@ -473,7 +449,7 @@ TEST_CASE("memory files v2: truncated or flipped label, GCS and policy sections 
   }
   // The intact file loads, with its schema, tree and GCS.
   const auto back = from_bytes(file);
-  check_same(back, mem);
+  check_same_memory(back, mem);
   CHECK(back.gcs_keys() == mem.gcs_keys());
 }
 
@@ -494,7 +470,7 @@ TEST_SUITE("data") {
     o.loops.window = 5;
     o.labels.sample = 30;
     const auto whole = run(frames, o, 0, detections);
-    check_same(run(frames, o, 20, detections), whole);
+    check_same_memory(run(frames, o, 20, detections), whole);
     REQUIRE(whole.label_schema().has_value());
     CHECK(whole.label_schema()->labels() == offline_schema(whole, o.labels.sample, per_frame).labels());
     CHECK(!whole.label_schema()->labels().empty());

@@ -22,6 +22,10 @@
 
 namespace {
 
+using vmap::test::load_small_memory;
+
+using vmap::test::sample_frames;
+
 namespace fs = std::filesystem;
 using vmap::test::error_of;
 using vmap::test::raw_sql;
@@ -30,11 +34,9 @@ using vmap::test::make_small_memory;
 using vmap::test::memory_estimator;
 using vmap::test::small_memory_options;
 
-const std::vector<vmap::Frame>& frames() { return vmap::test::sample_frames(); }
-
 /// The sample frames first .. last - 1 (their own indices, as a run of that part reads them).
 std::vector<vmap::Frame> part(std::size_t first, std::size_t last) {
-  return {frames().begin() + static_cast<std::ptrdiff_t>(first), frames().begin() + static_cast<std::ptrdiff_t>(last)};
+  return {sample_frames().begin() + static_cast<std::ptrdiff_t>(first), sample_frames().begin() + static_cast<std::ptrdiff_t>(last)};
 }
 
 /// Two runs over the sample frames: 0-39, then 20-59 (revisiting half of the first).
@@ -58,18 +60,6 @@ vmap::OrbVisualMemory two_sessions(const vmap::MemoryOptions& o) {
 vmap::OrbVisualMemory reload(const vmap::OrbVisualMemory& m) {
   return vmap::OrbVisualMemory::deserialize(m.serialize(), "<memory>", vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
                                             memory_estimator(), vmap::InlierRatio{});
-}
-
-fs::path fresh(const std::string& name) {
-  static const fs::path dir = vmap::test::scratch_dir("sessions");
-  const fs::path p = dir / name;
-  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(p.string() + suffix);
-  return p;
-}
-
-vmap::OrbVisualMemory load(vmap::MemoryStore& store) {
-  return store.load<vmap::OrbVisualMemory>(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
-                                           vmap::InlierRatio{});
 }
 
 }  // namespace
@@ -134,7 +124,7 @@ TEST_CASE("sessions: each run is its own chain of key images; loops join them") 
 
   // Localization searches both sessions: a frame of the second run finds a key image.
   auto ask = reload(mem);
-  const auto answer = ask.localize(frames()[50].image);
+  const auto answer = ask.localize(sample_frames()[50].image);
   CHECK(answer.ok());
 
   // start_session is a no-op before the first frame and twice in a row.
@@ -142,7 +132,7 @@ TEST_CASE("sessions: each run is its own chain of key images; loops join them") 
   empty.start_session();
   CHECK(empty.sessions().size() == 1);
   auto twice = make_small_memory(o);
-  twice.push(frames()[0]);
+  twice.push(sample_frames()[0]);
   twice.start_session();
   twice.start_session();
   CHECK(twice.sessions().size() == 2);
@@ -183,7 +173,7 @@ TEST_CASE("sessions: saved, loaded and resumed at any frame, a memory goes on as
 TEST_CASE("sessions: a store synced at every frame holds the sessions; reopened mid-run it goes on exactly") {
   const auto o = small_memory_options();
   const auto whole = two_sessions(o);
-  const fs::path p = fresh("two.vmdb");
+  const fs::path p = vmap::test::fresh_path("sessions", "two.vmdb");
   {
     auto store = vmap::MemoryStore::create(p);
     auto mem = make_small_memory(o);
@@ -196,7 +186,7 @@ TEST_CASE("sessions: a store synced at every frame holds the sessions; reopened 
   }
   {
     auto store = vmap::MemoryStore::open(p);
-    auto mem = load(store);
+    auto mem = load_small_memory(store);
     REQUIRE(mem.sessions().size() == 2);
     CHECK(mem.selector().chain_open());
     for (std::size_t i = 0; i < 18; ++i) {
@@ -205,19 +195,19 @@ TEST_CASE("sessions: a store synced at every frame holds the sessions; reopened 
     }
   }
   auto store = vmap::MemoryStore::open(p);
-  auto mem = load(store);
+  auto mem = load_small_memory(store);
   for (std::size_t i = 18; i < run2().size(); ++i) {
     mem.push(run2()[i]);
     store.sync(mem);
   }
   CHECK(mem.serialize() == whole.serialize());
-  CHECK(load(store).serialize() == whole.serialize());
+  CHECK(load_small_memory(store).serialize() == whole.serialize());
 }
 
 TEST_CASE("sessions: the store's sessions table, read without vmap; a version-1 store is read as one session") {
   const auto o = small_memory_options();
   const auto whole = two_sessions(o);
-  const fs::path p = fresh("table.vmdb");
+  const fs::path p = vmap::test::fresh_path("sessions", "table.vmdb");
   {
     auto store = vmap::MemoryStore::create(p);
     store.sync(whole);
@@ -235,7 +225,7 @@ TEST_CASE("sessions: the store's sessions table, read without vmap; a version-1 
   const fs::path corpus = vmap::test::source_dir() / "tests/fuzz/corpus";
   const auto seed = vmap::OrbVisualMemory::deserialize(
       vmap::read_file(corpus / "memory/labels_gcs_v4.vmem", 1 << 20, "seed"), "labels_gcs_v4.vmem");
-  const fs::path v1 = fresh("v1.vmdb");
+  const fs::path v1 = vmap::test::fresh_path("sessions", "v1.vmdb");
   fs::copy_file(corpus / "memory_store/labels_gcs.vmdb", v1);
   CHECK(sql_integer(v1, "PRAGMA user_version") == 1);
   {
@@ -278,7 +268,7 @@ TEST_CASE("sessions: merging two memories equals building both runs into one; ot
   auto built = reload(whole);
   REQUIRE(a.last_frame_index() == built.last_frame_index());
   for (std::size_t i = 0; i < 6; ++i) {
-    vmap::Frame f = frames()[i];
+    vmap::Frame f = sample_frames()[i];
     f.index = *a.last_frame_index() + 1;
     a.push(f);
     built.push(f);

@@ -26,6 +26,10 @@
 
 namespace {
 
+using vmap::test::load_small_memory;
+
+using vmap::test::sample_frames;
+
 using vmap::test::error_of;
 using vmap::test::raw_sql;
 using vmap::test::sql_integer;
@@ -33,32 +37,19 @@ namespace fs = std::filesystem;
 
 using vmap::test::memory_estimator;
 
-const std::vector<vmap::Frame>& frames() { return vmap::test::sample_frames(); }
 vmap::MemoryOptions options(vmap::ImageStorage images) { return vmap::test::small_memory_options(images); }
 vmap::OrbVisualMemory make(const vmap::MemoryOptions& o) { return vmap::test::make_small_memory(o); }
-
-vmap::OrbVisualMemory load(vmap::MemoryStore& store) {
-  return store.load<vmap::OrbVisualMemory>(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
-                                           vmap::InlierRatio{});
-}
-
-fs::path fresh(const std::string& name) {
-  static const fs::path dir = vmap::test::scratch_dir("store");  // emptied once per run
-  const fs::path p = dir / name;
-  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(p.string() + suffix);
-  return p;
-}
 
 }  // namespace
 
 TEST_CASE("store: a memory synced at every frame loads back as the same memory, for each pixel storage") {
   for (auto images : {vmap::ImageStorage::none, vmap::ImageStorage::png, vmap::ImageStorage::jpeg}) {
     CAPTURE(static_cast<int>(images));
-    const fs::path file = fresh("every_frame.vmdb");
+    const fs::path file = vmap::test::fresh_path("store", "every_frame.vmdb");
     auto store = vmap::MemoryStore::create(file);
     auto memory = make(options(images));
     std::size_t synced_keys = 0;
-    for (const auto& f : frames()) {
+    for (const auto& f : sample_frames()) {
       memory.push(f);
       store.sync(memory);
       // Each sync wrote exactly the key images made since the last one.
@@ -68,7 +59,7 @@ TEST_CASE("store: a memory synced at every frame loads back as the same memory, 
     }
     REQUIRE(memory.loops().size() > 0);
     REQUIRE(memory.database().size() > 0);
-    const auto back = load(store);
+    const auto back = load_small_memory(store);
     CHECK(back.key_images() == memory.key_images());
     CHECK(back.loops().size() == memory.loops().size());
     CHECK(back.database().ids() == memory.database().ids());
@@ -89,14 +80,14 @@ TEST_CASE("store: a memory synced at every frame loads back as the same memory, 
 // another connection sees all of them after flush(), and the store loads as the memory,
 // also when the store object was moved with a sync in flight.
 TEST_CASE("store: syncs committed in the writer thread: after each flush a reader sees every sync") {
-  const fs::path file = fresh("async.vmdb");
+  const fs::path file = vmap::test::fresh_path("store", "async.vmdb");
   std::optional<vmap::MemoryStore> store;
   store.emplace(vmap::MemoryStore::create(file));
   auto reader = vmap::MemoryStore::open(file, vmap::sqlite::Access::read);
   auto memory = make(options(vmap::ImageStorage::png));
   std::size_t flushes = 0;
-  for (std::size_t i = 0; i < frames().size(); ++i) {
-    memory.push(frames()[i]);
+  for (std::size_t i = 0; i < sample_frames().size(); ++i) {
+    memory.push(sample_frames()[i]);
     store->sync(memory);
     if (i == 25) {
       vmap::MemoryStore moved = std::move(*store);
@@ -109,14 +100,14 @@ TEST_CASE("store: syncs committed in the writer thread: after each flush a reade
       CHECK(sql_integer(file, "SELECT count(*) FROM loops") == static_cast<std::int64_t>(memory.loops().size()));
       CHECK(sql_integer(file, "SELECT count(bow) FROM key_images") ==
             static_cast<std::int64_t>(memory.database().size()));
-      CHECK(load(reader).serialize() == memory.serialize());
+      CHECK(load_small_memory(reader).serialize() == memory.serialize());
     }
   }
   CHECK(flushes == 4);
   REQUIRE(memory.loops().size() > 0);
   store->flush();
-  CHECK(load(reader).serialize() == memory.serialize());
-  CHECK(load(*store).serialize() == memory.serialize());
+  CHECK(load_small_memory(reader).serialize() == memory.serialize());
+  CHECK(load_small_memory(*store).serialize() == memory.serialize());
 }
 
 // A transaction that fails in the writer thread (here: a row another program inserted
@@ -126,15 +117,15 @@ TEST_CASE("store: syncs committed in the writer thread: after each flush a reade
 TEST_CASE("store: a sync that fails in the writer thread is an Error at the next sync or flush, then written again") {
   const auto o = options(vmap::ImageStorage::none);
   auto whole = make(o);
-  for (const auto& f : frames()) whole.push(f);
+  for (const auto& f : sample_frames()) whole.push(f);
 
-  const fs::path file = fresh("failed.vmdb");
+  const fs::path file = vmap::test::fresh_path("store", "failed.vmdb");
   std::optional<vmap::MemoryStore> store;
   store.emplace(vmap::MemoryStore::create(file));
   auto memory = make(o);
   std::size_t i = 0;
   for (; i < 20; ++i) {
-    memory.push(frames()[i]);
+    memory.push(sample_frames()[i]);
     store->sync(memory);
   }
   store->flush();
@@ -145,8 +136,8 @@ TEST_CASE("store: a sync that fails in the writer thread is an Error at the next
   // Pushed and synced up to the frame that makes key image m: the sync that writes it
   // returns, and fails in the writer thread.
   while (memory.key_images() == m) {
-    REQUIRE(i < frames().size());
-    memory.push(frames()[i++]);
+    REQUIRE(i < sample_frames().size());
+    memory.push(sample_frames()[i++]);
     store->sync(memory);
   }
   const std::string failed = error_of([&] { store->sync(memory); });
@@ -167,22 +158,22 @@ TEST_CASE("store: a sync that fails in the writer thread is an Error at the next
 
   raw_sql(file, "DELETE FROM key_images WHERE name = 'intruder'");
   store.emplace(vmap::MemoryStore::open(file));
-  for (; i < frames().size(); ++i) {
-    memory.push(frames()[i]);
+  for (; i < sample_frames().size(); ++i) {
+    memory.push(sample_frames()[i]);
     store->sync(memory);
   }
   store->flush();
   CHECK(memory.serialize() == whole.serialize());
-  CHECK(load(*store).serialize() == whole.serialize());
+  CHECK(load_small_memory(*store).serialize() == whole.serialize());
 }
 
 // The key images' pixels are counted from their recorded sizes before any is decoded:
 // a memory (file or store) holding more than the budget is refused, naming the limit.
 TEST_CASE("store: a memory's key images are loaded within a pixel budget") {
-  const fs::path file = fresh("budget.vmdb");
+  const fs::path file = vmap::test::fresh_path("store", "budget.vmdb");
   auto store = vmap::MemoryStore::create(file);
   auto memory = make(options(vmap::ImageStorage::png));
-  for (const auto& f : frames()) memory.push(f);
+  for (const auto& f : sample_frames()) memory.push(f);
   store.sync(memory);
   const std::uint64_t keys = memory.key_images();
   REQUIRE(keys >= 3);
@@ -213,11 +204,11 @@ TEST_CASE("store: a memory's key images are loaded within a pixel budget") {
 }
 
 TEST_CASE("store: a memory loaded without decoding its pixels answers the same and refuses to write pixels") {
-  const fs::path file = fresh("undecoded.vmdb");
+  const fs::path file = vmap::test::fresh_path("store", "undecoded.vmdb");
   std::optional<vmap::MemoryStore> store;
   store.emplace(vmap::MemoryStore::create(file));
   auto memory = make(options(vmap::ImageStorage::png));
-  for (std::size_t i = 0; i < 50; ++i) memory.push(frames()[i]);
+  for (std::size_t i = 0; i < 50; ++i) memory.push(sample_frames()[i]);
   store->sync(memory);
   store.reset();
   store.emplace(vmap::MemoryStore::open(file));
@@ -233,8 +224,8 @@ TEST_CASE("store: a memory loaded without decoding its pixels answers the same a
   // Everything but the pixels is there: the same file without pixels, the same answers.
   CHECK(lean.serialize(vmap::ImageStorage::none) == memory.serialize(vmap::ImageStorage::none));
   for (std::size_t i = 50; i < 60; ++i) {
-    const auto a = lean.localize(frames()[i].image);
-    const auto b = memory.localize(frames()[i].image);
+    const auto a = lean.localize(sample_frames()[i].image);
+    const auto b = memory.localize(sample_frames()[i].image);
     CHECK(a.status == b.status);
     CHECK(a.confidence == b.confidence);
   }
@@ -245,32 +236,32 @@ TEST_CASE("store: a memory loaded without decoding its pixels answers the same a
   CHECK(error_of([&] { store->sync(lean); }).find("MemoryStore::sync: the memory was loaded without") == 0);
   CHECK(fs::file_size(file) == before);
   // Loaded with its pixels (lossless PNG here) it writes them again.
-  CHECK(load(*store).serialize() == memory.serialize());
+  CHECK(load_small_memory(*store).serialize() == memory.serialize());
 }
 
 TEST_CASE("store: stopped and reopened every few frames, the memory goes on exactly as an uninterrupted run") {
   const auto o = options(vmap::ImageStorage::png);
   auto whole = make(o);
-  for (const auto& f : frames()) whole.push(f);
+  for (const auto& f : sample_frames()) whole.push(f);
   for (std::size_t every : {5U, 17U}) {
     CAPTURE(every);
-    const fs::path file = fresh("resumed.vmdb");
+    const fs::path file = vmap::test::fresh_path("store", "resumed.vmdb");
     std::optional<vmap::MemoryStore> store;
     std::optional<vmap::OrbVisualMemory> memory;
     store.emplace(vmap::MemoryStore::create(file));
     memory.emplace(make(o));
-    for (std::size_t i = 0; i < frames().size(); ++i) {
+    for (std::size_t i = 0; i < sample_frames().size(); ++i) {
       if (i > 0 && i % every == 0) {
         memory.reset();
         store.reset();
         store.emplace(vmap::MemoryStore::open(file));
-        memory.emplace(load(*store));
+        memory.emplace(load_small_memory(*store));
       }
-      memory->push(frames()[i]);
+      memory->push(sample_frames()[i]);
       store->sync(*memory);
     }
     CHECK(memory->serialize() == whole.serialize());
-    CHECK(load(*store).serialize() == whole.serialize());
+    CHECK(load_small_memory(*store).serialize() == whole.serialize());
   }
 }
 
@@ -290,15 +281,15 @@ TEST_CASE("store: I_{j-1}'s score synced with its degeneracy test deferred loads
                                              vmap::InlierRatio{});
   };
   auto whole = make_checking();
-  for (const auto& f : frames()) whole.push(f);
-  const fs::path file = fresh("deferred.vmdb");
+  for (const auto& f : sample_frames()) whole.push(f);
+  const fs::path file = vmap::test::fresh_path("store", "deferred.vmdb");
   std::optional<vmap::MemoryStore> store;
   std::optional<vmap::OrbVisualMemory> memory;
   store.emplace(vmap::MemoryStore::create(file));
   memory.emplace(make_checking());
   int deferred = 0, reopened_deferred = 0;
-  for (std::size_t i = 0; i < frames().size(); ++i) {
-    memory->push(frames()[i]);
+  for (std::size_t i = 0; i < sample_frames().size(); ++i) {
+    memory->push(sample_frames()[i]);
     store->sync(*memory);
     const bool is_deferred = memory->selector().deferred_state().degeneracy_deferred;
     deferred += is_deferred ? 1 : 0;
@@ -320,13 +311,13 @@ TEST_CASE("store: I_{j-1}'s score synced with its degeneracy test deferred loads
 TEST_CASE("store: a working memory of 3 key images answers as a memory that holds every key image's features") {
   const auto o = options(vmap::ImageStorage::none);
   // The first 50 frames are mapped; the last 10 are localized, then mapped on.
-  const std::vector<vmap::Frame> kept(frames().begin(), frames().begin() + 50);
-  const std::vector<vmap::Frame> later(frames().begin() + 50, frames().end());
+  const std::vector<vmap::Frame> kept(sample_frames().begin(), sample_frames().begin() + 50);
+  const std::vector<vmap::Frame> later(sample_frames().begin() + 50, sample_frames().end());
   auto whole = make(o);
   for (const auto& f : kept) whole.push(f);
   REQUIRE(whole.key_images() >= 10);
 
-  const fs::path file = fresh("working.vmdb");
+  const fs::path file = vmap::test::fresh_path("store", "working.vmdb");
   std::optional<vmap::MemoryStore> store;
   store.emplace(vmap::MemoryStore::create(file));
   auto bounded = make(o);
@@ -406,7 +397,7 @@ TEST_CASE("store: a working memory of 3 key images answers as a memory that hold
     whole.push(f);
   }
   CHECK(resumed.serialize() == whole.serialize());
-  CHECK(load(again).serialize() == whole.serialize());
+  CHECK(load_small_memory(again).serialize() == whole.serialize());
 
   CHECK_THROWS_AS(bounded.bound_features(0, again.features()), vmap::Error);
   const auto source = again.features();
@@ -414,10 +405,10 @@ TEST_CASE("store: a working memory of 3 key images answers as a memory that hold
 }
 
 TEST_CASE("store: one writer at a time; readers load the last sync while the writer goes on") {
-  const fs::path file = fresh("shared.vmdb");
+  const fs::path file = vmap::test::fresh_path("store", "shared.vmdb");
   auto writer = vmap::MemoryStore::create(file);
   auto memory = make(options(vmap::ImageStorage::none));
-  for (std::size_t i = 0; i < 30; ++i) memory.push(frames()[i]);
+  for (std::size_t i = 0; i < 30; ++i) memory.push(sample_frames()[i]);
   writer.sync(memory);
   writer.flush();  // sync() returns before its commit; a reader sees committed syncs
   const std::size_t first = memory.key_images();
@@ -426,27 +417,27 @@ TEST_CASE("store: one writer at a time; readers load the last sync while the wri
   CHECK(second.find("memory '" + file.string() + "' is being written by another program") != std::string::npos);
 
   auto reader = vmap::MemoryStore::open(file, vmap::sqlite::Access::read);
-  CHECK(load(reader).key_images() == first);
-  for (std::size_t i = 30; i < frames().size(); ++i) memory.push(frames()[i]);
+  CHECK(load_small_memory(reader).key_images() == first);
+  for (std::size_t i = 30; i < sample_frames().size(); ++i) memory.push(sample_frames()[i]);
   REQUIRE(memory.key_images() > first);
   writer.sync(memory);
   writer.flush();
   // The reader's next load sees the writer's new sync; a reader cannot write.
-  CHECK(load(reader).serialize() == memory.serialize());
+  CHECK(load_small_memory(reader).serialize() == memory.serialize());
   CHECK(error_of([&] { reader.sync(memory); }).find("is open read-only") != std::string::npos);
 }
 
 TEST_CASE("store: a memory is synced only into its own store") {
-  const fs::path file = fresh("own.vmdb");
+  const fs::path file = vmap::test::fresh_path("store", "own.vmdb");
   auto memory = make(options(vmap::ImageStorage::none));
-  for (std::size_t i = 0; i < 40; ++i) memory.push(frames()[i]);
+  for (std::size_t i = 0; i < 40; ++i) memory.push(sample_frames()[i]);
   {
     auto store = vmap::MemoryStore::create(file);
     store.sync(memory);
   }
   // A shorter memory: the store holds more than it.
   auto shorter = make(options(vmap::ImageStorage::none));
-  for (std::size_t i = 0; i < 10; ++i) shorter.push(frames()[i]);
+  for (std::size_t i = 0; i < 10; ++i) shorter.push(sample_frames()[i]);
   {
     auto store = vmap::MemoryStore::open(file);
     CHECK(error_of([&] { store.sync(shorter); }).find("use the memory loaded from this store") != std::string::npos);
@@ -456,7 +447,7 @@ TEST_CASE("store: a memory is synced only into its own store") {
   auto o = options(vmap::ImageStorage::none);
   o.selector.tau = 0.6;
   auto other = make(o);
-  for (const auto& f : frames()) other.push(f);
+  for (const auto& f : sample_frames()) other.push(f);
   const std::size_t last = memory.key_images() - 1;
   REQUIRE(other.key_images() > last);
   REQUIRE(other.map().keys[last].frame_index != memory.map().keys[last].frame_index);
@@ -469,48 +460,48 @@ TEST_CASE("store: a memory is synced only into its own store") {
 
 TEST_CASE("store: a .vmem memory file converts to a store that loads as the same memory") {
   auto memory = make(options(vmap::ImageStorage::png));
-  for (const auto& f : frames()) memory.push(f);
-  const fs::path vmem = fresh("converted.vmem");
+  for (const auto& f : sample_frames()) memory.push(f);
+  const fs::path vmem = vmap::test::fresh_path("store", "converted.vmem");
   memory.save(vmem);
   const auto loaded = vmap::OrbVisualMemory::load(vmem, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
                                                   vmap::InlierRatio{});
-  const fs::path file = fresh("converted.vmdb");
+  const fs::path file = vmap::test::fresh_path("store", "converted.vmdb");
   auto store = vmap::MemoryStore::create(file);
   store.sync(loaded);
-  CHECK(load(store).serialize() == memory.serialize());
+  CHECK(load_small_memory(store).serialize() == memory.serialize());
 }
 
 TEST_CASE("store: files that are not stores, other versions and damaged rows are Errors naming the memory") {
-  const fs::path missing = fresh("missing.vmdb");
+  const fs::path missing = vmap::test::fresh_path("store", "missing.vmdb");
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(missing); }).find("'" + missing.string() + "' does not exist") !=
         std::string::npos);
 
-  const fs::path text = fresh("text.vmdb");
+  const fs::path text = vmap::test::fresh_path("store", "text.vmdb");
   std::ofstream(text) << "not a database at all, but long enough to be looked at as one\n";
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(text, vmap::sqlite::Access::read); }).find(text.string()) !=
         std::string::npos);
 
   // A creation killed before its tables were written leaves an empty file.
-  const fs::path empty = fresh("empty.vmdb");
+  const fs::path empty = vmap::test::fresh_path("store", "empty.vmdb");
   std::ofstream(empty).close();
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(empty); }).find("is empty: its creation was interrupted") !=
         std::string::npos);
   {
     // Created, never synced: open, but nothing to load.
-    const fs::path unsynced = fresh("unsynced.vmdb");
+    const fs::path unsynced = vmap::test::fresh_path("store", "unsynced.vmdb");
     (void)vmap::MemoryStore::create(unsynced);
     auto store = vmap::MemoryStore::open(unsynced, vmap::sqlite::Access::read);
     CHECK(!store.synced());
-    CHECK(error_of([&] { (void)load(store); }).find("holds no 'options' state") != std::string::npos);
+    CHECK(error_of([&] { (void)load_small_memory(store); }).find("holds no 'options' state") != std::string::npos);
   }
 
-  const fs::path foreign = fresh("foreign.vmdb");
+  const fs::path foreign = vmap::test::fresh_path("store", "foreign.vmdb");
   raw_sql(foreign, "CREATE TABLE t(x)");
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(foreign); }).find("is not a vmap memory store") != std::string::npos);
 
   auto memory = make(options(vmap::ImageStorage::none));
-  for (std::size_t i = 0; i < 30; ++i) memory.push(frames()[i]);
-  const fs::path file = fresh("damaged.vmdb");
+  for (std::size_t i = 0; i < 30; ++i) memory.push(sample_frames()[i]);
+  const fs::path file = vmap::test::fresh_path("store", "damaged.vmdb");
   {
     auto store = vmap::MemoryStore::create(file);
     store.sync(memory);
@@ -528,11 +519,11 @@ TEST_CASE("store: files that are not stores, other versions and damaged rows are
         std::string("UPDATE meta SET value = x'0102' WHERE name = 'options'"),
         std::string("DELETE FROM meta WHERE name = 'selector'")}) {
     CAPTURE(damage);
-    const fs::path copy = fresh("damaged_copy.vmdb");
+    const fs::path copy = vmap::test::fresh_path("store", "damaged_copy.vmdb");
     fs::copy_file(file, copy);
     raw_sql(copy, damage);
     auto store = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read);
-    const std::string e = error_of([&] { (void)load(store); });
+    const std::string e = error_of([&] { (void)load_small_memory(store); });
     CHECK(e.find(copy.string()) != std::string::npos);
     CHECK(e != "no error");
   }
@@ -540,22 +531,22 @@ TEST_CASE("store: files that are not stores, other versions and damaged rows are
 
 TEST_CASE("store: every row is checked: a flipped bit, a column that differs from its record, a loop row gone or twice") {
   auto memory = make(options(vmap::ImageStorage::none));
-  for (std::size_t i = 0; i < 20; ++i) memory.push(frames()[i]);
+  for (std::size_t i = 0; i < 20; ++i) memory.push(sample_frames()[i]);
   memory.start_session();
-  for (std::size_t i = 0; i < 20; ++i) memory.push(frames()[i]);
+  for (std::size_t i = 0; i < 20; ++i) memory.push(sample_frames()[i]);
   REQUIRE(memory.loops().size() >= 2);
-  const fs::path file = fresh("rows.vmdb");
+  const fs::path file = vmap::test::fresh_path("store", "rows.vmdb");
   {
     auto store = vmap::MemoryStore::create(file);
     store.sync(memory);
   }
   const auto error_after = [&](const std::string& damage) {
-    const fs::path copy = fresh("rows_copy.vmdb");
+    const fs::path copy = vmap::test::fresh_path("store", "rows_copy.vmdb");
     fs::copy_file(file, copy);
     raw_sql(copy, damage);
     const std::string e = error_of([&] {
       auto store = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read);
-      (void)load(store);
+      (void)load_small_memory(store);
     });
     const std::string who = "memory '" + copy.string() + "' is corrupt: ";
     REQUIRE(e.starts_with(who));
@@ -585,8 +576,8 @@ TEST_CASE("store: every row is checked: a flipped bit, a column that differs fro
 
 TEST_CASE("store: a store in a folder the reader cannot write is read (as immutable); a stray journal is explained") {
   auto memory = make(options(vmap::ImageStorage::none));
-  for (std::size_t i = 0; i < 12; ++i) memory.push(frames()[i]);
-  const fs::path file = fresh("read_only.vmdb");
+  for (std::size_t i = 0; i < 12; ++i) memory.push(sample_frames()[i]);
+  const fs::path file = vmap::test::fresh_path("store", "read_only.vmdb");
   {
     auto store = vmap::MemoryStore::create(file);
     store.sync(memory);
@@ -608,7 +599,7 @@ TEST_CASE("store: a store in a folder the reader cannot write is read (as immuta
       if (::getuid() == 0 && (::setgid(65534) != 0 || ::setuid(65534) != 0)) ::_exit(3);
       if (::access(folder.c_str(), W_OK) == 0) ::_exit(4);  // the folder is writable after all
       auto store = vmap::MemoryStore::open(folder / "m.vmdb", vmap::sqlite::Access::read);
-      code = load(store).key_images() == memory.key_images() ? 0 : 1;
+      code = load_small_memory(store).key_images() == memory.key_images() ? 0 : 1;
     } catch (...) {
       code = 2;
     }
@@ -624,7 +615,7 @@ TEST_CASE("store: a store in a folder the reader cannot write is read (as immuta
 
   // A rollback journal beside a store (not vmap's: its stores use a write-ahead log)
   // makes SQLite refuse readers; the message says why and what to do.
-  const fs::path journaled = fresh("journaled.vmdb");
+  const fs::path journaled = vmap::test::fresh_path("store", "journaled.vmdb");
   fs::copy_file(file, journaled);
   {
     std::ofstream j(journaled.string() + "-journal", std::ios::binary);
@@ -632,13 +623,13 @@ TEST_CASE("store: a store in a folder the reader cannot write is read (as immuta
   }
   const std::string e = error_of([&] {
     auto store = vmap::MemoryStore::open(journaled, vmap::sqlite::Access::read);
-    (void)load(store);
+    (void)load_small_memory(store);
   });
   CHECK(e.find("attempt to write a readonly database (a rollback journal '" + journaled.string() +
                "-journal' lies beside it") != std::string::npos);
   fs::remove(journaled.string() + "-journal");
   auto store = vmap::MemoryStore::open(journaled, vmap::sqlite::Access::read);
-  CHECK(load(store).key_images() == memory.key_images());
+  CHECK(load_small_memory(store).key_images() == memory.key_images());
 }
 
 namespace {
@@ -673,9 +664,9 @@ void pad_key_record(const fs::path& p, std::int64_t id, const std::string& junk)
 
 TEST_CASE("store: a key image record with bytes after its contents is refused naming the row, its checksum right") {
   auto memory = make(options(vmap::ImageStorage::png));
-  for (std::size_t i = 0; i < 30; ++i) memory.push(frames()[i]);
+  for (std::size_t i = 0; i < 30; ++i) memory.push(sample_frames()[i]);
   REQUIRE(memory.key_images() >= 2);
-  const fs::path file = fresh("padded.vmdb");
+  const fs::path file = vmap::test::fresh_path("store", "padded.vmdb");
   {
     auto store = vmap::MemoryStore::create(file);
     store.sync(memory);
@@ -685,7 +676,7 @@ TEST_CASE("store: a key image record with bytes after its contents is refused na
   CHECK(sql_integer(file, "SELECT length(record) FROM key_images WHERE id = 1") == length + 4096);
 
   auto store = vmap::MemoryStore::open(file, vmap::sqlite::Access::read);
-  const std::string e = error_of([&] { (void)load(store); });
+  const std::string e = error_of([&] { (void)load_small_memory(store); });
   CHECK(e.find(file.string()) != std::string::npos);
   CHECK(e.find("key image 1") != std::string::npos);
   CHECK(e.find("4096 unexpected bytes after the key image") != std::string::npos);

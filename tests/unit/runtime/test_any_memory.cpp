@@ -31,13 +31,6 @@ vmap::MemoryOptions small() {
   return o;
 }
 
-fs::path fresh(const std::string& name) {
-  static const fs::path dir = vmap::test::scratch_dir("any_memory");
-  const fs::path p = dir / name;
-  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(p.string() + suffix);
-  return p;
-}
-
 }  // namespace
 
 TEST_CASE("AnyMemory: a memory in RAM answers as the typed memory of its stack") {
@@ -67,7 +60,7 @@ TEST_CASE("AnyMemory: a memory in RAM answers as the typed memory of its stack")
 }
 
 TEST_CASE("AnyMemory: created, recorded, reopened to read and to continue, its stack read back from its records") {
-  const fs::path path = fresh("run.vmdb");
+  const fs::path path = vmap::test::fresh_path("any_memory", "run.vmdb");
   const vmap::PolicyStack stack = vmap::PolicyStack::from_string("sift features=600 method=ransac");
   auto src = vmap::FrameSource::open(vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt",
                                      {.end = 30, .grey = true});
@@ -108,20 +101,20 @@ TEST_CASE("AnyMemory: created, recorded, reopened to read and to continue, its s
   CHECK(again.sessions().size() == 2);
   CHECK(again.frames() == 70);
   // A .vmem file of it reads back as the same memory, and a store made of that file too.
-  const fs::path file = fresh("run.vmem");
+  const fs::path file = vmap::test::fresh_path("any_memory", "run.vmem");
   again.save(file);
   auto from_file = vmap::AnyMemory::open(file);
   CHECK(from_file.kind() == vmap::MemoryKind::file);
   CHECK(from_file.stack() == stack);
   CHECK(from_file.records().policies == again.records().policies);
-  const fs::path copy = fresh("copy.vmdb");
+  const fs::path copy = vmap::test::fresh_path("any_memory", "copy.vmdb");
   auto copied = vmap::AnyMemory::copy_into_store(vmap::AnyMemory::open(file, {.pixels = true}), copy);
   copied.close();
   CHECK(vmap::AnyMemory::open(copy).map().key_indices() == again.map().key_indices());
 }
 
 TEST_CASE("AnyMemory: memories written by the format-4 code open with the stack their store noted") {
-  const fs::path copy = fresh("old.vmdb");
+  const fs::path copy = vmap::test::fresh_path("any_memory", "old.vmdb");
   fs::copy_file(vmap::test::source_dir() / "tests/unit/memory/data/tum_two_sessions_v3.vmdb", copy);
   auto mem = vmap::AnyMemory::open(copy);
   CHECK(vmap::to_string(mem.stack()) ==
@@ -134,24 +127,24 @@ TEST_CASE("AnyMemory: memories written by the format-4 code open with the stack 
 }
 
 TEST_CASE("AnyMemory: errors name the memory and what is wrong") {
-  const fs::path missing = fresh("missing.vmdb");
+  const fs::path missing = vmap::test::fresh_path("any_memory", "missing.vmdb");
   CHECK(error_of([&] { (void)vmap::AnyMemory::open(missing); }) == "memory '" + missing.string() + "' does not exist");
-  const fs::path text = fresh("notes.txt");
+  const fs::path text = vmap::test::fresh_path("any_memory", "notes.txt");
   std::ofstream(text) << "not a memory";
   CHECK(error_of([&] { (void)vmap::AnyMemory::open(text); }) ==
         "'" + text.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file)");
-  const fs::path empty = fresh("empty.vmdb");
+  const fs::path empty = vmap::test::fresh_path("any_memory", "empty.vmdb");
   (void)vmap::MemoryStore::create(empty);
   CHECK(error_of([&] { (void)vmap::AnyMemory::open(empty); }).find("holds nothing yet") != std::string::npos);
   // A memory of policies that are not a shipped stack (the tests' estimator skips the
   // degeneracy test) is refused by name; the library loads it with its own policies.
   auto typed = vmap::test::make_small_memory(vmap::test::small_memory_options());
   for (std::size_t i = 0; i < 10; ++i) typed.push(sample_frames()[i]);
-  const fs::path custom = fresh("custom.vmem");
+  const fs::path custom = vmap::test::fresh_path("any_memory", "custom.vmem");
   typed.save(custom);
   CHECK(error_of([&] { (void)vmap::AnyMemory::open(custom); }).find("its policies are not one of vmap's stacks") !=
         std::string::npos);
-  const fs::path exists = fresh("exists.vmdb");
+  const fs::path exists = vmap::test::fresh_path("any_memory", "exists.vmdb");
   vmap::AnyMemory::create(exists, vmap::PolicyStack{}).close();
   CHECK(error_of([&] { (void)vmap::AnyMemory::create(exists, vmap::PolicyStack{}); }).find("exists already") !=
         std::string::npos);
