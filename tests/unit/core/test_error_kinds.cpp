@@ -36,6 +36,9 @@ using vmap::test::write_bytes;
 namespace fs = std::filesystem;
 using vmap::ErrorKind;
 
+/// `name` in this file's scratch folder, with nothing there (vmap::test::fresh_path).
+std::filesystem::path kinds_path(const std::string& name) { return vmap::test::fresh_path("error_kinds", name); }
+
 /// The kind of the vmap::Error `action` throws; nullopt when it throws none.
 std::optional<ErrorKind> kind_of(auto&& action) {
   try {
@@ -84,35 +87,35 @@ TEST_CASE("error kinds: a bad option is invalid_argument") {
 }
 
 TEST_CASE("error kinds: a file or folder that does not exist is not_found") {
-  const fs::path missing = vmap::test::fresh_path("error_kinds", "missing.vmem");
+  const fs::path missing = kinds_path("missing.vmem");
   CHECK(kind_of([&] { (void)vmap::read_file(missing); }) == ErrorKind::not_found);
   CHECK(kind_of([&] { (void)load(missing); }) == ErrorKind::not_found);
-  CHECK(kind_of([&] { (void)vmap::load_map(vmap::test::fresh_path("error_kinds", "missing.vmap")); }) == ErrorKind::not_found);
-  CHECK(kind_of([&] { (void)vmap::MemoryStore::open(vmap::test::fresh_path("error_kinds", "missing.vmdb")); }) == ErrorKind::not_found);
-  CHECK(kind_of([&] { vmap::write_file_atomically(vmap::test::fresh_path("error_kinds", "no-folder") / "x.txt", "x"); }) == ErrorKind::not_found);
+  CHECK(kind_of([&] { (void)vmap::load_map(kinds_path("missing.vmap")); }) == ErrorKind::not_found);
+  CHECK(kind_of([&] { (void)vmap::MemoryStore::open(kinds_path("missing.vmdb")); }) == ErrorKind::not_found);
+  CHECK(kind_of([&] { vmap::write_file_atomically(kinds_path("no-folder") / "x.txt", "x"); }) == ErrorKind::not_found);
 }
 
 TEST_CASE("error kinds: a damaged memory, map or store is corrupt; a newer format is unsupported_version") {
-  const fs::path good = vmap::test::fresh_path("error_kinds", "good.vmem");
+  const fs::path good = kinds_path("good.vmem");
   save_small_memory(good);
   const std::string bytes = read_bytes(good);
   REQUIRE(bytes.size() > 64);
 
   SUBCASE("truncated") {
-    const fs::path p = vmap::test::fresh_path("error_kinds", "truncated.vmem");
+    const fs::path p = kinds_path("truncated.vmem");
     write_bytes(p, bytes.substr(0, bytes.size() / 2));
     CHECK(kind_of([&] { (void)load(p); }) == ErrorKind::corrupt);
   }
   SUBCASE("garbage") {
-    const fs::path p = vmap::test::fresh_path("error_kinds", "garbage.vmem");
+    const fs::path p = kinds_path("garbage.vmem");
     write_bytes(p, std::string(200, 'x'));
     CHECK(kind_of([&] { (void)load(p); }) == ErrorKind::corrupt);
-    const fs::path m = vmap::test::fresh_path("error_kinds", "garbage.vmap");
+    const fs::path m = kinds_path("garbage.vmap");
     write_bytes(m, std::string(200, 'x'));
     CHECK(kind_of([&] { (void)vmap::load_map(m); }) == ErrorKind::corrupt);
   }
   SUBCASE("a flipped byte in a section") {
-    const fs::path p = vmap::test::fresh_path("error_kinds", "flipped.vmem");
+    const fs::path p = kinds_path("flipped.vmem");
     std::string b = bytes;
     b[b.size() - 5] = static_cast<char>(b[b.size() - 5] ^ 0x5a);
     write_bytes(p, b);
@@ -120,7 +123,7 @@ TEST_CASE("error kinds: a damaged memory, map or store is corrupt; a newer forma
   }
   SUBCASE("a format version this build does not read yet") {
     // The header: u8[8] magic, then the u32 version (little-endian).
-    const fs::path p = vmap::test::fresh_path("error_kinds", "newer.vmem");
+    const fs::path p = kinds_path("newer.vmem");
     std::string b = bytes;
     b[8] = static_cast<char>(vmap::memory_format_version + 1);
     write_bytes(p, b);
@@ -131,14 +134,14 @@ TEST_CASE("error kinds: a damaged memory, map or store is corrupt; a newer forma
     CHECK(kind_of([&] { (void)load(p); }) == ErrorKind::corrupt);
   }
   SUBCASE("a file that is not an SQLite database, opened as a store") {
-    const fs::path p = vmap::test::fresh_path("error_kinds", "not-sqlite.vmdb");
+    const fs::path p = kinds_path("not-sqlite.vmdb");
     write_bytes(p, std::string(4096, 'x'));
     CHECK(kind_of([&] { (void)vmap::MemoryStore::open(p, vmap::sqlite::Access::read); }) == ErrorKind::corrupt);
   }
 }
 
 TEST_CASE("error kinds: a memory loaded or merged with other policies is policy_mismatch") {
-  const fs::path p = vmap::test::fresh_path("error_kinds", "orb.vmem");
+  const fs::path p = kinds_path("orb.vmem");
   save_small_memory(p);
   CHECK(kind_of([&] { (void)load(p, vmap::OrbDescriptor({.features = 123})); }) == ErrorKind::policy_mismatch);
   auto into = load(p);
@@ -148,7 +151,7 @@ TEST_CASE("error kinds: a memory loaded or merged with other policies is policy_
 }
 
 TEST_CASE("error kinds: a store another program writes is busy") {
-  const fs::path p = vmap::test::fresh_path("error_kinds", "busy.vmdb");
+  const fs::path p = kinds_path("busy.vmdb");
   auto writer = vmap::MemoryStore::create(p);
   CHECK(kind_of([&] { (void)vmap::MemoryStore::open(p); }) == ErrorKind::busy);
   CHECK(kind_of([&] { (void)vmap::sqlite::WriterLock(p, false, "memory"); }) == ErrorKind::busy);
@@ -158,7 +161,7 @@ TEST_CASE("error kinds: a write the system refuses (a full disk) is io") {
   // A file size limit of 0 (ulimit -f 0, SIGXFSZ ignored) makes every write fail with
   // EFBIG, as a full disk does with ENOSPC; it is set in a child, which reports the kind
   // by its exit code, so that this process keeps its limits.
-  const fs::path p = vmap::test::fresh_path("error_kinds", "full.txt");
+  const fs::path p = kinds_path("full.txt");
   const pid_t child = ::fork();
   REQUIRE(child >= 0);
   if (child == 0) {

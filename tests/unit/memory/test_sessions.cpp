@@ -34,6 +34,9 @@ using vmap::test::make_small_memory;
 using vmap::test::memory_estimator;
 using vmap::test::small_memory_options;
 
+/// `name` in this file's scratch folder, with nothing there (vmap::test::fresh_path).
+std::filesystem::path sessions_path(const std::string& name) { return vmap::test::fresh_path("sessions", name); }
+
 /// The sample frames first .. last - 1 (their own indices, as a run of that part reads them).
 std::vector<vmap::Frame> part(std::size_t first, std::size_t last) {
   return {sample_frames().begin() + static_cast<std::ptrdiff_t>(first), sample_frames().begin() + static_cast<std::ptrdiff_t>(last)};
@@ -173,7 +176,7 @@ TEST_CASE("sessions: saved, loaded and resumed at any frame, a memory goes on as
 TEST_CASE("sessions: a store synced at every frame holds the sessions; reopened mid-run it goes on exactly") {
   const auto o = small_memory_options();
   const auto whole = two_sessions(o);
-  const fs::path p = vmap::test::fresh_path("sessions", "two.vmdb");
+  const fs::path p = sessions_path("two.vmdb");
   {
     auto store = vmap::MemoryStore::create(p);
     auto mem = make_small_memory(o);
@@ -207,7 +210,7 @@ TEST_CASE("sessions: a store synced at every frame holds the sessions; reopened 
 TEST_CASE("sessions: the store's sessions table, read without vmap; a version-1 store is read as one session") {
   const auto o = small_memory_options();
   const auto whole = two_sessions(o);
-  const fs::path p = vmap::test::fresh_path("sessions", "table.vmdb");
+  const fs::path p = sessions_path("table.vmdb");
   {
     auto store = vmap::MemoryStore::create(p);
     store.sync(whole);
@@ -225,7 +228,7 @@ TEST_CASE("sessions: the store's sessions table, read without vmap; a version-1 
   const fs::path corpus = vmap::test::source_dir() / "tests/fuzz/corpus";
   const auto seed = vmap::OrbVisualMemory::deserialize(
       vmap::read_file(corpus / "memory/labels_gcs_v4.vmem", 1 << 20, "seed"), "labels_gcs_v4.vmem");
-  const fs::path v1 = vmap::test::fresh_path("sessions", "v1.vmdb");
+  const fs::path v1 = sessions_path("v1.vmdb");
   fs::copy_file(corpus / "memory_store/labels_gcs.vmdb", v1);
   CHECK(sql_integer(v1, "PRAGMA user_version") == 1);
   {

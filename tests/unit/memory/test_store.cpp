@@ -37,6 +37,9 @@ namespace fs = std::filesystem;
 
 using vmap::test::memory_estimator;
 
+/// `name` in this file's scratch folder, with nothing there (vmap::test::fresh_path).
+std::filesystem::path store_path(const std::string& name) { return vmap::test::fresh_path("store", name); }
+
 vmap::MemoryOptions options(vmap::ImageStorage images) { return vmap::test::small_memory_options(images); }
 vmap::OrbVisualMemory make(const vmap::MemoryOptions& o) { return vmap::test::make_small_memory(o); }
 
@@ -45,7 +48,7 @@ vmap::OrbVisualMemory make(const vmap::MemoryOptions& o) { return vmap::test::ma
 TEST_CASE("store: a memory synced at every frame loads back as the same memory, for each pixel storage") {
   for (auto images : {vmap::ImageStorage::none, vmap::ImageStorage::png, vmap::ImageStorage::jpeg}) {
     CAPTURE(static_cast<int>(images));
-    const fs::path file = vmap::test::fresh_path("store", "every_frame.vmdb");
+    const fs::path file = store_path("every_frame.vmdb");
     auto store = vmap::MemoryStore::create(file);
     auto memory = make(options(images));
     std::size_t synced_keys = 0;
@@ -80,7 +83,7 @@ TEST_CASE("store: a memory synced at every frame loads back as the same memory, 
 // another connection sees all of them after flush(), and the store loads as the memory,
 // also when the store object was moved with a sync in flight.
 TEST_CASE("store: syncs committed in the writer thread: after each flush a reader sees every sync") {
-  const fs::path file = vmap::test::fresh_path("store", "async.vmdb");
+  const fs::path file = store_path("async.vmdb");
   std::optional<vmap::MemoryStore> store;
   store.emplace(vmap::MemoryStore::create(file));
   auto reader = vmap::MemoryStore::open(file, vmap::sqlite::Access::read);
@@ -119,7 +122,7 @@ TEST_CASE("store: a sync that fails in the writer thread is an Error at the next
   auto whole = make(o);
   for (const auto& f : sample_frames()) whole.push(f);
 
-  const fs::path file = vmap::test::fresh_path("store", "failed.vmdb");
+  const fs::path file = store_path("failed.vmdb");
   std::optional<vmap::MemoryStore> store;
   store.emplace(vmap::MemoryStore::create(file));
   auto memory = make(o);
@@ -170,7 +173,7 @@ TEST_CASE("store: a sync that fails in the writer thread is an Error at the next
 // The key images' pixels are counted from their recorded sizes before any is decoded:
 // a memory (file or store) holding more than the budget is refused, naming the limit.
 TEST_CASE("store: a memory's key images are loaded within a pixel budget") {
-  const fs::path file = vmap::test::fresh_path("store", "budget.vmdb");
+  const fs::path file = store_path("budget.vmdb");
   auto store = vmap::MemoryStore::create(file);
   auto memory = make(options(vmap::ImageStorage::png));
   for (const auto& f : sample_frames()) memory.push(f);
@@ -204,7 +207,7 @@ TEST_CASE("store: a memory's key images are loaded within a pixel budget") {
 }
 
 TEST_CASE("store: a memory loaded without decoding its pixels answers the same and refuses to write pixels") {
-  const fs::path file = vmap::test::fresh_path("store", "undecoded.vmdb");
+  const fs::path file = store_path("undecoded.vmdb");
   std::optional<vmap::MemoryStore> store;
   store.emplace(vmap::MemoryStore::create(file));
   auto memory = make(options(vmap::ImageStorage::png));
@@ -245,7 +248,7 @@ TEST_CASE("store: stopped and reopened every few frames, the memory goes on exac
   for (const auto& f : sample_frames()) whole.push(f);
   for (std::size_t every : {5U, 17U}) {
     CAPTURE(every);
-    const fs::path file = vmap::test::fresh_path("store", "resumed.vmdb");
+    const fs::path file = store_path("resumed.vmdb");
     std::optional<vmap::MemoryStore> store;
     std::optional<vmap::OrbVisualMemory> memory;
     store.emplace(vmap::MemoryStore::create(file));
@@ -282,7 +285,7 @@ TEST_CASE("store: I_{j-1}'s score synced with its degeneracy test deferred loads
   };
   auto whole = make_checking();
   for (const auto& f : sample_frames()) whole.push(f);
-  const fs::path file = vmap::test::fresh_path("store", "deferred.vmdb");
+  const fs::path file = store_path("deferred.vmdb");
   std::optional<vmap::MemoryStore> store;
   std::optional<vmap::OrbVisualMemory> memory;
   store.emplace(vmap::MemoryStore::create(file));
@@ -317,7 +320,7 @@ TEST_CASE("store: a working memory of 3 key images answers as a memory that hold
   for (const auto& f : kept) whole.push(f);
   REQUIRE(whole.key_images() >= 10);
 
-  const fs::path file = vmap::test::fresh_path("store", "working.vmdb");
+  const fs::path file = store_path("working.vmdb");
   std::optional<vmap::MemoryStore> store;
   store.emplace(vmap::MemoryStore::create(file));
   auto bounded = make(o);
@@ -405,7 +408,7 @@ TEST_CASE("store: a working memory of 3 key images answers as a memory that hold
 }
 
 TEST_CASE("store: one writer at a time; readers load the last sync while the writer goes on") {
-  const fs::path file = vmap::test::fresh_path("store", "shared.vmdb");
+  const fs::path file = store_path("shared.vmdb");
   auto writer = vmap::MemoryStore::create(file);
   auto memory = make(options(vmap::ImageStorage::none));
   for (std::size_t i = 0; i < 30; ++i) memory.push(sample_frames()[i]);
@@ -428,7 +431,7 @@ TEST_CASE("store: one writer at a time; readers load the last sync while the wri
 }
 
 TEST_CASE("store: a memory is synced only into its own store") {
-  const fs::path file = vmap::test::fresh_path("store", "own.vmdb");
+  const fs::path file = store_path("own.vmdb");
   auto memory = make(options(vmap::ImageStorage::none));
   for (std::size_t i = 0; i < 40; ++i) memory.push(sample_frames()[i]);
   {
@@ -461,47 +464,47 @@ TEST_CASE("store: a memory is synced only into its own store") {
 TEST_CASE("store: a .vmem memory file converts to a store that loads as the same memory") {
   auto memory = make(options(vmap::ImageStorage::png));
   for (const auto& f : sample_frames()) memory.push(f);
-  const fs::path vmem = vmap::test::fresh_path("store", "converted.vmem");
+  const fs::path vmem = store_path("converted.vmem");
   memory.save(vmem);
   const auto loaded = vmap::OrbVisualMemory::load(vmem, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(),
                                                   vmap::InlierRatio{});
-  const fs::path file = vmap::test::fresh_path("store", "converted.vmdb");
+  const fs::path file = store_path("converted.vmdb");
   auto store = vmap::MemoryStore::create(file);
   store.sync(loaded);
   CHECK(load_small_memory(store).serialize() == memory.serialize());
 }
 
 TEST_CASE("store: files that are not stores, other versions and damaged rows are Errors naming the memory") {
-  const fs::path missing = vmap::test::fresh_path("store", "missing.vmdb");
+  const fs::path missing = store_path("missing.vmdb");
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(missing); }).find("'" + missing.string() + "' does not exist") !=
         std::string::npos);
 
-  const fs::path text = vmap::test::fresh_path("store", "text.vmdb");
+  const fs::path text = store_path("text.vmdb");
   std::ofstream(text) << "not a database at all, but long enough to be looked at as one\n";
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(text, vmap::sqlite::Access::read); }).find(text.string()) !=
         std::string::npos);
 
   // A creation killed before its tables were written leaves an empty file.
-  const fs::path empty = vmap::test::fresh_path("store", "empty.vmdb");
+  const fs::path empty = store_path("empty.vmdb");
   std::ofstream(empty).close();
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(empty); }).find("is empty: its creation was interrupted") !=
         std::string::npos);
   {
     // Created, never synced: open, but nothing to load.
-    const fs::path unsynced = vmap::test::fresh_path("store", "unsynced.vmdb");
+    const fs::path unsynced = store_path("unsynced.vmdb");
     (void)vmap::MemoryStore::create(unsynced);
     auto store = vmap::MemoryStore::open(unsynced, vmap::sqlite::Access::read);
     CHECK(!store.synced());
     CHECK(error_of([&] { (void)load_small_memory(store); }).find("holds no 'options' state") != std::string::npos);
   }
 
-  const fs::path foreign = vmap::test::fresh_path("store", "foreign.vmdb");
+  const fs::path foreign = store_path("foreign.vmdb");
   raw_sql(foreign, "CREATE TABLE t(x)");
   CHECK(error_of([&] { (void)vmap::MemoryStore::open(foreign); }).find("is not a vmap memory store") != std::string::npos);
 
   auto memory = make(options(vmap::ImageStorage::none));
   for (std::size_t i = 0; i < 30; ++i) memory.push(sample_frames()[i]);
-  const fs::path file = vmap::test::fresh_path("store", "damaged.vmdb");
+  const fs::path file = store_path("damaged.vmdb");
   {
     auto store = vmap::MemoryStore::create(file);
     store.sync(memory);
@@ -519,7 +522,7 @@ TEST_CASE("store: files that are not stores, other versions and damaged rows are
         std::string("UPDATE meta SET value = x'0102' WHERE name = 'options'"),
         std::string("DELETE FROM meta WHERE name = 'selector'")}) {
     CAPTURE(damage);
-    const fs::path copy = vmap::test::fresh_path("store", "damaged_copy.vmdb");
+    const fs::path copy = store_path("damaged_copy.vmdb");
     fs::copy_file(file, copy);
     raw_sql(copy, damage);
     auto store = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read);
@@ -535,13 +538,13 @@ TEST_CASE("store: every row is checked: a flipped bit, a column that differs fro
   memory.start_session();
   for (std::size_t i = 0; i < 20; ++i) memory.push(sample_frames()[i]);
   REQUIRE(memory.loops().size() >= 2);
-  const fs::path file = vmap::test::fresh_path("store", "rows.vmdb");
+  const fs::path file = store_path("rows.vmdb");
   {
     auto store = vmap::MemoryStore::create(file);
     store.sync(memory);
   }
   const auto error_after = [&](const std::string& damage) {
-    const fs::path copy = vmap::test::fresh_path("store", "rows_copy.vmdb");
+    const fs::path copy = store_path("rows_copy.vmdb");
     fs::copy_file(file, copy);
     raw_sql(copy, damage);
     const std::string e = error_of([&] {
@@ -577,7 +580,7 @@ TEST_CASE("store: every row is checked: a flipped bit, a column that differs fro
 TEST_CASE("store: a store in a folder the reader cannot write is read (as immutable); a stray journal is explained") {
   auto memory = make(options(vmap::ImageStorage::none));
   for (std::size_t i = 0; i < 12; ++i) memory.push(sample_frames()[i]);
-  const fs::path file = vmap::test::fresh_path("store", "read_only.vmdb");
+  const fs::path file = store_path("read_only.vmdb");
   {
     auto store = vmap::MemoryStore::create(file);
     store.sync(memory);
@@ -615,7 +618,7 @@ TEST_CASE("store: a store in a folder the reader cannot write is read (as immuta
 
   // A rollback journal beside a store (not vmap's: its stores use a write-ahead log)
   // makes SQLite refuse readers; the message says why and what to do.
-  const fs::path journaled = vmap::test::fresh_path("store", "journaled.vmdb");
+  const fs::path journaled = store_path("journaled.vmdb");
   fs::copy_file(file, journaled);
   {
     std::ofstream j(journaled.string() + "-journal", std::ios::binary);
@@ -666,7 +669,7 @@ TEST_CASE("store: a key image record with bytes after its contents is refused na
   auto memory = make(options(vmap::ImageStorage::png));
   for (std::size_t i = 0; i < 30; ++i) memory.push(sample_frames()[i]);
   REQUIRE(memory.key_images() >= 2);
-  const fs::path file = vmap::test::fresh_path("store", "padded.vmdb");
+  const fs::path file = store_path("padded.vmdb");
   {
     auto store = vmap::MemoryStore::create(file);
     store.sync(memory);

@@ -22,6 +22,9 @@ namespace fs = std::filesystem;
 using vmap::test::error_of;
 using vmap::test::sample_frames;
 
+/// `name` in this file's scratch folder, with nothing there (vmap::test::fresh_path).
+std::filesystem::path any_memory_path(const std::string& name) { return vmap::test::fresh_path("any_memory", name); }
+
 vmap::MemoryOptions small() {
   vmap::MemoryOptions o;
   o.vocabulary_after = 3;
@@ -60,7 +63,7 @@ TEST_CASE("AnyMemory: a memory in RAM answers as the typed memory of its stack")
 }
 
 TEST_CASE("AnyMemory: created, recorded, reopened to read and to continue, its stack read back from its records") {
-  const fs::path path = vmap::test::fresh_path("any_memory", "run.vmdb");
+  const fs::path path = any_memory_path("run.vmdb");
   const vmap::PolicyStack stack = vmap::PolicyStack::from_string("sift features=600 method=ransac");
   auto src = vmap::FrameSource::open(vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt",
                                      {.end = 30, .grey = true});
@@ -101,20 +104,20 @@ TEST_CASE("AnyMemory: created, recorded, reopened to read and to continue, its s
   CHECK(again.sessions().size() == 2);
   CHECK(again.frames() == 70);
   // A .vmem file of it reads back as the same memory, and a store made of that file too.
-  const fs::path file = vmap::test::fresh_path("any_memory", "run.vmem");
+  const fs::path file = any_memory_path("run.vmem");
   again.save(file);
   auto from_file = vmap::AnyMemory::open(file);
   CHECK(from_file.kind() == vmap::MemoryKind::file);
   CHECK(from_file.stack() == stack);
   CHECK(from_file.records().policies == again.records().policies);
-  const fs::path copy = vmap::test::fresh_path("any_memory", "copy.vmdb");
+  const fs::path copy = any_memory_path("copy.vmdb");
   auto copied = vmap::AnyMemory::copy_into_store(vmap::AnyMemory::open(file, {.pixels = true}), copy);
   copied.close();
   CHECK(vmap::AnyMemory::open(copy).map().key_indices() == again.map().key_indices());
 }
 
 TEST_CASE("AnyMemory: memories written by the format-4 code open with the stack their store noted") {
-  const fs::path copy = vmap::test::fresh_path("any_memory", "old.vmdb");
+  const fs::path copy = any_memory_path("old.vmdb");
   fs::copy_file(vmap::test::source_dir() / "tests/unit/memory/data/tum_two_sessions_v3.vmdb", copy);
   auto mem = vmap::AnyMemory::open(copy);
   CHECK(vmap::to_string(mem.stack()) ==
@@ -127,24 +130,24 @@ TEST_CASE("AnyMemory: memories written by the format-4 code open with the stack 
 }
 
 TEST_CASE("AnyMemory: errors name the memory and what is wrong") {
-  const fs::path missing = vmap::test::fresh_path("any_memory", "missing.vmdb");
+  const fs::path missing = any_memory_path("missing.vmdb");
   CHECK(error_of([&] { (void)vmap::AnyMemory::open(missing); }) == "memory '" + missing.string() + "' does not exist");
-  const fs::path text = vmap::test::fresh_path("any_memory", "notes.txt");
+  const fs::path text = any_memory_path("notes.txt");
   std::ofstream(text) << "not a memory";
   CHECK(error_of([&] { (void)vmap::AnyMemory::open(text); }) ==
         "'" + text.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file)");
-  const fs::path empty = vmap::test::fresh_path("any_memory", "empty.vmdb");
+  const fs::path empty = any_memory_path("empty.vmdb");
   (void)vmap::MemoryStore::create(empty);
   CHECK(error_of([&] { (void)vmap::AnyMemory::open(empty); }).find("holds nothing yet") != std::string::npos);
   // A memory of policies that are not a shipped stack (the tests' estimator skips the
   // degeneracy test) is refused by name; the library loads it with its own policies.
   auto typed = vmap::test::make_small_memory(vmap::test::small_memory_options());
   for (std::size_t i = 0; i < 10; ++i) typed.push(sample_frames()[i]);
-  const fs::path custom = vmap::test::fresh_path("any_memory", "custom.vmem");
+  const fs::path custom = any_memory_path("custom.vmem");
   typed.save(custom);
   CHECK(error_of([&] { (void)vmap::AnyMemory::open(custom); }).find("its policies are not one of vmap's stacks") !=
         std::string::npos);
-  const fs::path exists = vmap::test::fresh_path("any_memory", "exists.vmdb");
+  const fs::path exists = any_memory_path("exists.vmdb");
   vmap::AnyMemory::create(exists, vmap::PolicyStack{}).close();
   CHECK(error_of([&] { (void)vmap::AnyMemory::create(exists, vmap::PolicyStack{}); }).find("exists already") !=
         std::string::npos);
