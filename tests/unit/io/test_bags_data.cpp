@@ -224,15 +224,9 @@ TEST_SUITE("data") {
       CHECK(cv::norm(ka.features.descriptors, kb.features.descriptors, cv::NORM_HAMMING) == 0);
       CHECK(ka.timestamp == kb.timestamp);  // the bag's stamps are rgb.txt's times
     }
-    for (std::size_t k = 0; k < a.map().pairs.size(); ++k) CHECK(a.map().pairs[k].similarity == b.map().pairs[k].similarity);
+    vmap::test::check_same_memory(a, b);
     CHECK(a.map().quality() == b.map().quality());
-    REQUIRE(a.loops().size() == b.loops().size());
-    for (std::size_t k = 0; k < a.loops().size(); ++k) {
-      CHECK(a.loops()[k].from == b.loops()[k].from);
-      CHECK(a.loops()[k].link.key == b.loops()[k].link.key);
-      CHECK(a.loops()[k].link.inliers == b.loops()[k].link.inliers);
-      CHECK(a.loops()[k].link.confidence == b.loops()[k].link.confidence);
-    }
+    for (std::size_t k = 0; k < a.loops().size(); ++k) CHECK(a.loops()[k].link.confidence == b.loops()[k].link.confidence);
   }
 
   TEST_CASE("conformance bags (rosbags-rs): every topic listed; the two stub images refused with their reasons") {
