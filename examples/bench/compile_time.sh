@@ -4,8 +4,9 @@
 # on the same machine with the same flags; the ratio is the figure (the machine is
 # shared and noisy). Three programs: the probe of SHARED/bench/compile (consumer.cpp:
 # an OrbVisualMemory fed from a folder, one localization) header-only and as it compiles
-# in a program linking vmap::stacks (-DVMAP_COMPILED_STACKS), and a run-time-layer
-# program (tests/consumer/stacks.cpp: AnyMemory) both ways. Peak compiler memory too.
+# in a program linking vmap::stacks (-DVMAP_COMPILED_STACKS), the same work on AnyMemory
+# (tests/consumer/light.cpp), and a run-time-layer program
+# (tests/consumer/stacks.cpp: AnyMemory on a store) both ways. Peak compiler memory too.
 #
 #   bash examples/bench/compile_time.sh [SHARED_DIR=../shared] [ROUNDS=1]
 set -euo pipefail
@@ -38,5 +39,7 @@ row() {
 printf '%-44s %8.1f %8.2f %8.0f\n' "floor (OpenCV + Eigen headers)" "$floor_s" 1 "$((floor_kb / 1024))"
 row "consumer.cpp, header-only" "$shared/bench/compile/consumer.cpp"
 row "consumer.cpp, linking vmap::stacks" -DVMAP_COMPILED_STACKS "$shared/bench/compile/consumer.cpp"
+row "consumer light.cpp, header-only" tests/consumer/light.cpp
+row "consumer light.cpp, linking vmap::stacks" -DVMAP_COMPILED_STACKS tests/consumer/light.cpp
 row "AnyMemory program, header-only" tests/consumer/stacks.cpp
 row "AnyMemory program, linking vmap::stacks" -DVMAP_COMPILED_STACKS tests/consumer/stacks.cpp

@@ -14,6 +14,7 @@
 #include <vmap/core/error.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/image.hpp>
+#include <vmap/memory/replace.hpp>
 #include <vmap/runtime/memory.hpp>
 #include <vmap/runtime/recorder.hpp>
 #include <vmap/runtime/stack.hpp>

@@ -13,6 +13,7 @@
 
 #include <vmap/io/calibration.hpp>
 #include <vmap/io/frame_source.hpp>
+#include <vmap/memory/replace.hpp>
 #include <vmap/runtime/exports.hpp>
 #include <vmap/runtime/memory.hpp>
 #include <vmap/runtime/recorder.hpp>

@@ -6,10 +6,11 @@
 //   - the run-time layer's stacks of the shipped descriptors are declared `extern
 //     template` (runtime/detail/compiled_stacks.hpp), so no file of the program
 //     instantiates them;
-//   - the readers that are not templates (io/frame_source.hpp's videos, lists and bags)
-//     are declared only: their definitions, in the detail/*_impl.hpp headers, are
-//     compiled in one translation unit of vmap::stacks, so no file of the program parses
-//     OpenCV's videoio, the bag readers or SQLite for them.
+//   - the classes that are not templates (io/frame_source.hpp's readers of videos, lists
+//     and bags; runtime/memory.hpp's AnyMemory) are declared only: their definitions, in
+//     the detail/*_impl.hpp headers, are compiled in one translation unit of vmap::stacks
+//     each, so no file of the program parses OpenCV's videoio, the bag readers, SQLite or
+//     a VisualMemory for them.
 // VMAP_INLINE marks those definitions: `inline` in a header-only program, where every
 // file that includes them compiles them; nothing under VMAP_COMPILED_STACKS, where the
 // one translation unit that includes them gives the program their single definition.

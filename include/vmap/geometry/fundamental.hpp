@@ -5,6 +5,7 @@
 #include <vmap/core/names.hpp>
 #include <vmap/core/numeric.hpp>
 #include <vmap/geometry/detail/robust.hpp>
+#include <vmap/geometry/robust_method.hpp>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
@@ -16,23 +17,6 @@
 #include <vector>
 
 namespace vmap {
-
-/// Robust estimation methods for the two-view models.
-enum class RobustMethod {
-  magsac,       ///< MAGSAC++ (cv::USAC_MAGSAC), Barath et al. 2020
-  ransac,       ///< classic RANSAC (cv::FM_RANSAC / cv::RANSAC)
-  lmeds,        ///< least median of squares
-  eight_point,  ///< plain 8-point (fundamental only), every match is an inlier
-};
-
-/// The names of the methods: magsac, ransac, lmeds, 8point (core/names.hpp).
-[[nodiscard]] constexpr auto names_of(RobustMethod) noexcept {
-  return detail::NameTable<RobustMethod, 4>{{{{RobustMethod::magsac, "magsac"},
-                                              {RobustMethod::ransac, "ransac"},
-                                              {RobustMethod::lmeds, "lmeds"},
-                                              {RobustMethod::eight_point, "8point"}}}};
-}
-[[nodiscard]] constexpr std::string_view to_string(RobustMethod m) noexcept { return names_of(m).name(m); }
 
 struct FundamentalOptions {
   RobustMethod method = RobustMethod::magsac;

@@ -29,6 +29,7 @@
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/sqlite.hpp>
 #include <vmap/memory/detail/format.hpp>
+#include <vmap/memory/types.hpp>
 
 #include <fcntl.h>
 #include <stdio.h>
@@ -47,13 +48,6 @@
 #include <system_error>
 
 namespace vmap {
-
-/// What a file given as a memory is, by its first bytes.
-enum class MemoryKind : std::uint8_t {
-  store,  ///< a memory store (an SQLite file; an empty file is one whose creation was interrupted)
-  file,   ///< a single-file memory (.vmem, "VMAPMEMO")
-  other,  ///< neither (also anything that is not a regular file, which is never opened)
-};
 
 /// The kind of memory `file` holds. A path that is not a regular file (a folder, a FIFO,
 /// a device or a socket; a symbolic link is followed) is `other` without being opened:

@@ -8,16 +8,10 @@
 
 #include <vmap/core/verification.hpp>
 #include <vmap/geometry/pose2.hpp>
-#include <vmap/keyframe/selector.hpp>
-#include <vmap/lcd/influence.hpp>
-#include <vmap/lcd/loop_engine.hpp>
+#include <vmap/keyframe/result.hpp>
 #include <vmap/lcd/place_decision.hpp>
 #include <vmap/memory/options.hpp>
-#include <vmap/place/bow.hpp>
-#include <vmap/place/vocabulary_tree.hpp>
-#include <vmap/som/gcs.hpp>
-#include <vmap/som/histogram.hpp>
-#include <vmap/som/pose_map.hpp>
+#include <vmap/som/results.hpp>
 
 #include <opencv2/core.hpp>
 #include <opencv2/core/affine.hpp>
@@ -110,6 +104,13 @@ struct GraphNeighbour {
   enum class Kind : std::uint8_t { link, loop };
   std::uint32_t key = 0;
   Kind kind = Kind::link;
+};
+
+/// What a file given as a memory is, by its first bytes.
+enum class MemoryKind : std::uint8_t {
+  store,  ///< a memory store (an SQLite file; an empty file is one whose creation was interrupted)
+  file,   ///< a single-file memory (.vmem, "VMAPMEMO")
+  other,  ///< neither (also anything that is not a regular file, which is never opened)
 };
 
 }  // namespace vmap

@@ -16,6 +16,7 @@
 #include <vmap/io/files.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
+#include <vmap/memory/store.hpp>
 #include <vmap/memory/types.hpp>
 #include <vmap/runtime/memory.hpp>
 #include <vmap/runtime/stack.hpp>

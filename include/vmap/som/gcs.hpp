@@ -17,6 +17,7 @@
 #include <vmap/io/atomic_file.hpp>
 #include <vmap/io/binary.hpp>
 #include <vmap/som/options.hpp>
+#include <vmap/som/results.hpp>
 
 #include <Eigen/Core>
 
@@ -69,15 +70,6 @@ static_assert(VectorMetric<ManhattanDistance, Eigen::VectorXd>);
 
 /// What happened to the topology; passed to a training observer.
 enum class GcsEvent { inserted, removed };
-
-struct GcsTrainStats {
-  std::size_t epochs = 0;
-  std::size_t steps = 0;
-  std::size_t insertions = 0;
-  std::size_t removals = 0;
-  std::size_t cells = 0;
-  double mean_quantization_error = 0.0;  ///< mean distance of the data to their best matching cell
-};
 
 /// A cell and its distance to a query.
 struct CellDistance {

@@ -7,6 +7,7 @@
 #include <vmap/core/error.hpp>
 #include <vmap/geometry/pose2.hpp>
 #include <vmap/som/gcs.hpp>
+#include <vmap/som/results.hpp>
 
 #include <Eigen/Core>
 
@@ -25,21 +26,6 @@ struct NeuronPose {
   Eigen::Vector2d spread = Eigen::Vector2d::Zero();     ///< standard deviation of x and y (metres)
   std::size_t count = 0;                                ///< training images it wins; 0 = no pose
   [[nodiscard]] bool has_pose() const noexcept { return count > 0; }
-};
-
-/// One query image's best matching neuron.
-struct QueryMatch {
-  std::size_t neuron = 0;    ///< the neuron whose pose is used
-  double distance = 0.0;     ///< its distance to the query vector
-  bool substituted = false;  ///< the winner had no pose: this is the nearest neuron that has one
-  Pose2 pose;                ///< that neuron's mean pose
-};
-
-/// The estimate: the mean of the query images' neuron poses (Algorithm 5), with the
-/// neurons and distances so a user can judge it.
-struct Localization {
-  Pose2 pose;
-  std::vector<QueryMatch> matches;
 };
 
 /// A trained network plus a pose per neuron. Queries are const and thread-safe.

@@ -14,7 +14,7 @@
 // twins), which programs and tests use typed.
 
 #include <vmap/runtime/loop_detector.hpp>
-#include <vmap/runtime/memory.hpp>
+#include <vmap/runtime/detail/memory_model.hpp>
 #include <vmap/runtime/pair.hpp>
 #include <vmap/runtime/selector.hpp>
 
