@@ -20,6 +20,7 @@
 // usage: bench_allocations [RGB_TXT] [FRAMES=60] [WARM=5] [PR_FRAMES=2000]
 #include <vmap/io/frame_source.hpp>
 #include <vmap/keyframe/selector.hpp>
+#include <vmap/keyframe/stacks.hpp>
 #include <vmap/lcd/evaluation.hpp>
 
 #include <opencv2/calib3d.hpp>

@@ -25,6 +25,7 @@
 #include <vmap/io/frame_source.hpp>
 #include <vmap/keyframe/pipeline.hpp>
 #include <vmap/keyframe/selector.hpp>
+#include <vmap/keyframe/stacks.hpp>
 #include <vmap/keyframe/sweep.hpp>
 #include <vmap/matching/brute_force.hpp>
 

@@ -9,6 +9,7 @@
 //   bench_memory [--shared DIR] [--every 100] [--every-short 20] [--hold-out 10] [--within 15] [--end N]
 // (--every-short for rtabmap_loop, whose 84 frames hold no 100-frame interval to cut)
 #include <vmap/io/frame_source.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/visual_memory.hpp>
 
 #include <CLI/CLI.hpp>

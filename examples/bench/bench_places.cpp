@@ -35,6 +35,7 @@
 #include <vmap/lcd/evaluation.hpp>
 #include <vmap/lcd/loop_detector.hpp>
 #include <vmap/matching/brute_force.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/visual_memory.hpp>
 
 #include <CLI/CLI.hpp>

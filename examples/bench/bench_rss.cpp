@@ -18,6 +18,7 @@
 // of the sweep (the version that cached every frame's features) is this file compiled
 // against that version's headers; examples/results/memory.md gives the commands and the figures.
 #include <vmap/keyframe/sweep.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/visual_memory.hpp>
 
 #include <CLI/CLI.hpp>

@@ -22,6 +22,7 @@
 //   bench_store [--shared DIR] [--ratio-frames 400] [--repeats 3] [--keys 10000] [--scale-tau 0.95]
 //               [--working-memory 0] [--dir /tmp/bench_store]
 #include <vmap/io/frame_source.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 

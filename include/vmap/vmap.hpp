@@ -26,6 +26,7 @@
 #include <vmap/geometry/fundamental.hpp>
 #include <vmap/geometry/homography.hpp>
 #include <vmap/geometry/pose2.hpp>
+#include <vmap/geometry/robust_method.hpp>
 #include <vmap/geometry/similarity.hpp>
 
 #include <vmap/io/atomic_file.hpp>
@@ -60,7 +61,9 @@
 #include <vmap/keyframe/front_end.hpp>
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/keyframe/pipeline.hpp>
+#include <vmap/keyframe/result.hpp>
 #include <vmap/keyframe/selector.hpp>
+#include <vmap/keyframe/stacks.hpp>
 #include <vmap/keyframe/sweep.hpp>
 #include <vmap/keyframe/visual_map.hpp>
 
@@ -77,9 +80,12 @@
 #include <vmap/som/nearest_wall.hpp>
 #include <vmap/som/pose_io.hpp>
 #include <vmap/som/pose_map.hpp>
+#include <vmap/som/results.hpp>
 #include <vmap/som/virtual_room.hpp>
 
 // memory/: the visual memory a robot keeps (key images, loops, localization, resume)
 #include <vmap/memory/replace.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/store.hpp>
+#include <vmap/memory/types.hpp>
 #include <vmap/memory/visual_memory.hpp>

@@ -18,6 +18,7 @@
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/lcd/binary_tree.hpp>
 #include <vmap/lcd/evaluation.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 #include <vmap/place/database.hpp>

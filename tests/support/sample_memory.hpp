@@ -8,6 +8,7 @@
 #include "support/shared_data.hpp"
 
 #include <vmap/io/frame_source.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 

@@ -9,9 +9,6 @@
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
 #include <vmap/core/names.hpp>
-#include <vmap/features/akaze.hpp>
-#include <vmap/features/orb.hpp>
-#include <vmap/features/sift.hpp>
 #include <vmap/geometry/fundamental.hpp>
 #include <vmap/geometry/similarity.hpp>
 #include <vmap/hooks/pair_matcher.hpp>
@@ -483,12 +480,5 @@ class PairKeyframeSelector : public BasicKeyframeSelector<PairFrontEnd<P, E>> {
   PairKeyframeSelector(P matcher, E estimator, const SelectorOptions& options = {})
       : Base(PairFrontEnd<P, E>(std::move(matcher), std::move(estimator)), options) {}
 };
-
-// Named stacks. The F-matrix method is an option of FundamentalEstimator
-// (FundamentalOptions::method, MAGSAC++ by default), so e.g. OrbMagsacSelector
-// default-constructed is the paper's ORB 1000 + mutual NN + MAGSAC 1 px 0.99 + eq. 5.
-using OrbMagsacSelector = KeyframeSelector<OrbDescriptor, BruteForceMatcher, FundamentalEstimator, InlierRatio>;
-using AkazeMagsacSelector = KeyframeSelector<AkazeDescriptor, BruteForceMatcher, FundamentalEstimator, InlierRatio>;
-using SiftMagsacSelector = KeyframeSelector<SiftDescriptor, BruteForceMatcher, FundamentalEstimator, InlierRatio>;
 
 }  // namespace vmap

@@ -51,9 +51,6 @@
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
-#include <vmap/features/akaze.hpp>
-#include <vmap/features/orb.hpp>
-#include <vmap/features/sift.hpp>
 #include <vmap/geometry/fundamental.hpp>
 #include <vmap/geometry/similarity.hpp>
 #include <vmap/hooks/detection.hpp>
@@ -569,24 +566,3 @@ class VisualMemory {
 }  // namespace vmap
 
 #include <vmap/memory/detail/visual_memory_impl.hpp>
-
-namespace vmap {
-
-// Named stacks: the paper's ORB 1000 + mutual NN + MAGSAC++ + eq. 5, and A-KAZE / SIFT.
-using OrbVisualMemory = VisualMemory<OrbDescriptor, BruteForceMatcher, FundamentalEstimator, InlierRatio>;
-using AkazeVisualMemory = VisualMemory<AkazeDescriptor, BruteForceMatcher, FundamentalEstimator, InlierRatio>;
-using SiftVisualMemory = VisualMemory<SiftDescriptor, BruteForceMatcher, FundamentalEstimator, InlierRatio>;
-
-}  // namespace vmap
-
-// A program that links vmap::stacks (CMake) compiles the named stacks' members defined
-// apart from the class (memory/detail/visual_memory_impl.hpp) once, there
-// (runtime/detail/compiled_stacks.hpp).
-#ifdef VMAP_COMPILED_STACKS
-extern template class vmap::VisualMemory<vmap::OrbDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator,
-                                         vmap::InlierRatio>;
-extern template class vmap::VisualMemory<vmap::AkazeDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator,
-                                         vmap::InlierRatio>;
-extern template class vmap::VisualMemory<vmap::SiftDescriptor, vmap::BruteForceMatcher, vmap::FundamentalEstimator,
-                                         vmap::InlierRatio>;
-#endif

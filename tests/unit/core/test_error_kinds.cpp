@@ -13,6 +13,7 @@
 #include <vmap/io/files.hpp>
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/memory/records.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 

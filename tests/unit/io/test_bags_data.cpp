@@ -13,6 +13,7 @@
 #include <vmap/io/frame_source.hpp>
 #include <vmap/keyframe/pipeline.hpp>
 #include <vmap/keyframe/selector.hpp>
+#include <vmap/keyframe/stacks.hpp>
 #include <vmap/memory/visual_memory.hpp>
 
 #include <doctest/doctest.h>

@@ -6,6 +6,7 @@
 #include <vmap/io/frame_source.hpp>
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/keyframe/selector.hpp>
+#include <vmap/keyframe/stacks.hpp>
 
 #include <doctest/doctest.h>
 

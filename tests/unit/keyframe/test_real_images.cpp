@@ -5,6 +5,7 @@
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/keyframe/pipeline.hpp>
 #include <vmap/keyframe/selector.hpp>
+#include <vmap/keyframe/stacks.hpp>
 #include <vmap/keyframe/sweep.hpp>
 
 #include <doctest/doctest.h>

@@ -4,6 +4,7 @@
 
 #include <vmap/keyframe/pipeline.hpp>
 #include <vmap/keyframe/selector.hpp>
+#include <vmap/keyframe/stacks.hpp>
 #include <vmap/keyframe/visual_map.hpp>
 
 #include <doctest/doctest.h>

@@ -9,6 +9,7 @@
 #include <vmap/lcd/loop_engine.hpp>
 #include <vmap/lcd/place_decision.hpp>
 #include <vmap/matching/brute_force.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/visual_memory.hpp>
 
 #include "support/scripted_ranker.hpp"

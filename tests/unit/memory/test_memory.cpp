@@ -8,6 +8,8 @@
 
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/keyframe/pipeline.hpp>
+#include <vmap/keyframe/stacks.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/visual_memory.hpp>
 
 #include <doctest/doctest.h>

@@ -9,6 +9,7 @@
 
 #include <vmap/geometry/calibrated.hpp>
 #include <vmap/geometry/essential.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 

@@ -12,6 +12,7 @@
 #include <vmap/hooks/precomputed_detections.hpp>
 #include <vmap/lcd/evaluation.hpp>
 #include <vmap/lcd/influence.hpp>
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 

@@ -7,6 +7,7 @@
 #include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
 
+#include <vmap/memory/stacks.hpp>
 #include <vmap/memory/store.hpp>
 #include <vmap/memory/visual_memory.hpp>
 

@@ -10,7 +10,7 @@
 // KeyframeSelector or LoopDetector of a shipped stack. A program that does not link it
 // instantiates what it uses, as any header-only library (the same headers, nothing else
 // changes). The classic descriptors' TUs also say VMAP_INSTANTIATE_NAMED_MEMORY, for the
-// named stacks of memory/visual_memory.hpp (OrbVisualMemory and its A-KAZE and SIFT
+// named stacks of memory/stacks.hpp (OrbVisualMemory and its A-KAZE and SIFT
 // twins), which programs and tests use typed.
 
 #include <vmap/runtime/loop_detector.hpp>
