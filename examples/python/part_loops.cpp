@@ -626,8 +626,8 @@ constexpr const char* detect_loops_doc =
     "window: frames this recent are never candidates. min_candidates: m, backtrack up the tree until this many.\n"
     "top_k / min_bow_score: ranked sources verify this many best-ranked candidates, none below the score.\n"
     "temporal_consistency: accept a loop only when this many previous frames matched a nearby place (within\n"
-    "temporal_tolerance frames); 0: off. left_ratio: the revisit rule, a candidate's place was left when a frame\n"
-    "in between scored below this fraction of the query's bag-of-words score against it.\n"
+    "temporal_tolerance frames); 0: off. left_ratio: the revisit rule, a candidate's place was left when a view in\n"
+    "between began with a frame whose similarity to it (eq. 5) is below this fraction of the query's.\n"
     "min_confidence: the decision threshold on a loop's confidence in [0, 1]; min_inliers: below this a candidate\n"
     "is not weighed; chance_inlier_rate, half_significance, spread_grid, full_spread, ambiguity_ratio: the\n"
     "evidence's model (lcd/place_decision.hpp). label_min_score: detections below it are ignored.\n"
@@ -675,7 +675,7 @@ void bind(py::module_& m) {
       py::arg("refine_model") = "", py::arg("labels") = py::none(), py::arg("rank") = py::none(),
       py::arg("vocabulary") = py::none(), py::arg("words") = 1000, py::arg("depth") = 3, py::arg("seed") = 1,
       py::arg("window") = 10, py::arg("min_candidates") = 5, py::arg("top_k") = 2, py::arg("min_bow_score") = 0.0,
-      py::arg("temporal_consistency") = 0, py::arg("temporal_tolerance") = 3, py::arg("left_ratio") = 0.2,
+      py::arg("temporal_consistency") = 0, py::arg("temporal_tolerance") = 3, py::arg("left_ratio") = 0.5,
       py::arg("min_confidence") = 0.5, py::arg("min_inliers") = 12, py::arg("chance_inlier_rate") = 0.1,
       py::arg("half_significance") = 12.0, py::arg("spread_grid") = 4, py::arg("full_spread") = 0.35,
       py::arg("ambiguity_ratio") = 0.9, py::arg("label_min_score") = 0.5, py::arg("min_influence") = 0.05,
@@ -721,7 +721,7 @@ void bind(py::module_& m) {
            py::arg("refine_model") = "", py::arg("vocabulary") = py::none(), py::arg("words") = 1000,
            py::arg("depth") = 3, py::arg("seed") = 1, py::arg("label_order") = py::none(), py::arg("rank") = py::none(),
            py::arg("window") = 10, py::arg("min_candidates") = 5, py::arg("top_k") = 2, py::arg("min_bow_score") = 0.0,
-           py::arg("temporal_consistency") = 0, py::arg("temporal_tolerance") = 3, py::arg("left_ratio") = 0.2,
+           py::arg("temporal_consistency") = 0, py::arg("temporal_tolerance") = 3, py::arg("left_ratio") = 0.5,
            py::arg("min_confidence") = 0.5, py::arg("min_inliers") = 12, py::arg("chance_inlier_rate") = 0.1,
            py::arg("half_significance") = 12.0, py::arg("spread_grid") = 4, py::arg("full_spread") = 0.35,
            py::arg("ambiguity_ratio") = 0.9, py::arg("label_min_score") = 0.5)

@@ -496,8 +496,8 @@ std::function<int()> setup(CLI::App& app) {
   ex::add_vocabulary_options(app, a->options.vocabulary.learning, "Vocabulary learned here: ");
   app.add_option("--window", d.window, "Frames this recent are never candidates")->check(ex::count_in(0, 1000000));
   app.add_option("--left-ratio", d.left_ratio,
-                 "Revisit rule: a candidate's place was left when a frame in between scored below this fraction of "
-                 "the query's bag-of-words score against it")
+                 "Revisit rule: a candidate's place was left when a view in between began with a frame whose "
+                 "similarity to it (eq. 5) is below this fraction of the query's")
       ->check(ex::real_in(0.0, 1.0));
   app.add_option("--min-candidates", d.min_candidates, "m: backtrack up the tree until this many candidates")
       ->check(ex::count_in(1, 1000000));

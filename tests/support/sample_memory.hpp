@@ -61,6 +61,9 @@ inline MemoryOptions small_memory_options(ImageStorage images = ImageStorage::no
   o.vocabulary_after = 3;
   o.vocabulary = {.branching = 8, .depth = 2, .seed = 5};
   o.loops.window = 2;
+  // The camera swings back and forth within a few key images: a candidate counts as left
+  // when any key image between saw it less than the query does.
+  o.loops.left_ratio = 1.0;
   o.loops.decision.min_inliers = 30;
   return o;
 }

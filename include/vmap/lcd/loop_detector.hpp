@@ -9,7 +9,9 @@
 
 #include <vmap/core/concepts.hpp>
 #include <vmap/core/error.hpp>
+#include <vmap/geometry/similarity.hpp>
 #include <vmap/hooks/detection.hpp>
+#include <vmap/keyframe/options.hpp>
 #include <vmap/lcd/label_vector.hpp>
 #include <vmap/lcd/loop_engine.hpp>
 #include <vmap/lcd/place_ranking.hpp>
@@ -17,6 +19,7 @@
 #include <opencv2/core.hpp>
 
 #include <cstddef>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -72,17 +75,24 @@ class LoopDetector {
 
   /// One key frame whose features are already extracted (by the same kind of Descriptor
   /// as the frames before it: the key-image selector has them) and whose detections are
-  /// known. Neither the descriptor nor any detector is called.
-  LoopResult add(Features features, const std::vector<Detection>& detections) {
+  /// known. Neither the descriptor nor any detector is called. `view`: whether it starts
+  /// a new view of the revisit rule's chain, where the caller knows (the key images of a
+  /// selector each do, as in a visual memory); by default the detector tests it.
+  LoopResult add(Features features, const std::vector<Detection>& detections,
+                 std::optional<ViewStep> view = std::nullopt) {
     LoopResult r;
     r.frame = frames_.size();
     r.labels = engine_.schema().vector(detections, engine_.options().labels);
-    static_cast<PlaceDecision&>(r) = engine_.add(features, r.labels, [this](std::size_t j) -> const Features& {
-      return frames_[j];
-    });
+    const ViewStep step = view ? *view : view_step(features);
+    static_cast<PlaceDecision&>(r) = engine_.add(
+        features, r.labels, [this](std::size_t j) -> const Features& { return frames_[j]; }, step);
+    if (step == ViewStep::new_view) view_start_ = r.frame;
     frames_.push_back(std::move(features));
     return r;
   }
+
+  /// The first frame of the current view of the chain (the revisit rule).
+  [[nodiscard]] std::size_t view_start() const noexcept { return view_start_; }
 
   [[nodiscard]] std::size_t frames() const noexcept { return frames_.size(); }
   /// Verifications spent over all frames so far.
@@ -93,7 +103,7 @@ class LoopDetector {
   [[nodiscard]] const LoopDetectorOptions& options() const noexcept { return engine_.options(); }
   [[nodiscard]] const LoopEngine<Match, Estim, Rank>& engine() const noexcept { return engine_; }
   /// Whether the camera never left its place (lcd/loop_engine.hpp, stationary()).
-  [[nodiscard]] bool stationary() const noexcept { return engine_.stationary(); }
+  [[nodiscard]] bool stationary() const { return engine_.stationary(); }
 
   /// Bytes held for the frames: keypoints, descriptors, label vectors and the ranker's
   /// index (not the tree's nodes).
@@ -107,9 +117,25 @@ class LoopDetector {
   }
 
  private:
+  /// Whether `f` starts a new view: the key-image selector's test (Algorithm 1, eq. 5,
+  /// its default tau) against the first frame of the current view, so a stream of frames
+  /// has the views a visual memory's key images would give it; the raw matches bound the
+  /// similarity from above, so below tau no estimator runs.
+  [[nodiscard]] ViewStep view_step(const Features& f) const {
+    if (frames_.empty()) return ViewStep::new_view;
+    const Features& first = frames_[view_start_];
+    const double tau = SelectorOptions{}.tau;
+    const InlierRatio similarity;
+    const Matches matches = engine_.matcher().match(first, f);
+    if (similarity.upper_bound(first, f, static_cast<int>(matches.size())) < tau) return ViewStep::new_view;
+    const Verification v = engine_.estimator().verify(first, f, matches);
+    return v.ok() && similarity(first, f, v) >= tau ? ViewStep::same_view : ViewStep::new_view;
+  }
+
   Desc descriptor_;
   LoopEngine<Match, Estim, Rank> engine_;
   std::vector<Features> frames_;
+  std::size_t view_start_ = 0;
 };
 
 }  // namespace vmap

@@ -16,12 +16,19 @@
 //
 // Loops only (not localization):
 //   - the revisit rule: a loop needs the camera to have left the candidate's place and
-//     come back. Candidate j is "left" when some frame between j and the query looks
-//     much less like j than the query does (bag-of-words score below `left_ratio` times
-//     the query's); a camera that rests or hovers, or drives on along the same view, never
-//     leaves, so its frames are not loops of each other whatever the window. The window
-//     stays as an option (frames just before the query are not candidates at all). The
-//     rule needs bags of words (the ranked sources); the unranked ones keep the window.
+//     come back, and geometry says so, not the vocabulary. Each frame belongs to a view
+//     of the chain; the owner says when a frame starts a new one (a visual memory: every
+//     key image, the selector took it because the view changed; LoopDetector: a frame
+//     whose eq. 5 similarity to its view's first frame falls below the selector's tau).
+//     Candidate j was left when the first frame of some view between j and the query
+//     sees j (eq. 5 similarity, verified with the stack's matcher and estimator) less
+//     than `left_ratio` times the query does. A camera that rests or hovers never
+//     changes views (and the run is stationary); one that drives on sees j less with
+//     every view, so the query does not see it better than they did; one that went
+//     elsewhere, or turned away on the spot, shares nothing with j in between. Only
+//     candidates confident enough to be accepted are tested (one verification per view
+//     start, once per candidate: the lowest similarity is kept). The window stays as an
+//     option (frames just before the query are not candidates at all).
 //   - temporal consistency (DBoW2's islands, place/consistency.hpp): a loop stands when the
 //     `temporal_consistency` previous queries also placed themselves near it.
 //
@@ -34,6 +41,7 @@
 #include <vmap/core/names.hpp>
 #include <vmap/geometry/calibrated.hpp>
 #include <vmap/geometry/essential.hpp>
+#include <vmap/geometry/similarity.hpp>
 #include <vmap/io/binary.hpp>
 #include <vmap/lcd/binary_tree.hpp>
 #include <vmap/lcd/label_vector.hpp>
@@ -307,10 +315,15 @@ class LoopEngine {
   static void check_options(const LoopOptions& o, std::string_view owner) { check_loop_options(o, owner); }
 
   /// Frame `frames()` (its features `f`, its label vector for the label sources): its
-  /// loop decision against the frames before it, then it is indexed.
+  /// loop decision against the frames before it, then it is indexed. `view` says whether
+  /// it starts a new view of the chain (the revisit rule) or stays in the last frame's; a
+  /// session's first frame always starts one.
   template <FeatureLookup L>
-  PlaceDecision add(const Features& f, const LabelVector& labels, const L& lookup) {
+  PlaceDecision add(const Features& f, const LabelVector& labels, const L& lookup, ViewStep view = ViewStep::new_view) {
     const std::size_t q = frames_;
+    views_.push_back(q == 0 ? 0
+                     : view == ViewStep::new_view || q == session_start_ ? views_.back() + 1
+                                                                          : views_.back());
     PlaceDecision d;
     const auto t0 = std::chrono::steady_clock::now();
     std::optional<typename Rank::Bow> bow;
@@ -357,8 +370,8 @@ class LoopEngine {
     d.rank_ms = ms_since(t0);
     std::vector<Verified> verified = verify(d, f, to_verify, lookup, options_.decision);
     const auto td = std::chrono::steady_clock::now();
-    const bool stayed = bow && filter_revisits(d, verified, *bow);
-    choose(d, verified, bow ? &*bow : nullptr, stayed, !to_verify.empty(), options_.decision);
+    const bool stayed = filter_revisits(d, verified, f, lookup);
+    choose(d, verified, lookup, stayed, !to_verify.empty(), options_.decision);
     apply_temporal_consistency(d);
     d.decide_ms = ms_since(td);
 
@@ -397,7 +410,7 @@ class LoopEngine {
     d.rank_ms = ms_since(t0);
     std::vector<Verified> verified = verify(d, q, to_verify, lookup, dec);
     const auto td = std::chrono::steady_clock::now();
-    choose(d, verified, bow ? &*bow : nullptr, false, !to_verify.empty(), dec);
+    choose(d, verified, lookup, false, !to_verify.empty(), dec);
     d.decide_ms = ms_since(td);
     return d;
   }
@@ -406,7 +419,8 @@ class LoopEngine {
   /// (the ranker already holds their bags of words), the stationarity counts and the
   /// temporal-consistency state, and the first frame of the last frame's session
   /// (begin_session). The tree is rebuilt exactly: the frames the last query had
-  /// inserted, in order.
+  /// inserted, in order. Every restored frame is a view of its own, as a visual memory's
+  /// key images are (add()).
   void restore(std::vector<LabelVector> labels, const LoopEngineState& state, std::size_t session_start = 0) {
     const std::size_t past_window = state.past_window, left_queries = state.left_queries,
                       not_revisit = state.not_revisit;
@@ -419,6 +433,8 @@ class LoopEngine {
                     "LoopEngine::restore: a label vector does not fit the schema");
     labels_ = std::move(labels);
     frames_ = labels_.size();
+    views_.resize(frames_);
+    for (std::size_t k = 0; k < frames_; ++k) views_[k] = static_cast<std::uint32_t>(k);
     past_window_ = past_window;
     left_queries_ = left_queries;
     not_revisit_ = not_revisit;
@@ -468,42 +484,33 @@ class LoopEngine {
   [[nodiscard]] std::size_t queries_past_window() const noexcept { return past_window_; }
   /// Queries past the window with a candidate whose place the camera had left.
   [[nodiscard]] std::size_t left_queries() const noexcept { return left_queries_; }
-  /// True when at least `window` frames were queried past the window, none of them left
-  /// the place of a candidate, and the last three frames still look like the first three
-  /// at least half as much as the first three look like each other (mean bag-of-words
-  /// scores: one noisy pair decides nothing): the camera rests or hovers. A camera that
-  /// drives on along one view never leaves a candidate either, but its last frames no
-  /// longer look like its first. A stationary sequence is reported as such instead of
-  /// loops. Needs a ranker (false without).
+  /// True when at least `window` frames were queried past the window and the current
+  /// session's chain never changed views (add()'s ViewStep): the camera
+  /// rests or hovers. A stationary sequence is reported as such instead of loops. The
+  /// rule is the chain's, so it holds whatever the vocabulary (or without one).
   [[nodiscard]] bool stationary() const {
-    if (!ranker_.ready() || frames_ < 6 || past_window_ < std::max<std::size_t>(options_.window, 1) ||
-        left_queries_ != 0)
-      return false;
-    double first = 0.0, across = 0.0;
-    for (std::size_t a = 0; a < 3; ++a) {
-      for (std::size_t b = a + 1; b < 3; ++b) first += ranker_.similarity(a, b) / 3.0;
-      for (std::size_t b = frames_ - 3; b < frames_; ++b) across += ranker_.similarity(a, b) / 9.0;
-    }
-    return across >= 0.5 * first;
+    if (frames_ == 0 || past_window_ < std::max<std::size_t>(options_.window, 1)) return false;
+    return views_.back() == views_[std::min(session_start_, frames_ - 1)];
+  }
+
+  /// The view of frame `j` (add()'s ViewStep): 0 for the first, one more at each change.
+  [[nodiscard]] std::size_t view_of(std::size_t j) const {
+    detail::check(j < frames_, [&] {
+      return "LoopEngine::view_of: frame " + std::to_string(j) + " of " + std::to_string(frames_);
+    });
+    return views_[j];
   }
 
   /// Bytes of the engine's own state: label vectors, revisit caches, ranker's index.
   [[nodiscard]] std::size_t memory_bytes() const {
-    std::size_t bytes = labels_.capacity() * sizeof(LabelVector) + left_.capacity() * sizeof(LeftCache) +
+    std::size_t bytes = labels_.capacity() * sizeof(LabelVector) + views_.capacity() * sizeof(std::uint32_t) +
+                        left_.capacity() * sizeof(LeftCache) +
                         static_cast<std::size_t>(ranker_.memory_bytes());
     for (const LabelVector& v : labels_) bytes += v.capacity() / 8;
     return bytes;
   }
 
  private:
-  /// What the revisit rule has scanned of the frames after j: up to `until`, the lowest
-  /// bag-of-words score any of them had against j. The query only moves the bar, so a
-  /// frame is never scanned twice for one j.
-  struct LeftCache {
-    std::size_t until = 0;
-    double lowest = 2.0;
-  };
-
   static double ms_since(std::chrono::steady_clock::time_point t0) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }
@@ -514,15 +521,32 @@ class LoopEngine {
     return std::max(q > options_.window ? q - options_.window : 0, std::min(session_start_, q));
   }
 
-  /// The revisit rule for candidate j of query q (frames j+1 .. q-1 in the ranker); a
-  /// frame of an earlier session was left by definition.
-  bool left_place(std::size_t j, std::size_t q, double query_score) {
+  /// What the revisit rule has checked of the view starts after j: up to `until`, the
+  /// lowest eq. 5 similarity any of them had to j. The query only moves the bar, so a
+  /// view start is verified against j at most once.
+  struct LeftCache {
+    std::size_t until = 0;
+    double lowest = 2.0;
+  };
+
+  /// The revisit rule for candidate j of query q, whose eq. 5 similarity to j is
+  /// `query_similarity`: some view start between them saw j less than left_ratio times
+  /// that. A frame of an earlier session was left by definition.
+  template <FeatureLookup L>
+  bool left_place(std::size_t j, std::size_t q, double query_similarity, const L& lookup) {
     if (j < session_start_) return true;
     if (left_.size() < frames_) left_.resize(frames_);
     LeftCache& c = left_[j];
     if (c.until < j + 1) c.until = j + 1;
-    const double bar = options_.left_ratio * query_score;
-    for (; c.lowest >= bar && c.until < q; ++c.until) c.lowest = std::min(c.lowest, ranker_.similarity(c.until, j));
+    const double bar = options_.left_ratio * query_similarity;
+    for (; c.lowest >= bar && c.until < q; ++c.until) {
+      const std::size_t k = c.until;
+      if (views_[k] == views_[k - 1]) continue;  // not the first frame of a view
+      const Features& fj = lookup(j);
+      const Features& fk = lookup(k);
+      const Matches matches = matcher_.match(fj, fk);
+      c.lowest = std::min(c.lowest, InlierRatio{}(fj, fk, estimator_.verify(fj, fk, matches)));
+    }
     return c.lowest < bar;
   }
 
@@ -562,13 +586,16 @@ class LoopEngine {
     return verified;
   }
 
-  /// The revisit rule over the verified candidates of loop query `frames_`: drops those
-  /// whose place the camera never left; true when it dropped any. Counts the queries
-  /// past the window that left or stayed (stationary()).
-  bool filter_revisits(PlaceDecision& d, std::vector<Verified>& verified, const typename Rank::Bow& bow) {
+  /// The revisit rule over the verified candidates of loop query `frames_` (features
+  /// `f`) confident enough to be accepted: drops those whose place the camera never left;
+  /// true when it dropped any. The others cannot be a loop and are kept as they are.
+  /// Counts the queries past the window that left or stayed.
+  template <FeatureLookup L>
+  bool filter_revisits(PlaceDecision& d, std::vector<Verified>& verified, const Features& f, const L& lookup) {
     bool any_left = false, any_stayed = false;
     std::erase_if(verified, [&](const Verified& c) {
-      if (left_place(c.frame, frames_, ranker_.similarity(bow, c.frame))) {
+      if (c.confidence < options_.decision.min_confidence) return false;
+      if (left_place(c.frame, frames_, InlierRatio{}(f, lookup(c.frame), c.verification), lookup)) {
         any_left = true;
         return false;
       }
@@ -584,14 +611,37 @@ class LoopEngine {
     return any_stayed;
   }
 
+  /// Whether verified candidates `a` and `b` show one place: neighbours in the stream
+  /// (within the window or the temporal tolerance) or in the chain (the same or the next
+  /// view), or, when `b` competes with `a` (it could make the decision ambiguous), the
+  /// decision itself accepts the pair `a`, `b` (one verification, no vocabulary). A
+  /// place seen on two earlier laps is so one place, not two.
+  template <FeatureLookup L>
+  [[nodiscard]] bool one_place(const Verified& a, const Verified& b, bool competes, const L& lookup,
+                               const PlaceDecisionOptions& dec) const {
+    const std::size_t gap = a.frame > b.frame ? a.frame - b.frame : b.frame - a.frame;
+    if (gap <= std::max(options_.window, options_.temporal_tolerance)) return true;
+    const std::size_t va = views_[a.frame], vb = views_[b.frame];
+    if ((va > vb ? va - vb : vb - va) <= 1) return true;
+    if (!competes) return false;
+    const Features& fa = lookup(a.frame);
+    const Features& fb = lookup(b.frame);
+    const Matches matches = matcher_.match(fa, fb);
+    const Verification v = estimator_.verify(fa, fb, matches);
+    if (!v.ok()) return false;
+    return place_confidence(measure_place_evidence(fa, fb, matches, v, model_, dec), dec) >= dec.min_confidence;
+  }
+
   /// The decision from the verified candidates (best confidence first).
-  void choose(PlaceDecision& d, std::vector<Verified>& verified, const typename Rank::Bow* bow, bool stayed,
-              bool any_verified, const PlaceDecisionOptions& dec) const {
+  template <FeatureLookup L>
+  void choose(PlaceDecision& d, std::vector<Verified>& verified, const L& lookup, bool stayed, bool any_verified,
+              const PlaceDecisionOptions& dec) const {
     std::stable_sort(verified.begin(), verified.end(),
                      [](const Verified& a, const Verified& b) { return a.confidence > b.confidence; });
     const double need = dec.min_confidence;
     char buf[96];
-    if (verified.empty()) {
+    // The revisit rule dropped every candidate that could have been accepted.
+    if (verified.empty() || (stayed && verified.front().confidence < need)) {
       if (stayed) {
         d.status = PlaceStatus::not_a_revisit;
         d.reason_code = DecisionReason::camera_stayed;
@@ -613,16 +663,12 @@ class LoopEngine {
     d.evidence = b.evidence;
     d.verification = b.verification;
     d.considered[b.considered].stage = CandidateStage::chosen;
-    // The best other place: a verified candidate neither near the best one in the stream
-    // (within the window or the temporal tolerance) nor looking like it (candidates of
-    // one place look alike: a revisit of a place seen twice is not ambiguous).
+    // The best other place: the most confident verified candidate that is not the best
+    // one's place (one_place).
     for (std::size_t i = 1; i < verified.size(); ++i) {
       const Verified& o = verified[i];
-      const std::size_t gap = o.frame > b.frame ? o.frame - b.frame : b.frame - o.frame;
-      const bool same_place =
-          gap <= std::max(options_.window, options_.temporal_tolerance) ||
-          (bow && ranker_.similarity(o.frame, b.frame) >= options_.left_ratio * ranker_.similarity(*bow, o.frame));
-      if (!same_place) {
+      const bool competes = o.confidence >= need && o.confidence >= dec.ambiguity_ratio * b.confidence;
+      if (!one_place(b, o, competes, lookup, dec)) {
         d.second = o.frame;
         d.second_confidence = o.confidence;
         break;
@@ -675,7 +721,8 @@ class LoopEngine {
   BinaryClassifiedTree<std::size_t> tree_;
   TemporalConsistency<std::size_t> consistency_;
   std::vector<LabelVector> labels_;
-  std::vector<LeftCache> left_;
+  std::vector<std::uint32_t> views_;  ///< each frame's view in the chain (add()'s ViewStep)
+  std::vector<LeftCache> left_;       ///< the revisit rule's scan of each frame's later view starts
   std::size_t frames_ = 0;
   std::size_t tree_next_ = 0;
   std::size_t session_start_ = 0;  ///< first frame of the current session

@@ -92,13 +92,20 @@ enum class CandidateIndex : std::uint8_t {
 /// The most previous queries temporal consistency may ask for (LoopOptions).
 inline constexpr std::size_t max_temporal_consistency = 1000;
 
+/// Whether a frame added to the loop engine starts a new view of the chain (the revisit
+/// rule, lcd/loop_engine.hpp) or stays in the last frame's.
+enum class ViewStep : std::uint8_t {
+  same_view,  ///< the frame still sees its view's first frame
+  new_view,   ///< the view changed (a key image; a frame below the selector's tau)
+};
+
 /// The options of the loop engine, the same names for LoopDetector, VisualMemory and the
 /// command line.
 struct LoopOptions {
   LabelVectorOptions labels{};  ///< score threshold of eq. 3 (0.5)
   /// Frames j with j + window >= i are never candidates of frame i: consecutive frames
-  /// are trivially similar. 10 as in the rtabmap_loop baseline. The revisit rule, not
-  /// the window, decides whether an older frame is a revisit.
+  /// are trivially similar. 10 as in the rtabmap_loop baseline. The revisit rule (the
+  /// chain of views), not the window, decides whether an older frame is a revisit.
   std::size_t window = 10;
   /// m of sec. 3.3: backtrack up the tree until at least this many candidates. 5: a
   /// leaf of a handful of frames is one place seen from a few positions.
@@ -121,13 +128,14 @@ struct LoopOptions {
   /// examples/results/loops.md).
   std::size_t temporal_consistency = 0;
   std::size_t temporal_tolerance = 3;
-  /// The revisit rule: candidate j was left when a frame between j and the query scores
-  /// below `left_ratio` times the query's bag-of-words score against j. 0.2: frames of a
-  /// resting camera with sensor noise and sub-pixel jitter score well above it against
-  /// each other (their ORB keypoints move); at 0.2 a noisy still clip closes no loop
-  /// (tests/unit/lcd/test_place_decision.cpp) and rtabmap_loop keeps its recall (see
-  /// examples/loops.md, "The place decision"; results in examples/results/loops.md).
-  double left_ratio = 0.2;
+  /// The revisit rule (lcd/loop_engine.hpp): candidate j was left when a view of the
+  /// chain between j and the query began with a frame whose eq. 5 similarity to j
+  /// (verified matches over the larger feature count) is below `left_ratio` times the
+  /// query's. 0.5: a car driving on sees j less with every frame, so no frame in between
+  /// falls below half the query's similarity (kitti07_160 closes no loop), while a
+  /// camera that went elsewhere shares nothing with j there (similarity 0); see
+  /// examples/loops.md, "The place decision", and examples/results/loops.md.
+  double left_ratio = 0.5;
   /// The decision (confidence threshold, evidence).
   PlaceDecisionOptions decision{};
 };

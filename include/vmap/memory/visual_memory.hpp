@@ -265,9 +265,14 @@ class VisualMemory {
   /// The loop engine once loop detection runs (a vocabulary and, with detections, a
   /// schema); nullptr before.
   [[nodiscard]] const Engine* loop_engine() const noexcept { return engine_ ? &*engine_ : nullptr; }
-  /// Whether the camera never left its place (LoopEngine::stationary); false before the
-  /// loop detection runs.
-  [[nodiscard]] bool stationary() const { return engine_ && engine_->stationary(); }
+  /// Whether the camera never left its place: more frames than the loop window were
+  /// pushed into the current session and its chain holds one key image (the selector
+  /// never saw the view change; the revisit rule's chain, lcd/loop_engine.hpp). No
+  /// vocabulary is needed.
+  [[nodiscard]] bool stationary() const {
+    const MemorySession& s = sessions_.back();
+    return frames() - s.first_frame > std::max<std::size_t>(options_.loops.window, 1) && key_images() == s.first_key + 1;
+  }
   [[nodiscard]] const MemoryOptions& options() const noexcept { return options_; }
   [[nodiscard]] Selector& selector() noexcept { return selector_; }
   /// Whether the frames come with detections (the label-tree loop detection runs).

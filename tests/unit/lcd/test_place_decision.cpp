@@ -160,28 +160,30 @@ TEST_CASE("place decision: a repeated texture patch with many inliers in a small
   CHECK(c_patch < c_real);
 }
 
-TEST_CASE("revisit rule: a camera that stays is no loop and is reported stationary; one that leaves and comes back is") {
-  // Eight textured places; frames are pushed as a scripted chain and the ranker scores
-  // frames of one place 1, other places 0.05.
+TEST_CASE("revisit rule: scripted chains of views (never left, left and came back, turned on the spot)") {
+  // The chain of views alone decides what is a revisit: the bags of words are scripted,
+  // or there are none (brute force, no vocabulary).
   vmap::OrbDescriptor orb({.features = 500});
-  SUBCASE("the camera rests on one place: every older frame is its place, never left") {
+  const auto trembling = [&](std::uint64_t seed, int k) {
+    // A place with the camera trembling by up to 2.5 px, no two frames alike (identical
+    // images give no F-matrix).
+    const cv::Mat still = vmap::test::place_image(seed);
+    cv::Mat moved;
+    cv::warpAffine(still, moved, cv::Matx23d(1, 0, 0.13 * k, 0, 1, 0.07 * k), still.size(), cv::INTER_LINEAR,
+                   cv::BORDER_REFLECT);
+    return orb.extract(moved);
+  };
+  SUBCASE("never left: the camera rests on one place and the chain stays in one view") {
     std::vector<vmap::Features> frames;
-    // Place 0 with the camera trembling by up to 2 px (identical images would give no
-    // F-matrix).
-    const cv::Mat still = vmap::test::place_image(300);
-    for (int k = 0; k < 20; ++k) {
-      cv::Mat moved;
-      cv::warpAffine(still, moved, cv::Matx23d(1, 0, 0.5 * (k % 5), 0, 1, 0.4 * (k % 3)), still.size(),
-                     cv::INTER_LINEAR, cv::BORDER_REFLECT);
-      frames.push_back(orb.extract(moved));
-    }
+    for (int k = 0; k < 20; ++k) frames.push_back(trembling(300, k));
     Engine e(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}),
              {.window = 3, .index = vmap::CandidateIndex::bow}, ScriptedRanker([](std::size_t, std::size_t) { return 1.0; }));
     const auto lookup = [&](std::size_t j) -> const vmap::Features& { return frames[j]; };
     for (std::size_t k = 0; k < frames.size(); ++k) {
-      const auto d = e.add(frames[k], {}, lookup);
+      const auto d = e.add(frames[k], {}, lookup, k == 0 ? vmap::ViewStep::new_view : vmap::ViewStep::same_view);
       CAPTURE(k);
       CHECK_FALSE(d.accepted());
+      CHECK(e.view_of(k) == 0);
       if (k > 3) {
         CHECK(d.status == PlaceStatus::not_a_revisit);
         CHECK(d.reason_code == vmap::DecisionReason::camera_stayed);
@@ -192,19 +194,37 @@ TEST_CASE("revisit rule: a camera that stays is no loop and is reported stationa
     }
     CHECK(e.stationary());
     CHECK(e.not_a_revisit_queries() == 16);
+    // The detector's own test of the chain (the selector's eq. 5 against the view's first
+    // frame) keeps the trembling camera in one view, with no vocabulary at all.
+    vmap::LoopDetector det(vmap::LabelSchema{}, vmap::OrbDescriptor({.features = 500}), vmap::BruteForceMatcher{},
+                           vmap::FundamentalEstimator({.seed = 7}),
+                           {.window = 3, .index = vmap::CandidateIndex::brute_force});
+    std::size_t loops = 0;
+    for (const auto& f : frames) loops += det.add(f, {}).loop() ? 1 : 0;
+    CHECK(loops == 0);
+    CHECK(det.view_start() == 0);
+    CHECK(det.stationary());
   }
-  SUBCASE("places 0..7, then 0..7 again: the second visit of each is a loop") {
+  SUBCASE("left and came back: places 0..7, then 0..7 again, each a new view") {
     std::vector<vmap::Features> frames;
     for (int k = 0; k < 16; ++k) frames.push_back(orb.extract(vmap::test::lap_frame(k, 8, 300)));
     Engine e(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}),
              {.window = 3, .index = vmap::CandidateIndex::bow},
              ScriptedRanker([](std::size_t a, std::size_t b) { return a % 8 == b % 8 ? 1.0 : 0.05; }));
+    // The same chain without bags of words: brute force verifies every older frame.
+    vmap::LoopDetector det(vmap::LabelSchema{}, vmap::OrbDescriptor({.features = 500}), vmap::BruteForceMatcher{},
+                           vmap::FundamentalEstimator({.seed = 7}),
+                           {.window = 3, .index = vmap::CandidateIndex::brute_force});
     const auto lookup = [&](std::size_t j) -> const vmap::Features& { return frames[j]; };
     for (std::size_t k = 0; k < frames.size(); ++k) {
       const auto d = e.add(frames[k], {}, lookup);
+      const auto r = det.add(frames[k], {});
       CAPTURE(k);
+      CHECK(e.view_of(k) == k);
+      CHECK(det.view_start() == k);  // each place is a new view for the detector's own test too
       if (k < 8) {
         CHECK_FALSE(d.accepted());
+        CHECK_FALSE(r.loop());
         continue;
       }
       CHECK(d.status == PlaceStatus::accepted);
@@ -212,7 +232,48 @@ TEST_CASE("revisit rule: a camera that stays is no loop and is reported stationa
       CHECK(*d.best == k - 8);
       CHECK(d.reason_code == vmap::DecisionReason::confident);
       CHECK(d.reason.rfind("confidence", 0) == 0);
+      REQUIRE(r.loop());
+      CHECK(*r.best == k - 8);
     }
+    CHECK_FALSE(e.stationary());
+    CHECK_FALSE(det.stationary());
+  }
+  SUBCASE("turned on the spot: eight views around, back to the first, then rests there") {
+    // Views 0..7 are the directions around the spot; frame 8 faces direction 0 again
+    // (rotated 4 degrees), frames 9..12 rest there in frame 8's view.
+    std::vector<vmap::Features> frames;
+    for (int k = 0; k < 9; ++k) frames.push_back(orb.extract(vmap::test::lap_frame(k, 8, 700)));
+    for (int k = 9; k < 13; ++k) {
+      const cv::Mat warp = cv::getRotationMatrix2D(cv::Point2f(160, 120), 4.0, 1.03);
+      cv::Mat out, shifted;
+      cv::warpAffine(vmap::test::place_image(700), out, warp, cv::Size(320, 240), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+      cv::warpAffine(out, shifted, cv::Matx23d(1, 0, 0.5 * (k % 5), 0, 1, 0.4 * (k % 3)), out.size(), cv::INTER_LINEAR,
+                     cv::BORDER_REFLECT);
+      frames.push_back(orb.extract(shifted));
+    }
+    Engine e(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}),
+             {.window = 3, .index = vmap::CandidateIndex::brute_force});
+    const auto lookup = [&](std::size_t j) -> const vmap::Features& { return frames[j]; };
+    for (std::size_t k = 0; k < frames.size(); ++k) {
+      const auto d = e.add(frames[k], {}, lookup, k <= 8 ? vmap::ViewStep::new_view : vmap::ViewStep::same_view);
+      CAPTURE(k);
+      if (k < 8) {
+        CHECK_FALSE(d.accepted());
+        continue;
+      }
+      // Direction 0 was left (the chain turned through seven views) and is a revisit.
+      CHECK(d.status == PlaceStatus::accepted);
+      REQUIRE(d.best.has_value());
+      CHECK(*d.best == 0);
+      if (k == 12) {
+        // Frame 8, past the window, is in frame 12's own view: not a revisit.
+        bool saw_8 = false;
+        for (const auto& c : d.considered)
+          if (c.frame == 8) saw_8 = c.stage == vmap::CandidateStage::not_a_revisit;
+        CHECK(saw_8);
+      }
+    }
+    CHECK(e.view_of(12) == 8);
     CHECK_FALSE(e.stationary());
   }
 }
@@ -253,26 +314,40 @@ TEST_CASE("place decision: each rejection says why") {
   CHECK(unknown.reason_code == vmap::DecisionReason::low_confidence);
   CHECK(unknown.reason.find("< 1.00") != std::string::npos);
   CHECK(unknown.confidence > 0.5);
-  // Two places that do not look alike, both verified and equally confident: ambiguous.
-  // Frames 0 and 5 are the same image, seen again (rotated) by query 9; the ranker scores both
-  // 0.9 against the query but 0.01 against each other (two look-alike places).
-  std::vector<vmap::Features> twins = {frames[1], frames[2], frames[3], frames[4], frames[5], frames[1],
-                                       frames[6], frames[7], frames[0], frames[9]};
-  vmap::LoopOptions amb{.window = 2, .index = vmap::CandidateIndex::bow, .top_k = 2, .left_ratio = 1.0,
-                        .decision = {.ambiguity_ratio = 0.5}};
-  Engine a(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}), amb,
-           ScriptedRanker([](std::size_t x, std::size_t y) {
-             if ((x == 9 && (y == 0 || y == 5)) || (y == 9 && (x == 0 || x == 5))) return 0.9;
-             return x == y ? 1.0 : 0.01;
-           }));
+  // Two places, both verified and about equally confident, that are not one place (they
+  // do not verify against each other): ambiguous. Frames 0 and 5 are two places; query 9
+  // sees the left half of the one and the right half of the other (rotated).
+  const cv::Mat place_a = vmap::test::place_image(500), place_b = vmap::test::place_image(600);
+  cv::Mat both = place_a.clone();
+  place_b(cv::Rect(160, 0, 160, 240)).copyTo(both(cv::Rect(160, 0, 160, 240)));
+  cv::Mat seen;
+  cv::warpAffine(both, seen, cv::getRotationMatrix2D(cv::Point2f(160, 120), 4.0, 1.03), both.size(), cv::INTER_LINEAR,
+                 cv::BORDER_REFLECT);
+  std::vector<vmap::Features> twins = {orb.extract(place_a), frames[2], frames[3], frames[4], frames[5],
+                                       orb.extract(place_b), frames[6], frames[7], frames[1], orb.extract(seen)};
+  vmap::LoopOptions amb{.window = 2, .index = vmap::CandidateIndex::brute_force, .decision = {.ambiguity_ratio = 0.5}};
+  Engine a(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}), amb);
   const auto twin_lookup = [&](std::size_t j) -> const vmap::Features& { return twins[j]; };
   vmap::PlaceDecision last;
   for (const auto& f : twins) last = a.add(f, {}, twin_lookup);
+  CAPTURE(last.reason);
   CHECK(last.status == PlaceStatus::ambiguous);
   CHECK(last.reason_code == vmap::DecisionReason::two_places);
   REQUIRE(last.second.has_value());
   CHECK(((*last.best == 0 && *last.second == 5) || (*last.best == 5 && *last.second == 0)));
   CHECK(last.reason.find("frames") == 0);
+  // The same place seen on two earlier laps is one place, not two: the two candidates
+  // verify against each other.
+  std::vector<vmap::Features> laps = {orb.extract(place_a), frames[2], frames[3], frames[4], frames[5],
+                                      orb.extract(vmap::test::lap_frame(8, 8, 500)), frames[6], frames[7], frames[1],
+                                      orb.extract(seen)};
+  Engine l(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}), amb);
+  const auto lap_lookup = [&](std::size_t j) -> const vmap::Features& { return laps[j]; };
+  for (const auto& f : laps) last = l.add(f, {}, lap_lookup);
+  CAPTURE(last.reason);
+  CHECK(last.status == PlaceStatus::accepted);
+  CHECK((*last.best == 0 || *last.best == 5));
+  if (last.second) CHECK((*last.second != 0 && *last.second != 5));
   // Temporal consistency holds a first sighting back until the next query agrees.
   auto held = base;
   held.temporal_consistency = 1;
@@ -307,7 +382,6 @@ TEST_CASE("loop engine: LoopDetector and VisualMemory find the same loops over t
   o.vocabulary_after = 3;
   o.vocabulary = {.branching = 8, .depth = 2, .seed = 5};
   o.loops.window = 2;
-  o.loops.left_ratio = 1.0;  // a vocabulary of 64 words: the strictest revisit rule
   vmap::OrbVisualMemory mem(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
                             vmap::FundamentalEstimator({.check_degeneracy = false}), vmap::InlierRatio{}, o);
   while (auto f = src.next()) mem.push(*f);
@@ -319,7 +393,7 @@ TEST_CASE("loop engine: LoopDetector and VisualMemory find the same loops over t
                          vmap::FundamentalEstimator({.check_degeneracy = false}), lo, vmap::PlaceRanker(voc));
   std::vector<std::pair<std::size_t, std::size_t>> detector_loops, memory_loops;
   for (std::size_t k = 0; k < mem.key_images(); ++k) {
-    const auto r = det.add(mem.map().keys[k].features, {});
+    const auto r = det.add(mem.map().keys[k].features, {}, vmap::ViewStep::new_view);  // each key image a view
     if (r.loop()) detector_loops.emplace_back(k, *r.best);
   }
   for (const auto& e : mem.loops()) memory_loops.emplace_back(e.from, e.link.key);
@@ -409,6 +483,59 @@ TEST_SUITE("data") {
       CHECK(ok);
     }
     CHECK(right * 10 >= own * 8);
+  }
+
+  TEST_CASE("revisit rule: a forward traverse is never stationary, whatever the vocabulary") {
+    // kitti07_160: a car driving forward. The chain of views changes whatever the bags of
+    // words say: a vocabulary learned on the sequence, or the three imported ones (learned
+    // on TUM frames, indoor).
+    auto src = vmap::FrameSource::open(vmap::test::data_path("kitti07_160/image_0"), {.grey = true});
+    vmap::OrbDescriptor orb;
+    std::vector<vmap::Features> frames;
+    std::vector<cv::Mat> sets;
+    while (auto f = src.next()) {
+      frames.push_back(orb.extract(f->image));
+      sets.push_back(frames.back().descriptors);
+    }
+    REQUIRE(frames.size() == 160);
+    std::vector<std::pair<std::string, vmap::AnyVocabulary>> vocabularies;
+    vocabularies.emplace_back("learned", vmap::AnyVocabulary::learn(sets, {.branching = 10, .depth = 3, .seed = 1}));
+    for (const char* name : {"orbslam2_k10L3.txt", "dbow2_k10L3.yml.gz", "fbow_k10L3.fbow"})
+      vocabularies.emplace_back(name, vmap::AnyVocabulary::load(vmap::test::data_path(std::string("vocabularies/") + name)));
+    for (auto& [name, voc] : vocabularies) {
+      CAPTURE(name);
+      vmap::LoopDetector det(vmap::LabelSchema{}, vmap::OrbDescriptor{}, vmap::BruteForceMatcher{},
+                             vmap::FundamentalEstimator({.check_degeneracy = false}),
+                             {.index = vmap::CandidateIndex::bow},
+                             vmap::PlaceRanker(std::make_shared<const vmap::AnyVocabulary>(std::move(voc))));
+      std::size_t loops = 0, not_revisit = 0;
+      for (const auto& f : frames) {
+        const auto r = det.add(f, {});
+        loops += r.loop() ? 1 : 0;
+        not_revisit += r.status == PlaceStatus::not_a_revisit ? 1 : 0;
+      }
+      MESSAGE(name << ": " << det.engine().view_of(159) + 1 << " views, " << loops << " loops, " << not_revisit
+                   << " not a revisit");
+      CHECK_FALSE(det.stationary());
+      CHECK(det.engine().view_of(159) >= 20);
+      CHECK(loops == 0);  // the car never comes back (the ground truth has no loop)
+    }
+  }
+
+  TEST_CASE("revisit rule: the sample frames, then the same frames reversed, close loops into the first half") {
+    std::vector<cv::Mat> images;
+    auto src = vmap::FrameSource::open(vmap::test::source_dir() / "examples/data/tum_fr1_rpy_60/rgb.txt", {.grey = true});
+    while (auto f = src.next()) images.push_back(f->image);
+    REQUIRE(images.size() == 60);
+    vmap::OrbVisualMemory mem;
+    for (const auto& im : images) mem.push(im);
+    const std::size_t first_half = mem.key_images();
+    for (std::size_t i = images.size(); i-- > 0;) mem.push(images[i]);
+    MESSAGE(first_half << " key images forward, " << mem.key_images() << " in all, " << mem.loops().size() << " loops");
+    CHECK_FALSE(mem.stationary());
+    std::size_t into_first = 0;
+    for (const auto& e : mem.loops()) into_first += e.from >= first_half && e.link.key < first_half ? 1 : 0;
+    CHECK(into_first >= 3);
   }
 
   TEST_CASE("revisit rule: a real frame repeated with sensor noise and sub-pixel jitter closes no loop") {

@@ -38,7 +38,7 @@ cv::Mat ranked_lap_frame(int k) { return vmap::test::lap_frame(k, ranked_places,
 // every frame of the second lap must close its loop with the first visit, verifying
 // `top_k` candidates each.
 template <class Desc>
-void check_two_laps(Desc descriptor, vmap::CandidateIndex source, std::size_t top_k = 1, double left_ratio = 0.5) {
+void check_two_laps(Desc descriptor, vmap::CandidateIndex source, std::size_t top_k = 1) {
   std::vector<vmap::Features> frames;
   std::vector<cv::Mat> first_lap;
   for (int k = 0; k < 2 * ranked_places; ++k) {
@@ -49,7 +49,7 @@ void check_two_laps(Desc descriptor, vmap::CandidateIndex source, std::size_t to
       vmap::AnyVocabulary::learn(first_lap, {.branching = 8, .depth = 2, .seed = 3}));
   vmap::LoopDetector d(vmap::LabelSchema{}, std::move(descriptor), vmap::BruteForceMatcher{},
                        vmap::FundamentalEstimator({.seed = 7}),
-                       {.window = 3, .index = source, .top_k = top_k, .left_ratio = left_ratio, .decision = {.min_inliers = 40}}, vmap::PlaceRanker(vocabulary));
+                       {.window = 3, .index = source, .top_k = top_k, .decision = {.min_inliers = 40}}, vmap::PlaceRanker(vocabulary));
   for (int k = 0; k < 2 * ranked_places; ++k) {
     const vmap::LoopResult r = d.add(frames[static_cast<std::size_t>(k)], {});
     CAPTURE(k);
@@ -85,10 +85,9 @@ TEST_CASE("ranked loops: tree_ranked (every frame in one leaf) ranks like bow") 
 }
 
 TEST_CASE("ranked loops: float descriptors (SIFT) go through a float vocabulary") {
-  // 64 float words learned on 8 synthetic images rank the revisit first or second. So few
-  // words make every image look half alike, so the revisit rule is set to its strictest
-  // reading (left when any frame in between scored below the query).
-  check_two_laps(vmap::SiftDescriptor({.features = 500}), vmap::CandidateIndex::bow, 2, 1.0);
+  // 64 float words learned on 8 synthetic images rank the revisit first or second (so few
+  // words make every image look half alike); the revisit rule is the chain's, not theirs.
+  check_two_laps(vmap::SiftDescriptor({.features = 500}), vmap::CandidateIndex::bow, 2);
 }
 
 TEST_CASE("ranked loops: a vocabulary of the other descriptor kind is an Error naming it") {
@@ -170,8 +169,7 @@ TEST_SUITE("data") {
     REQUIRE(vocabulary->floating() != nullptr);
     vmap::LoopDetector d(vmap::LabelSchema{}, std::move(xfeat), vmap::BruteForceMatcher{},
                          vmap::FundamentalEstimator({.seed = 1}),
-                         // 64 float words: the strictest revisit rule (as the two-lap SIFT case)
-                         {.window = 0, .index = vmap::CandidateIndex::bow, .top_k = 2, .left_ratio = 1.0},
+                         {.window = 0, .index = vmap::CandidateIndex::bow, .top_k = 2},
                          vmap::PlaceRanker(vocabulary));
     vmap::LoopResult last;
     for (const auto& f : frames) last = d.add(f, {});

@@ -159,6 +159,9 @@ inline MemoryOptions read_options_v4(BinaryReader& r, std::uint32_t version) {
   if (const int again = r.i32("min_localize_inliers"); version >= 3 && again != o.loops.decision.min_inliers)
     r.corrupt("the two inlier floors differ");
   r.expect_end("the options");
+  // The revisit ratio is in the decision's record from version 3 on (0.2 by default then);
+  // an older file reads as the same memory written again in version 3.
+  o.loops.left_ratio = 0.2;
   return o;
 }
 
