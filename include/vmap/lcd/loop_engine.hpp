@@ -129,9 +129,10 @@ struct PlaceDecision {
 };
 
 /// What a stopped run restores of the loop engine besides each frame's label vector and
-/// bag of words (LoopEngine::restore): the stationarity counts and the temporal-consistency
-/// state. Written and read here as the visual memory's section "dcsn" holds it after the
-/// decision's options (examples/memory.md, "The single-file format (.vmem)").
+/// bag of words (LoopEngine::restore): the revisit counts (queries past the window, left
+/// or not) and the temporal-consistency state. Written and read here as the visual
+/// memory's section "dcsn" holds it after the decision's options (examples/memory.md,
+/// "The single-file format (.vmem)").
 struct LoopEngineState {
   std::size_t past_window = 0;   ///< queries past the window
   std::size_t left_queries = 0;  ///< of those, queries with a candidate whose place the camera had left
@@ -416,7 +417,7 @@ class LoopEngine {
   }
 
   /// The state a saved run ended with: the label vector of each frame indexed so far
-  /// (the ranker already holds their bags of words), the stationarity counts and the
+  /// (the ranker already holds their bags of words), the revisit counts and the
   /// temporal-consistency state, and the first frame of the last frame's session
   /// (begin_session). The tree is rebuilt exactly: the frames the last query had
   /// inserted, in order. Every restored frame is a view of its own, as a visual memory's
@@ -427,7 +428,7 @@ class LoopEngine {
     detail::check(frames_ == 0, "LoopEngine::restore: frames were added already");
     detail::check(session_start <= labels.size(), "LoopEngine::restore: the session starts after the last frame");
     detail::check(not_revisit + left_queries <= past_window && past_window <= labels.size(),
-                  "LoopEngine::restore: inconsistent stationarity counts");
+                  "LoopEngine::restore: inconsistent revisit counts");
     for (const LabelVector& v : labels)
       detail::check(!uses_labels(options_.index) || v.size() == schema_.size(),
                     "LoopEngine::restore: a label vector does not fit the schema");
