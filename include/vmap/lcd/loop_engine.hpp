@@ -522,17 +522,22 @@ class LoopEngine {
     return std::max(q > options_.window ? q - options_.window : 0, std::min(session_start_, q));
   }
 
-  /// What the revisit rule has checked of the view starts after j: up to `until`, the
-  /// lowest eq. 5 similarity any of them had to j. The query only moves the bar, so a
-  /// view start is verified against j at most once.
+  /// What the revisit rule has checked of the view starts after j: every one before
+  /// `until`, and `probed` (0: none) beyond it; the lowest eq. 5 similarity any of them
+  /// had to j. The query only moves the bar, so a view start is verified against j at
+  /// most once.
   struct LeftCache {
     std::size_t until = 0;
+    std::size_t probed = 0;
     double lowest = 2.0;
   };
 
   /// The revisit rule for candidate j of query q, whose eq. 5 similarity to j is
   /// `query_similarity`: some view start between them saw j less than left_ratio times
-  /// that. A frame of an earlier session was left by definition.
+  /// that. A frame of an earlier session was left by definition. The view start halfway
+  /// between them is verified first: where the camera went away and came back, it is
+  /// the one least likely to see j, so a revisit costs one verification; otherwise every
+  /// view start is checked in order.
   template <FeatureLookup L>
   bool left_place(std::size_t j, std::size_t q, double query_similarity, const L& lookup) {
     if (j < session_start_) return true;
@@ -540,13 +545,24 @@ class LoopEngine {
     LeftCache& c = left_[j];
     if (c.until < j + 1) c.until = j + 1;
     const double bar = options_.left_ratio * query_similarity;
-    for (; c.lowest >= bar && c.until < q; ++c.until) {
-      const std::size_t k = c.until;
-      if (views_[k] == views_[k - 1]) continue;  // not the first frame of a view
+    const auto similarity_to_j = [&](std::size_t k) {
       const Features& fj = lookup(j);
       const Features& fk = lookup(k);
       const Matches matches = matcher_.match(fj, fk);
-      c.lowest = std::min(c.lowest, InlierRatio{}(fj, fk, estimator_.verify(fj, fk, matches)));
+      return InlierRatio{}(fj, fk, estimator_.verify(fj, fk, matches));
+    };
+    if (c.lowest >= bar && c.probed == 0) {
+      std::size_t mid = j + (q - j) / 2;
+      while (mid > c.until && views_[mid] == views_[mid - 1]) --mid;  // back to its view's start
+      if (mid >= c.until && mid < q && views_[mid] != views_[mid - 1]) {
+        c.probed = mid;
+        c.lowest = std::min(c.lowest, similarity_to_j(mid));
+      }
+    }
+    for (; c.lowest >= bar && c.until < q; ++c.until) {
+      const std::size_t k = c.until;
+      if (views_[k] == views_[k - 1] || k == c.probed) continue;  // not a view start, or checked
+      c.lowest = std::min(c.lowest, similarity_to_j(k));
     }
     return c.lowest < bar;
   }
