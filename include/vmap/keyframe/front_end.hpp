@@ -14,6 +14,7 @@
 #include <vmap/core/features.hpp>
 #include <vmap/core/verification.hpp>
 #include <vmap/hooks/pair_matcher.hpp>
+#include <vmap/keyframe/result.hpp>
 
 #include <opencv2/core.hpp>
 
@@ -37,6 +38,46 @@ struct PairScore {
   Verification verification;  ///< the estimator's result (when verified_run)
   double similarity = 0.0;    ///< eq. 5 (when verified_run; else 0)
 };
+
+/// A pair's score from its tentative matches before verification: their count and the
+/// bound they put on eq. 5.
+template <Similarity S>
+[[nodiscard]] PairScore bound_pair(const S& similarity, const Features& key, const Features& frame,
+                                   const Matches& matches) {
+  PairScore s;
+  s.raw_matches = static_cast<int>(matches.size());
+  s.upper_bound = similarity.upper_bound(key, frame, s.raw_matches);
+  return s;
+}
+
+/// Verifies the pair's matches and completes its score with eq. 5 (0 when no model).
+template <Estimator E, Similarity S>
+void verify_pair(const E& estimator, const S& similarity, const Features& key, const Features& frame,
+                 const Matches& matches, PairScore& s) {
+  s.verification = estimator.verify(key, frame, matches);
+  s.verified_run = true;
+  s.similarity = s.verification.ok() ? static_cast<double>(similarity(key, frame, s.verification)) : 0.0;
+}
+
+/// Eq. 5 for a pair of feature sets: matched, bounded, and verified unless the bound is
+/// already below `skip_below` (the selector's fast path).
+template <Matcher M, Estimator E, Similarity S>
+[[nodiscard]] PairScore score_pair(const M& matcher, const E& estimator, const S& similarity, const Features& key,
+                                   const Features& frame, double skip_below) {
+  const Matches matches = matcher.match(key, frame);
+  PairScore s = bound_pair(similarity, key, frame, matches);
+  if (s.upper_bound >= skip_below) verify_pair(estimator, similarity, key, frame, matches, s);
+  return s;
+}
+
+/// Why a frame scored so no longer resembles the key image at threshold `tau`, the test
+/// of Algorithm 1 (KeyReason::none: it still does).
+[[nodiscard]] constexpr KeyReason key_reason(const PairScore& s, double tau) noexcept {
+  if (!s.verified_run) return KeyReason::bound_below_threshold;
+  if (!s.verification.ok()) return KeyReason::verification_failed;  // the paper: no F-matrix also ends the key image
+  if (s.similarity < tau) return KeyReason::below_threshold;
+  return KeyReason::none;
+}
 
 // ---- the front-end concept --------------------------------------------------------
 
@@ -128,25 +169,16 @@ class FeatureFrontEnd {
   [[nodiscard]] Features prepare(const cv::Mat& image) { return descriptor_.extract(image); }
 
   [[nodiscard]] PairScore score(const Features& key, const Features& frame, double skip_below) const {
-    const Matches matches = match(key, frame);
-    PairScore s = bound(key, frame, matches);
-    if (s.upper_bound < skip_below) return s;
-    verify(key, frame, matches, s);
-    return s;
+    return score_pair(matcher_, estimator_, similarity_, key, frame, skip_below);
   }
 
   /// The stages of `score`, public so that the threshold sweep can cache them per pair.
   [[nodiscard]] Matches match(const Features& key, const Features& frame) const { return matcher_.match(key, frame); }
   [[nodiscard]] PairScore bound(const Features& key, const Features& frame, const Matches& matches) const {
-    PairScore s;
-    s.raw_matches = static_cast<int>(matches.size());
-    s.upper_bound = similarity_.upper_bound(key, frame, s.raw_matches);
-    return s;
+    return bound_pair(similarity_, key, frame, matches);
   }
   void verify(const Features& key, const Features& frame, const Matches& matches, PairScore& s) const {
-    s.verification = estimator_.verify(key, frame, matches);
-    s.verified_run = true;
-    s.similarity = s.verification.ok() ? static_cast<double>(similarity_(key, frame, s.verification)) : 0.0;
+    verify_pair(estimator_, similarity_, key, frame, matches, s);
   }
 
   /// `score` into `out` with the front end's reusable buffers (no allocation of ours

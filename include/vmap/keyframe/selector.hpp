@@ -184,12 +184,7 @@ class BasicKeyframeSelector {
       r.status = s.verification.status;
       r.verified_matches = s.verification.ok() ? s.verification.inliers : 0;
     }
-    if (!s.verified_run)
-      r.reason = KeyReason::bound_below_threshold;
-    else if (!s.verification.ok())
-      r.reason = KeyReason::verification_failed;  // the paper: no F-matrix also ends the key image
-    else if (s.similarity < options_.tau)
-      r.reason = KeyReason::below_threshold;
+    r.reason = key_reason(s, options_.tau);
     if (r.reason == KeyReason::none) {
       set_previous(std::move(frame));
       std::swap(prev_score_, scratch_score_);  // the buffers change hands, none is freed

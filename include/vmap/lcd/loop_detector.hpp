@@ -11,6 +11,7 @@
 #include <vmap/core/error.hpp>
 #include <vmap/geometry/similarity.hpp>
 #include <vmap/hooks/detection.hpp>
+#include <vmap/keyframe/front_end.hpp>
 #include <vmap/keyframe/options.hpp>
 #include <vmap/lcd/label_vector.hpp>
 #include <vmap/lcd/loop_engine.hpp>
@@ -103,7 +104,7 @@ class LoopDetector {
   [[nodiscard]] const LoopDetectorOptions& options() const noexcept { return engine_.options(); }
   [[nodiscard]] const LoopEngine<Match, Estim, Rank>& engine() const noexcept { return engine_; }
   /// Whether the camera never left its place (lcd/loop_engine.hpp, stationary()).
-  [[nodiscard]] bool stationary() const { return engine_.stationary(); }
+  [[nodiscard]] bool stationary() const noexcept { return engine_.stationary(); }
 
   /// Bytes held for the frames: keypoints, descriptors, label vectors and the ranker's
   /// index (not the tree's nodes).
@@ -118,18 +119,13 @@ class LoopDetector {
 
  private:
   /// Whether `f` starts a new view: the key-image selector's test (Algorithm 1, eq. 5,
-  /// its default tau) against the first frame of the current view, so a stream of frames
-  /// has the views a visual memory's key images would give it; the raw matches bound the
-  /// similarity from above, so below tau no estimator runs.
+  /// its default tau, with its fast path) against the first frame of the current view, so
+  /// a stream of frames has the views a visual memory's key images would give it.
   [[nodiscard]] ViewStep view_step(const Features& f) const {
     if (frames_.empty()) return ViewStep::new_view;
-    const Features& first = frames_[view_start_];
     const double tau = SelectorOptions{}.tau;
-    const InlierRatio similarity;
-    const Matches matches = engine_.matcher().match(first, f);
-    if (similarity.upper_bound(first, f, static_cast<int>(matches.size())) < tau) return ViewStep::new_view;
-    const Verification v = engine_.estimator().verify(first, f, matches);
-    return v.ok() && similarity(first, f, v) >= tau ? ViewStep::same_view : ViewStep::new_view;
+    const PairScore s = score_pair(engine_.matcher(), engine_.estimator(), InlierRatio{}, frames_[view_start_], f, tau);
+    return key_reason(s, tau) == KeyReason::none ? ViewStep::same_view : ViewStep::new_view;
   }
 
   Desc descriptor_;

@@ -43,6 +43,7 @@
 #include <vmap/geometry/essential.hpp>
 #include <vmap/geometry/similarity.hpp>
 #include <vmap/io/binary.hpp>
+#include <vmap/keyframe/front_end.hpp>
 #include <vmap/lcd/binary_tree.hpp>
 #include <vmap/lcd/label_vector.hpp>
 #include <vmap/lcd/options.hpp>
@@ -280,7 +281,9 @@ template <class E>
   return detail::fits_essential<E>::value ? PlaceModel::essential : PlaceModel::fundamental;
 }
 
-/// Borrowed features of frame `id`.
+/// Borrowed features of frame `id`, valid until the lookup's next call (a visual memory
+/// that bounds its RAM reads a released key image into one buffer): the engine holds one
+/// reference at a time.
 template <class L>
 concept FeatureLookup = requires(const L& l, std::size_t id) {
   { l(id) } -> std::convertible_to<const Features&>;
@@ -489,7 +492,7 @@ class LoopEngine {
   /// session's chain never changed views (add()'s ViewStep): the camera
   /// rests or hovers. A stationary sequence is reported as such instead of loops. The
   /// rule is the chain's, so it holds whatever the vocabulary (or without one).
-  [[nodiscard]] bool stationary() const {
+  [[nodiscard]] bool stationary() const noexcept {
     if (frames_ == 0 || past_window_ < std::max<std::size_t>(options_.window, 1)) return false;
     return views_.back() == views_[std::min(session_start_, frames_ - 1)];
   }
@@ -545,11 +548,10 @@ class LoopEngine {
     LeftCache& c = left_[j];
     if (c.until < j + 1) c.until = j + 1;
     const double bar = options_.left_ratio * query_similarity;
+    std::optional<Features> candidate;  // j's features, kept: each view start is a lookup too
     const auto similarity_to_j = [&](std::size_t k) {
-      const Features& fj = lookup(j);
-      const Features& fk = lookup(k);
-      const Matches matches = matcher_.match(fj, fk);
-      return InlierRatio{}(fj, fk, estimator_.verify(fj, fk, matches));
+      if (!candidate) candidate = lookup(j);
+      return score_pair(matcher_, estimator_, InlierRatio{}, *candidate, lookup(k), 0.0).similarity;
     };
     if (c.lowest >= bar && c.probed == 0) {
       std::size_t mid = j + (q - j) / 2;
@@ -641,7 +643,7 @@ class LoopEngine {
     const std::size_t va = views_[a.frame], vb = views_[b.frame];
     if ((va > vb ? va - vb : vb - va) <= 1) return true;
     if (!competes) return false;
-    const Features& fa = lookup(a.frame);
+    const Features fa = lookup(a.frame);  // a copy: the next lookup may replace it
     const Features& fb = lookup(b.frame);
     const Matches matches = matcher_.match(fa, fb);
     const Verification v = estimator_.verify(fa, fb, matches);

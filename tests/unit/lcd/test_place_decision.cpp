@@ -23,6 +23,7 @@
 
 #include <cmath>
 #include <functional>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -276,6 +277,34 @@ TEST_CASE("revisit rule: scripted chains of views (never left, left and came bac
     CHECK(e.view_of(12) == 8);
     CHECK_FALSE(e.stationary());
   }
+}
+
+TEST_CASE("revisit rule and ambiguity: a lookup that keeps one frame's features at a time gives the same decisions") {
+  // A visual memory that bounds its RAM lends a released key image's features from one
+  // buffer, replaced at its next read: the engine must not hold two of its references.
+  vmap::OrbDescriptor orb({.features = 500});
+  std::vector<vmap::Features> frames;
+  for (int k = 0; k < 16; ++k) frames.push_back(orb.extract(vmap::test::lap_frame(k, 8, 900)));
+  const vmap::LoopOptions o{.window = 3, .index = vmap::CandidateIndex::brute_force};
+  Engine stable(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}), o);
+  Engine slotted(vmap::BruteForceMatcher{}, vmap::FundamentalEstimator({.seed = 7}), o);
+  const auto lookup = [&](std::size_t j) -> const vmap::Features& { return frames[j]; };
+  std::optional<std::pair<std::size_t, vmap::Features>> slot;
+  const auto one_slot = [&](std::size_t j) -> const vmap::Features& {
+    if (!slot || slot->first != j) slot.emplace(j, frames[j]);
+    return slot->second;
+  };
+  std::size_t accepted = 0;
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    const auto a = stable.add(frames[k], {}, lookup);
+    const auto b = slotted.add(frames[k], {}, one_slot);
+    CAPTURE(k);
+    CHECK(a.status == b.status);
+    CHECK(a.best == b.best);
+    CHECK(a.confidence == b.confidence);
+    accepted += a.accepted() ? 1 : 0;
+  }
+  CHECK(accepted == 8);
 }
 
 TEST_CASE("place decision: each rejection says why") {
