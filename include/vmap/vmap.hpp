@@ -68,6 +68,7 @@
 #include <vmap/keyframe/visual_map.hpp>
 
 #include <vmap/lcd/binary_tree.hpp>
+#include <vmap/lcd/calibration.hpp>
 #include <vmap/lcd/evaluation.hpp>
 #include <vmap/lcd/influence.hpp>
 #include <vmap/lcd/label_sources.hpp>

@@ -69,6 +69,10 @@ struct Verification {
   std::vector<std::uint8_t> inlier_mask;     ///< one entry per match, 1 = inlier
   int inliers = 0;                           ///< number of ones in inlier_mask
   int matches = 0;                           ///< correspondences that were given
+  /// The correspondences the model was fitted to, when a stage before it dropped some of
+  /// `matches` (XFeat*'s refinement keeps the matches it is confident in); unset: all of
+  /// them. The place decision's chance model weighs the inliers against these.
+  std::optional<int> fitted;
   Degeneracy degeneracy = Degeneracy::none;
   int homography_inliers = 0;  ///< model inliers a homography also explains (0 if unchecked)
   /// Set by estimators that know the camera (EssentialEstimator with recover_pose).

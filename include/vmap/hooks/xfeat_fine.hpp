@@ -235,7 +235,9 @@ inline void refine_matches(XFeatRefiner& refiner, const Features& a, const Featu
 /// (XFeatDenseDescriptor with XFeatGrid::refinable); the Verification's inlier_mask is
 /// aligned with the given coarse matches (matches below the confidence are outliers)
 /// and `matches` counts all of them, so S = inliers / cells keeps eq. 5's coarse
-/// denominator. Without refinement options it is E unchanged (one type for a command
+/// denominator, while `fitted` counts the kept ones (the place decision weighs its
+/// inliers against those: the coarse cells the refinement drops were never candidates
+/// of the model). Without refinement options it is E unchanged (one type for a command
 /// line that chooses at run time).
 /// verify() is const and thread-safe: the refinement networks are a pool, each call
 /// borrows one (a second network is parsed the first time two calls overlap), and every
@@ -279,6 +281,7 @@ class XFeatRefined {
     }
     Verification v = estimator_.verify(fa, fb, kept);
     v.matches = static_cast<int>(matches.size());
+    v.fitted = static_cast<int>(kept.size());
     if (!v.inlier_mask.empty()) {
       std::vector<std::uint8_t> mask(matches.size(), 0);
       for (std::size_t k = 0; k < kept.size(); ++k) mask[r.original[k]] = v.inlier_mask[k];

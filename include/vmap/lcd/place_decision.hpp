@@ -57,7 +57,7 @@ enum class PlaceModel : std::uint8_t {
 
 /// What one verified pair says about "same place?".
 struct PlaceEvidence {
-  int matches = 0;              ///< tentative correspondences given to the estimator
+  int matches = 0;              ///< tentative correspondences the model was fitted to (Verification::fitted)
   int inliers = 0;              ///< those the model explains
   double inlier_ratio = 0.0;    ///< inliers / matches
   /// -log10 P(at least `inliers` of `matches` fit by chance); 0 when unverified.
@@ -217,7 +217,7 @@ inline double binomial_tail_significance(int k, int n, double p) {
                                                           PlaceModel model, const PlaceDecisionOptions& o = {}) {
   PlaceEvidence e;
   e.model = model;
-  e.matches = static_cast<int>(matches.size());
+  e.matches = v.fitted.value_or(static_cast<int>(matches.size()));
   if (!v.ok()) return e;
   e.inliers = v.inliers;
   e.inlier_ratio = e.matches > 0 ? static_cast<double>(e.inliers) / static_cast<double>(e.matches) : 0.0;

@@ -125,6 +125,25 @@ struct PolicyStack {
   return out;
 }
 
+/// The place decision's chance-inlier rate measured for the stack's descriptor with its
+/// own matcher and MAGSAC++'s F-matrix at 1 px (lcd/calibration.hpp, on foreign pairs of
+/// the shared sequences: examples/results/loops.md, "The chance rate of each stack").
+/// Set PlaceDecisionOptions::chance_inlier_rate to it, or to a rate measured on your own
+/// images (calibrate_chance_rate), so that a confidence means the same for each stack.
+/// ORB keeps the 0.1 the decision was built with (measured: 0.0999). Another method or a
+/// camera's essential matrix is given the descriptor's rate: not measured apart.
+[[nodiscard]] constexpr double measured_chance_rate(const PolicyStack& s) noexcept {
+  switch (s.descriptor) {
+    case DescriptorKind::orb: return 0.1;
+    case DescriptorKind::akaze: return 0.033;
+    case DescriptorKind::sift: return 0.032;
+    case DescriptorKind::xfeat: return 0.059;
+    case DescriptorKind::xfeat_dense: return 0.051;
+    case DescriptorKind::xfeat_star: return 0.035;
+  }
+  return 0.1;
+}
+
 /// "ORB 1000, magsac, raw pixels" / "xfeat-star, magsac, camera tum.yaml": for summaries.
 [[nodiscard]] inline std::string summary(const PolicyStack& s) {
   std::string out(to_string(s.descriptor));

@@ -11,9 +11,12 @@
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
 #include <vmap/keyframe/selector.hpp>
+#include <vmap/lcd/evaluation.hpp>
 #include <vmap/memory/visual_memory.hpp>
+#include <vmap/runtime/policy_stack.hpp>
 
 #include "support/errors.hpp"
+#include "support/frames.hpp"
 #include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
 
@@ -442,5 +445,53 @@ TEST_SUITE("data") {
                                                    << ", " << answer.evidence.inliers << " of " << answer.evidence.matches
                                                    << " matches, confidence " << answer.confidence << ", "
                                                    << vmap::to_string(answer.status));
+  }
+  TEST_CASE("XFeat*: at its measured chance rate a memory of tum_fr3_cabinet_kf places its held-out frames") {
+    // bench_places section 6 (examples/results/loops.md, "The chance rate of each stack"):
+    // every 5th frame held out, 12 of 12 accepted and right, no foreign frame accepted.
+    using XFeatStarMemory = vmap::VisualMemory<vmap::XFeatDenseDescriptor, vmap::DenseMutualMatcher,
+                                               vmap::XFeatRefined<vmap::FundamentalEstimator>, vmap::InlierRatio>;
+    vmap::XFeatDenseOptions ro = dense_options();
+    ro.grid = vmap::XFeatGrid::refinable;
+    vmap::PolicyStack stack;
+    stack.descriptor = vmap::DescriptorKind::xfeat_star;
+    vmap::MemoryOptions o;
+    o.loops.decision.chance_inlier_rate = vmap::measured_chance_rate(stack);
+    XFeatStarMemory mem(vmap::XFeatDenseDescriptor(ro), vmap::DenseMutualMatcher({.normalise = true}),
+                        vmap::XFeatRefined(refine_with(), vmap::FundamentalEstimator{}), vmap::InlierRatio{}, o);
+    const auto cabinet = vmap::test::grey_frames(vmap::test::data_path("tum_fr3_cabinet_kf/rgb.txt"));
+    const vmap::LoopGroundTruth same = vmap::ground_truth_from_poses(
+        vmap::load_tum_poses(vmap::test::data_path("tum_fr3_cabinet_kf/truth_cam_poses.txt")),
+        {.max_distance = 0.5, .max_angle_deg = 30, .window = 0});
+    std::vector<const vmap::Frame*> held;
+    for (const auto& f : cabinet) {
+      if (f.index % 5 == 2)
+        held.push_back(&f);
+      else
+        mem.push(f);
+    }
+    REQUIRE(held.size() == 12);
+    std::size_t accepted = 0, right = 0;
+    for (const vmap::Frame* f : held) {
+      const auto a = mem.localize(f->image);
+      INFO("frame " << f->index << ": " << a.reason);
+      if (!a.ok()) continue;
+      ++accepted;
+      const std::size_t k = mem.map().keys[a.best()->key].frame_index;
+      right += (k < f->index ? same(f->index, k) : same(k, f->index)) ? 1 : 0;
+    }
+    MESSAGE("XFeat* at chance rate " << o.loops.decision.chance_inlier_rate << ": " << accepted << " of 12 held-out "
+                                     << "cabinet frames accepted, " << right << " right");
+    CHECK(accepted >= 10);
+    CHECK(right == accepted);
+    std::size_t foreign = 0;
+    for (const char* other : {"rtabmap_loop/images", "kitti07_160/image_0"})
+      for (const auto& f : vmap::test::grey_frames(vmap::test::data_path(other), 20)) {
+        const auto a = mem.localize(f.image);
+        INFO(other << " frame " << f.index << ": " << a.reason);
+        CHECK(!a.ok());
+        ++foreign;
+      }
+    CHECK(foreign == 13);
   }
 }

@@ -12,6 +12,7 @@
 #include <vmap/memory/stacks.hpp>
 #include <vmap/memory/visual_memory.hpp>
 
+#include "support/frames.hpp"
 #include "support/scripted_ranker.hpp"
 #include "support/shared_data.hpp"
 #include "support/two_laps.hpp"
@@ -473,19 +474,12 @@ TEST_CASE("place decision: with a calibrated camera, localize gives the query's 
 
 TEST_SUITE("data") {
   TEST_CASE("place decision: a memory of rtabmap_loop knows its own frames and refuses other places") {
-    auto read = [](const std::filesystem::path& input, std::size_t step) {
-      auto src = vmap::FrameSource::open(input, {.grey = true});
-      std::vector<vmap::Frame> out;
-      while (auto f = src.next())
-        if (f->index % step == 0) out.push_back(std::move(*f));
-      return out;
-    };
-    const auto rt = read(vmap::test::data_path("rtabmap_loop/images"), 1);
+    const auto rt = vmap::test::grey_frames(vmap::test::data_path("rtabmap_loop/images"));
     vmap::OrbVisualMemory mem;
     for (const auto& f : rt) mem.push(f);
     std::size_t foreign = 0, accepted = 0;
     for (const char* other : {"kitti07_160/image_0", "tum_fr3_cabinet_kf/rgb.txt"}) {
-      for (const auto& f : read(vmap::test::data_path(other), 5)) {
+      for (const auto& f : vmap::test::grey_frames(vmap::test::data_path(other), 5)) {
         const auto a = mem.localize(f.image);
         ++foreign;
         if (a.ok()) MESSAGE(other << " frame " << f.index << " accepted: " << a.reason);
