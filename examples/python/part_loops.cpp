@@ -49,11 +49,12 @@ struct EngineArgs {
   std::size_t temporal_consistency, temporal_tolerance;
   double left_ratio, min_confidence;
   int min_inliers;
-  double chance_inlier_rate, half_significance;
+  std::optional<double> chance_inlier_rate;  ///< None: the rate measured for the stack
+  double half_significance;
   int spread_grid;
   double full_spread, ambiguity_ratio, label_min_score;
 
-  [[nodiscard]] LoopOptions options() const {
+  [[nodiscard]] LoopOptions options(const PolicyStack& stack) const {
     LoopOptions o;
     o.labels.min_score = static_cast<float>(label_min_score);
     o.window = window;
@@ -65,7 +66,7 @@ struct EngineArgs {
     o.left_ratio = left_ratio;
     o.decision.min_confidence = min_confidence;
     o.decision.min_inliers = min_inliers;
-    o.decision.chance_inlier_rate = chance_inlier_rate;
+    o.decision.chance_inlier_rate = chance_inlier_rate.value_or(measured_chance_rate(stack));
     o.decision.half_significance = half_significance;
     o.decision.spread_grid = spread_grid;
     o.decision.full_spread = full_spread;
@@ -181,7 +182,7 @@ LoopRun detect_loops(const py::object& source, const std::string& features, int 
   o.label_order = label_order.value_or(std::vector<int>{});
   o.sample = sample;
   const std::optional<PrecomputedDetections> detections = labels_of(labels);
-  o.detector = engine.options();
+  o.detector = engine.options(o.stack);
   o.detector.index = candidate_index(rank, detections.has_value(), true);
   check_candidate_source(o.detector.index, detections.has_value(), true);
   o.vocabulary.learning = {.words = words, .depth = depth, .seed = seed};
@@ -296,7 +297,7 @@ class PyLoopDetector {
       }
     }
     const bool have_labels = label_order && !label_order->empty();
-    LoopOptions options = engine.options();
+    LoopOptions options = engine.options(stack);
     options.index = candidate_index(rank, have_labels, words_tree != nullptr);
     check_candidate_source(options.index, have_labels, words_tree != nullptr,
                            OptionNames{.style = OptionNames::Style::keyword,
@@ -524,6 +525,8 @@ void bind_results(py::module_& m) {
           "the candidate source: tree, tree_ranked, bow or brute_force")
       .def_property_readonly("min_confidence", [](const LoopRun& r) { return r.options.decision.min_confidence; },
                              "the confidence a loop needed")
+      .def_property_readonly("chance_inlier_rate", [](const LoopRun& r) { return r.options.decision.chance_inlier_rate; },
+                             "the decision's chance-inlier rate (the stack's measured one unless given)")
       .def_property_readonly("window", [](const LoopRun& r) { return r.options.window; },
                              "frames just before a query that are never its candidates")
       .def_readonly("verifications", &LoopRun::verifications, "F-matrix verifications over the whole run")
@@ -629,7 +632,7 @@ constexpr const char* detect_loops_doc =
     "temporal_tolerance frames); 0: off. left_ratio: the revisit rule, a candidate's place was left when a view in\n"
     "between began with a frame whose similarity to it (eq. 5) is below this fraction of the query's.\n"
     "min_confidence: the decision threshold on a loop's confidence in [0, 1]; min_inliers: below this a candidate\n"
-    "is not weighed; chance_inlier_rate, half_significance, spread_grid, full_spread, ambiguity_ratio: the\n"
+    "is not weighed; chance_inlier_rate (None: vmap.measured_chance_rate(features)), half_significance, spread_grid, full_spread, ambiguity_ratio: the\n"
     "evidence's model (lcd/place_decision.hpp). label_min_score: detections below it are ignored.\n"
     "min_influence / max_influence: drop labels present in fewer / more frames of the sample (eq. 5);\n"
     "label_order: label ids large to small (default: by mean box area); sample: frames of the eq. 5 sample (0: all).\n"
@@ -660,7 +663,7 @@ void bind(py::module_& m) {
          const py::object& vocabulary, std::size_t words, int depth, std::uint64_t seed, std::size_t window,
          std::size_t min_candidates, std::size_t top_k, double min_bow_score, std::size_t temporal_consistency,
          std::size_t temporal_tolerance, double left_ratio, double min_confidence, int min_inliers,
-         double chance_inlier_rate, double half_significance, int spread_grid, double full_spread,
+         std::optional<double> chance_inlier_rate, double half_significance, int spread_grid, double full_spread,
          double ambiguity_ratio, double label_min_score, double min_influence, double max_influence,
          const std::optional<std::vector<int>>& label_order, std::size_t sample, double time_offset,
          const py::object& progress) {
@@ -676,7 +679,7 @@ void bind(py::module_& m) {
       py::arg("vocabulary") = py::none(), py::arg("words") = 1000, py::arg("depth") = 3, py::arg("seed") = 1,
       py::arg("window") = 10, py::arg("min_candidates") = 5, py::arg("top_k") = 2, py::arg("min_bow_score") = 0.0,
       py::arg("temporal_consistency") = 0, py::arg("temporal_tolerance") = 3, py::arg("left_ratio") = 0.5,
-      py::arg("min_confidence") = 0.5, py::arg("min_inliers") = 12, py::arg("chance_inlier_rate") = 0.1,
+      py::arg("min_confidence") = 0.5, py::arg("min_inliers") = 12, py::arg("chance_inlier_rate") = py::none(),
       py::arg("half_significance") = 12.0, py::arg("spread_grid") = 4, py::arg("full_spread") = 0.35,
       py::arg("ambiguity_ratio") = 0.9, py::arg("label_min_score") = 0.5, py::arg("min_influence") = 0.05,
       py::arg("max_influence") = 0.95, py::arg("label_order") = py::none(), py::arg("sample") = 0,
@@ -697,7 +700,7 @@ void bind(py::module_& m) {
                        const std::optional<std::string>& rank, std::size_t window, std::size_t min_candidates,
                        std::size_t top_k, double min_bow_score, std::size_t temporal_consistency,
                        std::size_t temporal_tolerance, double left_ratio, double min_confidence, int min_inliers,
-                       double chance_inlier_rate, double half_significance, int spread_grid, double full_spread,
+                       std::optional<double> chance_inlier_rate, double half_significance, int spread_grid, double full_spread,
                        double ambiguity_ratio, double label_min_score) {
              const EngineArgs engine{window,
                                      min_candidates,
@@ -722,7 +725,7 @@ void bind(py::module_& m) {
            py::arg("depth") = 3, py::arg("seed") = 1, py::arg("label_order") = py::none(), py::arg("rank") = py::none(),
            py::arg("window") = 10, py::arg("min_candidates") = 5, py::arg("top_k") = 2, py::arg("min_bow_score") = 0.0,
            py::arg("temporal_consistency") = 0, py::arg("temporal_tolerance") = 3, py::arg("left_ratio") = 0.5,
-           py::arg("min_confidence") = 0.5, py::arg("min_inliers") = 12, py::arg("chance_inlier_rate") = 0.1,
+           py::arg("min_confidence") = 0.5, py::arg("min_inliers") = 12, py::arg("chance_inlier_rate") = py::none(),
            py::arg("half_significance") = 12.0, py::arg("spread_grid") = 4, py::arg("full_spread") = 0.35,
            py::arg("ambiguity_ratio") = 0.9, py::arg("label_min_score") = 0.5)
       .def("add", &PyLoopDetector::add, py::arg("frame"), py::arg("detections") = py::none(),
@@ -764,6 +767,12 @@ void bind(py::module_& m) {
                                return d.read([](const AnyLoopDetector& b) { return b.options().decision.min_confidence; });
                              },
                              "the confidence a loop needs")
+      .def_property_readonly("chance_inlier_rate",
+                             [](const PyLoopDetector& d) {
+                               return d.read(
+                                   [](const AnyLoopDetector& b) { return b.options().decision.chance_inlier_rate; });
+                             },
+                             "the decision's chance-inlier rate (the stack's measured one unless given)")
       .def("__len__", [](const PyLoopDetector& d) { return d.read([](const AnyLoopDetector& b) { return b.frames(); }); })
       .def("__repr__", [](const PyLoopDetector& d) {
         return d.read([](const AnyLoopDetector& b) {
@@ -772,6 +781,16 @@ void bind(py::module_& m) {
         });
       });
 
+  m.def(
+      "measured_chance_rate",
+      [](const std::string& features) {
+        PolicyStack s;
+        s.descriptor = parse<DescriptorKind>(features, "features");
+        return measured_chance_rate(s);
+      },
+      py::arg("features") = "orb",
+      "The place decision's chance-inlier rate measured for a descriptor (orb, akaze, sift, xfeat, xfeat-dense,\n"
+      "xfeat-star) with its own matcher and MAGSAC++ at 1 px: the default of chance_inlier_rate=None.");
   m.def("evaluate", &evaluate, py::arg("loops"), py::arg("ground_truth") = py::none(), py::kw_only(),
         py::arg("poses") = py::none(), py::arg("max_distance") = 0.5, py::arg("max_angle") = 30.0,
         py::arg("window") = py::none(), py::arg("min_confidence") = py::none(), evaluate_doc);

@@ -72,8 +72,8 @@ class PyMemory {
   std::atomic<std::thread::id> owner_{};
 };
 
-MemoryOptions options_of(double tau, const std::string& rule, const std::string& images, std::size_t vocabulary_after,
-                         double min_confidence) {
+MemoryOptions options_of(const PolicyStack& stack, double tau, const std::string& rule, const std::string& images,
+                         std::size_t vocabulary_after, double min_confidence, std::optional<double> chance_inlier_rate) {
   MemoryOptions o;
   o.selector.tau = tau;
   if (rule == "previous")
@@ -92,6 +92,7 @@ MemoryOptions options_of(double tau, const std::string& rule, const std::string&
     fail("images: unknown storage '" + images + "' (choose none, png or jpeg)");
   o.vocabulary_after = vocabulary_after;
   o.loops.decision.min_confidence = min_confidence;
+  o.loops.decision.chance_inlier_rate = chance_inlier_rate.value_or(measured_chance_rate(stack));
   return o;
 }
 
@@ -308,38 +309,44 @@ void bind(py::module_& m) {
                        const std::string& refine_model, const std::string& estimator,
                        const std::optional<std::string>& camera, double tau, const std::string& rule,
                        const std::string& images, const std::optional<std::string>& vocabulary,
-                       std::size_t vocabulary_after, double min_confidence) {
+                       std::size_t vocabulary_after, double min_confidence, std::optional<double> chance_inlier_rate) {
+             const PolicyStack stack = policy_stack(features, nfeatures, model, refine_model, estimator, camera);
              return std::make_unique<PyMemory>(AnyMemory::in_ram(
-                 policy_stack(features, nfeatures, model, refine_model, estimator, camera),
-                 options_of(tau, rule, images, vocabulary_after, min_confidence), vocabulary_of(vocabulary)));
+                 stack, options_of(stack, tau, rule, images, vocabulary_after, min_confidence, chance_inlier_rate),
+                 vocabulary_of(vocabulary)));
            }),
            py::arg("features") = "orb", py::kw_only(), py::arg("nfeatures") = 1000, py::arg("model") = "",
            py::arg("refine_model") = "", py::arg("estimator") = "magsac", py::arg("camera") = py::none(),
            py::arg("tau") = 0.3, py::arg("rule") = "previous", py::arg("images") = "none",
            py::arg("vocabulary") = py::none(), py::arg("vocabulary_after") = MemoryOptions{}.vocabulary_after,
            py::arg("min_confidence") = PlaceDecisionOptions{}.min_confidence,
+           py::arg("chance_inlier_rate") = py::none(),
            "A new memory in RAM. features: orb, akaze, sift, xfeat, xfeat-dense, xfeat-star (model: the ONNX\n"
            "file); estimator: magsac, ransac, lmeds, 8point; camera: a calibration file (F on undistorted\n"
            "points and a relative pose per localization); tau: eq. 6's threshold; rule: previous (eq. 6) or\n"
            "current (Algorithm 1); images: none, png or jpeg (key images' pixels kept); vocabulary: a\n"
            "vocabulary file, else one is learned from the first vocabulary_after key images;\n"
-           "min_confidence: the place decision's threshold.")
+           "min_confidence: the place decision's threshold; chance_inlier_rate: its chance model (None: the rate\n"
+           "measured for the descriptor, vmap.measured_chance_rate).")
       .def_static(
           "create",
           [](const std::string& path, const std::string& features, int nfeatures, const std::string& model,
              const std::string& refine_model, const std::string& estimator, const std::optional<std::string>& camera,
              double tau, const std::string& rule, const std::string& images, const std::optional<std::string>& vocabulary,
-             std::size_t vocabulary_after, double min_confidence, bool force, std::size_t working_memory) {
-            return create_memory(path, policy_stack(features, nfeatures, model, refine_model, estimator, camera),
-                                 options_of(tau, rule, images, vocabulary_after, min_confidence), vocabulary_of(vocabulary),
-                                 force, working_memory);
+             std::size_t vocabulary_after, double min_confidence, std::optional<double> chance_inlier_rate, bool force,
+             std::size_t working_memory) {
+            const PolicyStack stack = policy_stack(features, nfeatures, model, refine_model, estimator, camera);
+            return create_memory(path, stack,
+                                 options_of(stack, tau, rule, images, vocabulary_after, min_confidence, chance_inlier_rate),
+                                 vocabulary_of(vocabulary), force, working_memory);
           },
           py::arg("path"), py::kw_only(), py::arg("features") = "orb", py::arg("nfeatures") = 1000,
           py::arg("model") = "", py::arg("refine_model") = "", py::arg("estimator") = "magsac",
           py::arg("camera") = py::none(), py::arg("tau") = 0.3, py::arg("rule") = "previous",
           py::arg("images") = "none", py::arg("vocabulary") = py::none(),
           py::arg("vocabulary_after") = MemoryOptions{}.vocabulary_after,
-          py::arg("min_confidence") = PlaceDecisionOptions{}.min_confidence, py::arg("force") = false,
+          py::arg("min_confidence") = PlaceDecisionOptions{}.min_confidence, py::arg("chance_inlier_rate") = py::none(),
+          py::arg("force") = false,
           py::arg("working_memory") = std::size_t{200},
           "A new memory store at `path` (a folder means path/memory.vmdb), synced at every key image and loop\n"
           "edge, holding the features of its `working_memory` newest key images in RAM (0: all). An existing\n"

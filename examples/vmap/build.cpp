@@ -60,6 +60,7 @@ struct BuildArgs {
   bool gcs = false;   // --gcs: floor poses, and the GCS localizer trained at the end
   std::size_t vocabulary_after = vmap::MemoryOptions{}.vocabulary_after;
   double min_confidence = vmap::PlaceDecisionOptions{}.min_confidence;  // --min-confidence: of loop edges
+  std::optional<double> chance_rate;  // --chance-rate: unset, the rate measured for the stack
 };
 
 // The human table goes to stdout, or to stderr when --json owns stdout.
@@ -287,12 +288,13 @@ std::optional<std::size_t> expected_frames(const vmap::FrameSource& src, const v
 }
 
 /// The options of a new memory from the command line.
-vmap::MemoryOptions memory_options(const BuildArgs& args) {
+vmap::MemoryOptions memory_options(const BuildArgs& args, const vmap::PolicyStack& stack) {
   vmap::MemoryOptions o;
   o.selector.tau = args.threshold;
   o.selector.rule = ex::parse_rule(args.common.rule);
   o.vocabulary_after = args.vocabulary_after;
   o.loops.decision.min_confidence = args.min_confidence;
+  o.loops.decision.chance_inlier_rate = args.chance_rate.value_or(vmap::measured_chance_rate(stack));
   o.images = args.images == "png" ? vmap::ImageStorage::png : args.images == "jpeg" ? vmap::ImageStorage::jpeg
                                                                                     : vmap::ImageStorage::none;
   return o;
@@ -324,7 +326,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   ex::prepare_memory_output(file, "--memory", inputs, continued, args.force);
   if (continued)
     ex::check_continuable(file, app, {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after",
-                                      "--min-confidence"}, how);
+                                      "--min-confidence", "--chance-rate"}, how);
   if (!args.vocabulary.empty()) ex::check_input_file(args.vocabulary, "--vocabulary");
   const vmap::SyncPolicy sync{args.save_every};
   std::optional<vmap::AnyMemory> mem;
@@ -365,7 +367,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
     if (!args.vocabulary.empty()) vocabulary = vmap::AnyVocabulary::load(args.vocabulary);
     // --force: the memory there is replaced when the run closes it; until then readers
     // see it, and a failed run leaves it as it was.
-    mem.emplace(vmap::AnyMemory::create(file, stack, memory_options(args), std::move(vocabulary),
+    mem.emplace(vmap::AnyMemory::create(file, stack, memory_options(args, stack), std::move(vocabulary),
                                         {.working_memory = args.working_memory, .sync = sync, .replace = args.force}));
     vmap::set_session_input(*mem, input);
   }
@@ -447,6 +449,10 @@ std::function<int()> setup(CLI::App& app) {
                  "With --memory: a loop edge needs this place-decision confidence in [0, 1] (0.5: inliers a chance "
                  "alignment gives 1 in 10^12)")
       ->check(ex::real_in(0.0, 1.0));
+  app.add_option("--chance-rate", args->chance_rate,
+                 "With --memory: the place decision's chance-inlier rate, kept with the memory (default: the rate "
+                 "measured for the stack, vmap::measured_chance_rate; your own from vmap::calibrate_chance_rate)")
+      ->check(ex::real_in(0.0001, 0.9));
   app.add_option("--poses", args->poses,
                  "With --memory: each frame's odometry pose (TUM or KITTI camera poses; by order when there is one "
                  "per frame, else the nearest in time within 50 ms), kept with its key image");
@@ -459,7 +465,7 @@ std::function<int()> setup(CLI::App& app) {
     ex::check_range(a);
     if (!args->memory.empty()) return build_memory(*args, app);
     for (const char* o : {"--resume", "--session", "--save-every", "--working-memory", "--images", "--vocabulary",
-                          "--vocabulary-after", "--min-confidence", "--poses", "--gcs"})
+                          "--vocabulary-after", "--min-confidence", "--chance-rate", "--poses", "--gcs"})
       if (app.get_option(o)->count() > 0) ex::usage_error(std::string(o) + " needs --memory DIR|FILE");
     const auto camera = ex::camera_option(a.camera, a.input);
     const bool pictures = !a.out.empty();

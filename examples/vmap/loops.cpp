@@ -69,6 +69,7 @@ struct LoopsArgs {
   bool edges = false;  // --memory: every loop edge instead of a summary
   ex::DescriptorChoice descriptor;  // --features, --nfeatures, --features-model, --refine-model
   vmap::LoopRunOptions options;
+  std::optional<double> chance_rate;  // --chance-rate: unset, the rate measured for the stack
 };
 
 /// The names of `vmap loops`'s options in the library's messages: the descriptor's model
@@ -170,6 +171,7 @@ int run(LoopsArgs& a, const CLI::App& app) {
     ex::usage_error("--model is the detector's model: give --detector yolox|nanodet|fastestdet (the descriptor's "
                     "model is --features-model)");
   o.stack = ex::stack_of(a.descriptor, "magsac", std::nullopt, cli);
+  o.detector.decision.chance_inlier_rate = a.chance_rate.value_or(vmap::measured_chance_rate(o.stack));
   ex::as_usage([&] { o.validate(cli); });
   // Every input, and every output checked against them, before any frame is read.
   std::vector<std::filesystem::path> inputs{a.input};
@@ -504,6 +506,10 @@ std::function<int()> setup(CLI::App& app) {
   app.add_option("--min-confidence", d.decision.min_confidence,
                  "Decision threshold: a loop's confidence in [0, 1] (0.5: inliers a chance alignment gives 1 in 10^12)")
       ->check(ex::real_in(0.0, 1.0));
+  app.add_option("--chance-rate", a->chance_rate,
+                 "The place decision's chance-inlier rate (default: the rate measured for the descriptor, "
+                 "vmap::measured_chance_rate)")
+      ->check(ex::real_in(0.0001, 0.9));
   app.add_option("--min-inliers", d.decision.min_inliers, "Below this many inliers a candidate is not weighed")
       ->check(ex::count_in(0, 1000000));
   app.add_option("--score", d.labels.min_score, "Detections below this score are ignored")->check(ex::real_in(0.0, 1.0));

@@ -108,6 +108,29 @@ def test_options_reach_the_detector_as_on_the_command_line(rtabmap, vmap_cli):
         cli["precision"], cli["recall"], cli["recall_at_100_precision"])
 
 
+def test_the_chance_rate_is_the_stacks_unless_given(rtabmap, bow_run):
+    images, _ = rtabmap
+    assert vmap.measured_chance_rate() == 0.1
+    assert bow_run.chance_inlier_rate == vmap.measured_chance_rate("orb")
+    # SIFT's and XFeat*'s matches fit a model by chance far less often than ORB's.
+    assert vmap.measured_chance_rate("sift") < 0.05
+    assert vmap.measured_chance_rate("xfeat-star") < 0.05
+    assert vmap.LoopDetector(features="sift").chance_inlier_rate == vmap.measured_chance_rate("sift")
+    assert vmap.LoopDetector(chance_inlier_rate=0.05).chance_inlier_rate == 0.05
+    run = vmap.detect_loops(images, rank="bow", chance_inlier_rate=0.05)
+    assert run.chance_inlier_rate == 0.05
+    # A lower rate makes the same inliers more significant: no loop of both runs loses
+    # confidence.
+    before = {(l.query, l.match): l.confidence for l in bow_run.loops}
+    after = {(l.query, l.match): l.confidence for l in run.loops}
+    both = set(before) & set(after)
+    assert len(both) > 30
+    assert all(after[k] >= before[k] for k in both)
+    assert any(after[k] > before[k] for k in both if before[k] < 1.0)
+    with pytest.raises(vmap.Error, match="features"):
+        vmap.measured_chance_rate("surf")
+
+
 def test_poses_ground_truth_equals_the_command_line(shared, vmap_cli):
     folder = shared / "data" / "tum_fr3_cabinet_kf"
     frames, poses = folder / "rgb.txt", folder / "truth_cam_poses.txt"

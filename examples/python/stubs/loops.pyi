@@ -112,6 +112,9 @@ class LoopRun:
     @property
     def min_confidence(self) -> float: ...
     @property
+    def chance_inlier_rate(self) -> float:
+        """the decision's chance-inlier rate (the stack's measured one unless given)"""
+    @property
     def window(self) -> int: ...
     @property
     def verifications(self) -> int: ...
@@ -178,7 +181,7 @@ class LoopDetector:
         left_ratio: float = 0.5,
         min_confidence: float = 0.5,
         min_inliers: int = 12,
-        chance_inlier_rate: float = 0.1,
+        chance_inlier_rate: Optional[float] = None,
         half_significance: float = 12.0,
         spread_grid: int = 4,
         full_spread: float = 0.35,
@@ -205,6 +208,9 @@ class LoopDetector:
     def window(self) -> int: ...
     @property
     def min_confidence(self) -> float: ...
+    @property
+    def chance_inlier_rate(self) -> float:
+        """the decision's chance-inlier rate (the stack's measured one unless given)"""
     def __len__(self) -> int: ...
 
 def detect_loops(
@@ -229,7 +235,7 @@ def detect_loops(
     left_ratio: float = 0.5,
     min_confidence: float = 0.5,
     min_inliers: int = 12,
-    chance_inlier_rate: float = 0.1,
+    chance_inlier_rate: Optional[float] = None,
     half_significance: float = 12.0,
     spread_grid: int = 4,
     full_spread: float = 0.35,
@@ -242,6 +248,7 @@ def detect_loops(
     time_offset: float = 0.0,
     progress: Optional[Callable[[str, int, int], object]] = None,
 ) -> LoopRun: ...
+def measured_chance_rate(features: str = "orb") -> float: ...
 def evaluate(
     loops: Union[LoopRun, npt.NDArray[numpy.floating], Sequence[Tuple[int, Optional[int], float]]],
     ground_truth: Union[_Path, npt.NDArray[numpy.bool_], npt.NDArray[numpy.integer], None] = None,

@@ -142,6 +142,7 @@ class VisualMemory:
         vocabulary: Optional[str] = None,
         vocabulary_after: int = 20,
         min_confidence: float = 0.5,
+        chance_inlier_rate: Optional[float] = None,
     ) -> None: ...
     @staticmethod
     def create(
@@ -159,6 +160,7 @@ class VisualMemory:
         vocabulary: Optional[str] = None,
         vocabulary_after: int = 20,
         min_confidence: float = 0.5,
+        chance_inlier_rate: Optional[float] = None,
         force: bool = False,
         working_memory: int = 200,
     ) -> VisualMemory: ...
