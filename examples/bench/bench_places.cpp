@@ -24,7 +24,11 @@
 //      held-out frames accepted and right by the poses (0.5 m, 30 degrees), and every
 //      10th frame of the other sequences (foreign places) accepted, with the time per query.
 //
-//   bench_places [--shared DIR] [--static-frames 120] [--seed 1] [--part all|localize]
+//   7. The chance rate of each named stack (lcd/calibration.hpp): 200 pairs of images of
+//      two different shared sequences, verified with the stack's own matcher and
+//      estimator; the rate runtime/policy_stack.hpp's measured_chance_rate holds.
+//
+//   bench_places [--shared DIR] [--static-frames 120] [--seed 1] [--part all|localize|calibrate]
 #include <vmap/features/orb.hpp>
 #include <vmap/features/sift.hpp>
 #include <vmap/geometry/fundamental.hpp>
@@ -32,11 +36,13 @@
 #include <vmap/hooks/xfeat_fine.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
+#include <vmap/lcd/calibration.hpp>
 #include <vmap/lcd/evaluation.hpp>
 #include <vmap/lcd/loop_detector.hpp>
 #include <vmap/matching/brute_force.hpp>
 #include <vmap/memory/stacks.hpp>
 #include <vmap/memory/visual_memory.hpp>
+#include <vmap/runtime/policies.hpp>
 
 #include <CLI/CLI.hpp>
 
@@ -289,8 +295,17 @@ void localization_section(const std::vector<Sequence>& sequences, const fs::path
               "accepted | ms per query | s to build the memory |\n|---|---|---|---|---|---|---|---|---|\n");
   std::fflush(stdout);
   const vmap::FundamentalEstimator f{};
-  localization_row("ORB 1000", vmap::OrbVisualMemory(), cabinet, same, sequences);
-  localization_row("SIFT", vmap::SiftVisualMemory(), cabinet, same, sequences);
+  // Each stack's decision weighs its inliers against the chance rate measured for it
+  // (section 7), as the command line's and the Python module's memories do.
+  const auto options_of = [](vmap::DescriptorKind d) {
+    vmap::PolicyStack stack;
+    stack.descriptor = d;
+    vmap::MemoryOptions o;
+    o.loops.decision.chance_inlier_rate = vmap::measured_chance_rate(stack);
+    return o;
+  };
+  localization_row("ORB 1000", vmap::OrbVisualMemory(options_of(vmap::DescriptorKind::orb)), cabinet, same, sequences);
+  localization_row("SIFT", vmap::SiftVisualMemory(options_of(vmap::DescriptorKind::sift)), cabinet, same, sequences);
   const fs::path models = shared / "models";
   using XFeatStarMemory = vmap::VisualMemory<vmap::XFeatDenseDescriptor, vmap::DenseMutualMatcher,
                                              vmap::XFeatRefined<vmap::FundamentalEstimator>, vmap::InlierRatio>;
@@ -299,8 +314,42 @@ void localization_section(const std::vector<Sequence>& sequences, const fs::path
       XFeatStarMemory(vmap::XFeatDenseDescriptor({.model = models / "xfeat_anysize.onnx", .grid = vmap::XFeatGrid::refinable}),
                       vmap::DenseMutualMatcher({.normalise = true}),
                       vmap::XFeatRefined<vmap::FundamentalEstimator>(vmap::XFeatFineOptions{.model = models / "xfeat_fine.onnx"}, f),
-                      vmap::InlierRatio{}),
+                      vmap::InlierRatio{}, options_of(vmap::DescriptorKind::xfeat_star)),
       cabinet, same, sequences);
+}
+
+// ---- 7. the chance rate of each stack ------------------------------------------------
+
+void calibration_section(const std::vector<Sequence>& sequences, const fs::path& shared) {
+  std::printf("\n## 7. The chance rate of each stack (200 foreign pairs, seed 1: rtabmap_loop, tum_fr3_cabinet_kf, "
+              "every 10th frame of tum_fr1_rpy, every 3rd of kitti07_160)\n\n");
+  std::printf("| stack | rate | pairs | weighed (>= 12 inliers) | strongest foreign significance at the rate | "
+              "measured_chance_rate |\n|---|---|---|---|---|---|\n");
+  std::fflush(stdout);
+  const fs::path models = shared / "models";
+  std::vector<vmap::PolicyStack> stacks(6);
+  stacks[1].descriptor = vmap::DescriptorKind::akaze;
+  stacks[2].descriptor = vmap::DescriptorKind::sift;
+  stacks[3].descriptor = vmap::DescriptorKind::xfeat;
+  stacks[3].model = (models / "xfeat_640x480.onnx").string();
+  stacks[4].descriptor = vmap::DescriptorKind::xfeat_dense;
+  stacks[4].model = (models / "xfeat_anysize.onnx").string();
+  stacks[5].descriptor = vmap::DescriptorKind::xfeat_star;
+  stacks[5].model = stacks[4].model;
+  stacks[5].refine_model = (models / "xfeat_fine.onnx").string();
+  const std::size_t steps[4] = {1, 1, 10, 3};  // rtabmap_loop, cabinet, tum_fr1_rpy, kitti07_160
+  for (const auto& stack : stacks) {
+    vmap::with_policies(stack, vmap::StackUse::memory, [&](auto descriptor, auto matcher, auto estimator) {
+      std::vector<std::vector<vmap::Features>> places(4);
+      for (std::size_t p = 0; p < 4; ++p)
+        for (std::size_t i = 0; i < sequences[p].frames.size(); i += steps[p])
+          places[p].push_back(descriptor.extract(sequences[p].frames[i].image));
+      const vmap::ChanceCalibration c = vmap::calibrate_chance_rate(matcher, estimator, places);
+      std::printf("| %s | %.4f | %zu | %zu | %.1f | %.4f |\n", vmap::summary(stack).c_str(), c.rate, c.pairs, c.weighed,
+                  c.strongest, vmap::measured_chance_rate(stack));
+      std::fflush(stdout);
+    });
+  }
 }
 
 // ---- 5. a camera that does not move -------------------------------------------------
@@ -336,13 +385,19 @@ int main(int argc, char** argv) {
   app.add_option("--static-frames", static_frames, "Frames of the static clip")->check(CLI::Range(11, 100000));
   app.add_option("--seed", seed, "Seed of the static clip's noise and jitter");
   std::string part = "all";
-  app.add_option("--part", part, "all: sections 1-6; localize: section 6 only (minutes: XFeat* verifies on the CPU)")
-      ->check(CLI::IsMember({"all", "localize"}));
+  app.add_option("--part", part,
+                 "all: sections 1-7; localize: section 6 only, calibrate: section 7 only (minutes each: XFeat* verifies "
+                 "on the CPU)")
+      ->check(CLI::IsMember({"all", "localize", "calibrate"}));
   CLI11_PARSE(app, argc, argv);
 
   const auto sequences = load_sequences(shared);
   if (part == "localize") {
     localization_section(sequences, shared);
+    return 0;
+  }
+  if (part == "calibrate") {
+    calibration_section(sequences, shared);
     return 0;
   }
   vmap::OrbDescriptor orb;
@@ -481,5 +536,6 @@ int main(int argc, char** argv) {
     std::printf("\n- memory: %zu key images, %zu loop edges\n", mem.key_images(), mem.loops().size());
   }
   localization_section(sequences, shared);
+  calibration_section(sequences, shared);
   return 0;
 }
