@@ -1337,6 +1337,33 @@ TEST_CASE("cli: vocabulary value errors exit 2 before any frame is read; one sum
 }
 
 TEST_SUITE("data") {
+  TEST_CASE("cli: calibrate measures a stack's chance rate on places that share nothing, the same for a seed") {
+    const std::string corridor = vmap::test::data_path("rtabmap_loop/images").string();
+    const std::string cabinet = vmap::test::data_path("tum_fr3_cabinet_kf/rgb.txt").string();
+    const Run a = run_vmap({"calibrate", corridor, cabinet, "--json"});
+    INFO(a.err);
+    REQUIRE(a.code == 0);
+    const auto j = nlohmann::json::parse(a.out);
+    CHECK(j["frames"] == nlohmann::json::array({84, 58}));
+    CHECK(j["pairs"] == 200);
+    CHECK(j["measured_chance_rate"] == 0.1);
+    // ORB's rate on these two places: near the 0.1 the decision was built with.
+    CHECK(j["rate"].get<double>() > 0.05);
+    CHECK(j["rate"].get<double>() < 0.2);
+    CHECK(j["weighed"].get<int>() > 0);
+    CHECK(j["strongest_significance"].get<double>() >= 5.0);
+    const Run again = run_vmap({"calibrate", corridor, cabinet, "--json"});
+    CHECK(nlohmann::json::parse(again.out)["rate"] == j["rate"]);
+    const Run other = run_vmap({"calibrate", corridor, cabinet, "--seed", "2", "--json"});
+    CHECK(nlohmann::json::parse(other.out)["rate"] != j["rate"]);
+    const Run human = run_vmap({"calibrate", corridor, cabinet});
+    CHECK(human.code == 0);
+    CHECK(human.out.find("chance rate   ") != std::string::npos);
+    CHECK(human.out.find("--chance-rate") != std::string::npos);
+    usage_error({"calibrate", corridor}, "give at least two places");
+    usage_error({"calibrate", corridor, cabinet, "--pairs", "10"}, "--pairs");
+  }
+
   TEST_CASE("cli: the sample memory's loop edges are all true by the motion-capture poses") {
     // The hand-held camera turns on one spot and returns to earlier views: each loop edge
     // is a pair of frames within 0.5 m and 30 degrees (the ground truth's defaults).
