@@ -14,6 +14,7 @@
 #include <vmap/lcd/loop_detector.hpp>
 #include <vmap/lcd/loop_engine.hpp>
 #include <vmap/lcd/place_decision.hpp>
+#include <vmap/runtime/calibration.hpp>
 #include <vmap/runtime/loop_detector.hpp>
 #include <vmap/runtime/loops.hpp>
 #include <vmap/runtime/option_names.hpp>
@@ -781,6 +782,37 @@ void bind(py::module_& m) {
         });
       });
 
+  py::class_<ChanceCalibration>(m, "ChanceCalibration",
+                                "A stack's chance rate measured on foreign pairs (vmap.calibrate_chance_rate).")
+      .def_readonly("rate", &ChanceCalibration::rate, "the chance-inlier rate: give it as chance_inlier_rate")
+      .def_readonly("pairs", &ChanceCalibration::pairs, "foreign pairs verified")
+      .def_readonly("weighed", &ChanceCalibration::weighed, "of those, with at least 12 inliers")
+      .def_readonly("strongest_significance", &ChanceCalibration::strongest,
+                    "the strongest foreign pair's significance at the rate")
+      .def("__repr__", [](const ChanceCalibration& c) {
+        return "<vmap.ChanceCalibration rate " + std::to_string(c.rate) + " from " + std::to_string(c.pairs) + " pairs>";
+      });
+  m.def(
+      "calibrate_chance_rate",
+      [](const std::vector<py::object>& places, const std::string& features, int nfeatures, const std::string& model,
+         const std::string& refine_model, const std::string& estimator, std::size_t pairs, std::uint64_t seed) {
+        const PolicyStack stack = policy_stack(features, nfeatures, model, refine_model, estimator);
+        std::vector<std::string> paths;
+        for (const py::object& p : places) {
+          if (!is_path(p)) fail("places: paths of image folders, list files or videos, got " + std::string(py::repr(p)));
+          paths.push_back(path_of(p));
+        }
+        if (pairs < 100) fail("pairs: at least 100 (the 99th percentile needs them), got " + std::to_string(pairs));
+        py::gil_scoped_release unlocked;
+        std::vector<SequenceFeatures> features_of;
+        for (const std::string& p : paths) features_of.push_back(extract_features(p, stack));
+        return calibrate_chance_rate(stack, std::move(features_of), {.pairs = pairs, .seed = seed});
+      },
+      py::arg("places"), py::kw_only(), py::arg("features") = "orb", py::arg("nfeatures") = 1000, py::arg("model") = "",
+      py::arg("refine_model") = "", py::arg("estimator") = "magsac", py::arg("pairs") = 200, py::arg("seed") = 1,
+      "The place decision's chance rate for a stack, measured on two or more places that share nothing (image\n"
+      "folders, list files or videos): seeded pairs of images of two different places verified with the stack's\n"
+      "matcher and estimator, as `vmap calibrate` does. Give its rate as chance_inlier_rate.");
   m.def(
       "measured_chance_rate",
       [](const std::string& features) {

@@ -131,6 +131,23 @@ def test_the_chance_rate_is_the_stacks_unless_given(rtabmap, bow_run):
         vmap.measured_chance_rate("surf")
 
 
+def test_calibrate_chance_rate_equals_the_command_line(rtabmap, shared, vmap_cli):
+    images, _ = rtabmap
+    cabinet = shared / "data" / "tum_fr3_cabinet_kf" / "rgb.txt"
+    c = vmap.calibrate_chance_rate([images, cabinet])
+    out = subprocess.run([vmap_cli, "calibrate", str(images), str(cabinet), "--json"], check=True, capture_output=True,
+                         text=True)
+    cli = json.loads(out.stdout)
+    assert (c.rate, c.pairs, c.weighed, c.strongest_significance) == (
+        cli["rate"], cli["pairs"], cli["weighed"], cli["strongest_significance"])
+    assert 0.05 < c.rate < 0.2
+    assert vmap.calibrate_chance_rate([images, cabinet], seed=2).rate != c.rate
+    with pytest.raises(vmap.Error, match="needs at least two places"):
+        vmap.calibrate_chance_rate([images])
+    with pytest.raises(vmap.Error, match="pairs: at least 100"):
+        vmap.calibrate_chance_rate([images, cabinet], pairs=10)
+
+
 def test_poses_ground_truth_equals_the_command_line(shared, vmap_cli):
     folder = shared / "data" / "tum_fr3_cabinet_kf"
     frames, poses = folder / "rgb.txt", folder / "truth_cam_poses.txt"

@@ -248,6 +248,31 @@ def detect_loops(
     time_offset: float = 0.0,
     progress: Optional[Callable[[str, int, int], object]] = None,
 ) -> LoopRun: ...
+class ChanceCalibration:
+    @property
+    def rate(self) -> float:
+        """the chance-inlier rate: give it as chance_inlier_rate"""
+    @property
+    def pairs(self) -> int:
+        """foreign pairs verified"""
+    @property
+    def weighed(self) -> int:
+        """of those, with at least 12 inliers"""
+    @property
+    def strongest_significance(self) -> float:
+        """the strongest foreign pair's significance at the rate"""
+
+def calibrate_chance_rate(
+    places: Sequence[_Path],
+    *,
+    features: str = "orb",
+    nfeatures: int = 1000,
+    model: str = "",
+    refine_model: str = "",
+    estimator: str = "magsac",
+    pairs: int = 200,
+    seed: int = 1,
+) -> ChanceCalibration: ...
 def measured_chance_rate(features: str = "orb") -> float: ...
 def evaluate(
     loops: Union[LoopRun, npt.NDArray[numpy.floating], Sequence[Tuple[int, Optional[int], float]]],
