@@ -435,7 +435,7 @@ void bind_results(py::module_& m) {
           "inliers", [](const DetectedLoop& l) { return l.evidence.inliers; }, "matches the geometric model explains")
       .def_property_readonly(
           "matches", [](const DetectedLoop& l) { return l.evidence.matches; },
-          "tentative correspondences given to the estimator")
+          "tentative correspondences the model was fitted to (for XFeat*: the refined ones)")
       .def_property_readonly(
           "inlier_ratio", [](const DetectedLoop& l) { return l.evidence.inlier_ratio; }, "inliers / matches")
       .def_property_readonly(

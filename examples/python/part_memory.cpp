@@ -191,7 +191,7 @@ std::string text_of(const PlaceEvidence& e) {
 void bind(py::module_& m) {
   py::class_<PlaceEvidence>(m, "PlaceEvidence",
                             "What a place decision weighed for one candidate (lcd/place_decision.hpp).")
-      .def_readonly("matches", &PlaceEvidence::matches, "tentative correspondences given to the estimator")
+      .def_readonly("matches", &PlaceEvidence::matches, "tentative correspondences the model was fitted to (for XFeat*: the refined ones)")
       .def_readonly("inliers", &PlaceEvidence::inliers, "those the model explains")
       .def_readonly("inlier_ratio", &PlaceEvidence::inlier_ratio, "inliers / matches")
       .def_readonly("significance", &PlaceEvidence::significance,
