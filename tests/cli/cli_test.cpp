@@ -1955,8 +1955,8 @@ TEST_SUITE("data") {
     const auto j = nlohmann::json::parse(l.out);
     CHECK(j["stack"] == stack);
     CHECK(j["queries"][0]["verified_candidates"].get<std::size_t>() >= 1);
-    // The matches the refinement kept (732 of the dense grid's coarse ones), which the
-    // decision weighs the inliers against.
+    // The matches the refinement kept of the dense grid's coarse ones, which the decision
+    // weighs the inliers against.
     CHECK(j["queries"][0]["evidence"]["matches"].get<int>() > 300);
     CHECK(j["queries"][0]["evidence"]["inliers"].get<int>() <= j["queries"][0]["evidence"]["matches"].get<int>());
     const Run r = run_vmap({"build", sample, "--memory", mem, "--resume", "--end", "16", "--json"});

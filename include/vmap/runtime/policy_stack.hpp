@@ -130,8 +130,9 @@ struct PolicyStack {
 /// the shared sequences: examples/results/loops.md, "The chance rate of each stack").
 /// Set PlaceDecisionOptions::chance_inlier_rate to it, or to a rate measured on your own
 /// images (calibrate_chance_rate), so that a confidence means the same for each stack.
-/// ORB keeps the 0.1 the decision was built with (measured: 0.0999). Another method or a
-/// camera's essential matrix is given the descriptor's rate: not measured apart.
+/// ORB keeps the 0.1 the decision was built with, which is what it measures. Another
+/// method or a camera's essential matrix is given the descriptor's rate: not measured
+/// apart.
 [[nodiscard]] constexpr double measured_chance_rate(const PolicyStack& s) noexcept {
   switch (s.descriptor) {
     case DescriptorKind::orb: return 0.1;

@@ -447,8 +447,8 @@ TEST_SUITE("data") {
                                                    << vmap::to_string(answer.status));
   }
   TEST_CASE("XFeat*: at its measured chance rate a memory of tum_fr3_cabinet_kf places its held-out frames") {
-    // bench_places section 6 (examples/results/loops.md, "The chance rate of each stack"):
-    // every 5th frame held out, 12 of 12 accepted and right, no foreign frame accepted.
+    // bench_places section 6 (examples/results/loops.md, "The chance rate of each stack"),
+    // with a margin: every 5th frame held out, foreign frames of two other sequences.
     using XFeatStarMemory = vmap::VisualMemory<vmap::XFeatDenseDescriptor, vmap::DenseMutualMatcher,
                                                vmap::XFeatRefined<vmap::FundamentalEstimator>, vmap::InlierRatio>;
     vmap::XFeatDenseOptions ro = dense_options();
