@@ -477,6 +477,7 @@ inline int localize_from_memory(const std::filesystem::path& file, const std::st
               {"frames", mem.frames()},
               {"key_images", mem.key_images()},
               {"min_confidence", decision.min_confidence},
+              {"chance_inlier_rate", decision.chance_inlier_rate},
               {"queries", localizations_json(mem, answers)},
               {"localized", localized}});
   return 0;

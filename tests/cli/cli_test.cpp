@@ -475,6 +475,25 @@ TEST_CASE("cli: --working-memory 2 reads older key images from the memory and gi
   usage_error({"build", sample, "--working-memory", "2"}, "--working-memory needs --memory");
 }
 
+TEST_CASE("cli: build --memory keeps the chance rate given, else the one measured for the descriptor") {
+  const fs::path dir = work_dir() / "memory_chance_rate";
+  fs::create_directories(dir);
+  const auto rate_of = [&](const std::string& name, const std::vector<std::string>& options) {
+    std::vector<std::string> args{"build", sample, "--memory", (dir / name).string(), "--end", "8", "--force"};
+    args.insert(args.end(), options.begin(), options.end());
+    const Run b = run_vmap(args);
+    INFO(b.err);
+    REQUIRE(b.code == 0);
+    const Run l = run_vmap({"localize", "--memory", (dir / name).string(), frame_a, "--json"});
+    INFO(l.err);
+    REQUIRE(l.code == 0);
+    return nlohmann::json::parse(l.out)["chance_inlier_rate"].get<double>();
+  };
+  CHECK(rate_of("given.vmdb", {"--chance-rate", "0.05"}) == 0.05);
+  CHECK(rate_of("sift.vmdb", {"--features", "sift"}) == 0.032);
+  CHECK(rate_of("orb.vmdb", {}) == 0.1);
+}
+
 TEST_CASE("cli: build --memory errors: mixed options, --resume without a memory, a non-memory file") {
   const fs::path dir = work_dir() / "memory_errors";
   fs::create_directories(dir);
@@ -551,6 +570,7 @@ TEST_CASE("cli: localize --memory answers every query with its place decision; -
   CHECK(j["localized"] == 2);
   REQUIRE(j["queries"].size() == 2);
   CHECK(j["min_confidence"] == 0.5);
+  CHECK(j["chance_inlier_rate"] == 0.1);  // ORB's measured rate, the default
   for (const auto& q : j["queries"]) {
     CHECK(q["status"] == "accepted");
     CHECK(q["localized"] == true);
