@@ -42,7 +42,7 @@
 #include <vmap/matching/brute_force.hpp>
 #include <vmap/memory/stacks.hpp>
 #include <vmap/memory/visual_memory.hpp>
-#include <vmap/runtime/policies.hpp>
+#include <vmap/runtime/calibration.hpp>
 
 #include <CLI/CLI.hpp>
 
@@ -339,16 +339,17 @@ void calibration_section(const std::vector<Sequence>& sequences, const fs::path&
   stacks[5].refine_model = (models / "xfeat_fine.onnx").string();
   const std::size_t steps[4] = {1, 1, 10, 3};  // rtabmap_loop, cabinet, tum_fr1_rpy, kitti07_160
   for (const auto& stack : stacks) {
-    vmap::with_policies(stack, vmap::StackUse::memory, [&](auto descriptor, auto matcher, auto estimator) {
-      std::vector<std::vector<vmap::Features>> places(4);
-      for (std::size_t p = 0; p < 4; ++p)
-        for (std::size_t i = 0; i < sequences[p].frames.size(); i += steps[p])
-          places[p].push_back(descriptor.extract(sequences[p].frames[i].image));
-      const vmap::ChanceCalibration c = vmap::calibrate_chance_rate(matcher, estimator, places);
-      std::printf("| %s | %.4f | %zu | %zu | %.1f | %.4f |\n", vmap::summary(stack).c_str(), c.rate, c.pairs, c.weighed,
-                  c.strongest, vmap::measured_chance_rate(stack));
-      std::fflush(stdout);
-    });
+    // The same function as `vmap calibrate`, on the frames already read.
+    std::vector<vmap::SequenceFeatures> places;
+    for (std::size_t p = 0; p < 4; ++p) {
+      std::vector<cv::Mat> images;
+      for (std::size_t i = 0; i < sequences[p].frames.size(); i += steps[p]) images.push_back(sequences[p].frames[i].image);
+      places.push_back(vmap::extract_features(images, stack));
+    }
+    const vmap::ChanceCalibration c = vmap::calibrate_chance_rate(stack, std::move(places));
+    std::printf("| %s | %.4f | %zu | %zu | %.1f | %.4f |\n", vmap::summary(stack).c_str(), c.rate, c.pairs, c.weighed,
+                c.strongest, vmap::measured_chance_rate(stack));
+    std::fflush(stdout);
   }
 }
 

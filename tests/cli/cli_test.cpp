@@ -1381,6 +1381,10 @@ TEST_SUITE("data") {
     CHECK(human.out.find("chance rate   ") != std::string::npos);
     CHECK(human.out.find("--chance-rate") != std::string::npos);
     usage_error({"calibrate", corridor}, "give at least two places");
+    const Run same = run_vmap({"calibrate", corridor, corridor});
+    CHECK(same.code != 0);
+    CHECK(same.err.find("the places share views") != std::string::npos);
+    CHECK(same.err.find("vmap calibrate: error: chance calibration: the foreign pairs fit") != std::string::npos);
     usage_error({"calibrate", corridor, cabinet, "--pairs", "10"}, "--pairs");
   }
 

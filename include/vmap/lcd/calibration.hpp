@@ -69,6 +69,9 @@ struct ChanceCalibration {
   double strongest = 0.0;       ///< the strongest foreign pair's significance at `rate`
 };
 
+/// The highest chance rate a calibration gives: above it the pairs are not foreign.
+inline constexpr double max_chance_rate = 0.5;
+
 namespace detail {
 
 inline double sample_significance(const ChanceSample& s, int sample, double rate, int min_inliers) {
@@ -90,8 +93,9 @@ inline double quantile_significance(std::span<const ChanceSample> samples, int s
 }  // namespace detail
 
 /// The chance rate of the foreign pairs `samples`, verified with model `model` (see the
-/// top of this file). An Error when the options are out of range or there are fewer
-/// than min_pairs samples, or one has more inliers than fitted matches.
+/// top of this file). An Error when the options are out of range, there are fewer than
+/// min_pairs samples, one has more inliers than fitted matches, none makes a model the
+/// decision weighs, or they fit far beyond chance (the places share views).
 [[nodiscard]] inline ChanceCalibration chance_rate_from(std::span<const ChanceSample> samples, PlaceModel model,
                                                         const ChanceCalibrationOptions& o = {}) {
   detail::check(std::isfinite(o.quantile) && o.quantile > 0.0 && o.quantile < 1.0, [&] {
@@ -120,12 +124,20 @@ inline double quantile_significance(std::span<const ChanceSample> samples, int s
            "cannot be measured; verify more pairs";
   });
   // The significance falls as the rate rises: bisect, on a log scale between 1e-4 and
-  // 0.9, for the rate at which the pair at the quantile reaches `significance`. When
-  // fewer than (1 - quantile) of the pairs are weighed at all, the pair at the quantile
-  // is never significant: the strongest pair sets the rate instead.
+  // max_chance_rate, for the rate at which the pair at the quantile reaches
+  // `significance`. When fewer than (1 - quantile) of the pairs are weighed at all, the
+  // pair at the quantile is never significant: the strongest pair sets the rate instead.
   ChanceCalibrationOptions at = o;
   if (detail::quantile_significance(samples, sample, 1e-4, at) <= 0.0) at.quantile = 1.0;
-  double lo = std::log(1e-4), hi = std::log(0.9);
+  // Pairs that stay significant at max_chance_rate are not chance (no stack's matches
+  // fit by chance one time in two): the "foreign" places share views, the same place
+  // given twice or overlapping ones.
+  detail::check(detail::quantile_significance(samples, sample, max_chance_rate, at) <= o.significance, [&] {
+    return "chance calibration: the foreign pairs fit the model far beyond chance (at a rate of 0.5 the pair at the " +
+           std::to_string(at.quantile) + " quantile is still significant): the places share views; give places that "
+           "share nothing";
+  });
+  double lo = std::log(1e-4), hi = std::log(max_chance_rate);
   for (int i = 0; i < 60; ++i) {
     const double mid = 0.5 * (lo + hi);
     (detail::quantile_significance(samples, sample, std::exp(mid), at) > o.significance ? lo : hi) = mid;

@@ -81,6 +81,10 @@ TEST_CASE("chance calibration: too few pairs, no weighed pair, impossible sample
   const std::vector<vmap::ChanceSample> none(200, vmap::ChanceSample{40, 11});
   CHECK_THROWS_WITH_AS(static_cast<void>(vmap::chance_rate_from(none, vmap::PlaceModel::fundamental)),
                        doctest::Contains("none of 200 foreign pairs has 12 inliers"), vmap::Error);
+  // Pairs of one place given twice: nearly every match fits, no rate makes that chance.
+  const std::vector<vmap::ChanceSample> same(200, vmap::ChanceSample{100, 95});
+  CHECK_THROWS_WITH_AS(static_cast<void>(vmap::chance_rate_from(same, vmap::PlaceModel::fundamental)),
+                       doctest::Contains("the places share views"), vmap::Error);
   auto bad = pairs;
   bad[3] = {20, 21};
   CHECK_THROWS_WITH_AS(static_cast<void>(vmap::chance_rate_from(bad, vmap::PlaceModel::fundamental)),
