@@ -9,7 +9,8 @@
 //      ranking with a vocabulary learned on the sequence, top 2, window 10): precision,
 //      recall, recall at 100 % precision over the confidence, verifications per query,
 //      the time per query of ranking, verification and the decision, and the evidence of
-//      the best candidates that are true and false loops.
+//      the best candidates that are true and false loops; the same stream decided by
+//      temporal consistency and by the sequence's evidence (lcd/sequence.hpp).
 //   2. Foreign places: a visual memory (`vmap build --memory` defaults) of each sequence;
 //      every 5th frame of every other sequence localized in it: accepted answers.
 //   3. Own places: tum_fr1_rpy with every 10th frame held out of the memory: accepted,
@@ -28,7 +29,12 @@
 //      two different shared sequences, verified with the stack's own matcher and
 //      estimator; the rate runtime/policy_stack.hpp's measured_chance_rate holds.
 //
-//   bench_places [--shared DIR] [--static-frames 120] [--seed 1] [--part all|localize|calibrate]
+//   8. Sequences as evidence (memory/sequence.hpp): each sequence's memory without every
+//      5th frame, the held-out frames localized in order alone and with windows of 5, 8
+//      and 10 of them (centred, and 8 trailing); every 10th frame of the other sequences
+//      as foreign sequences; the time per answer.
+//
+//   bench_places [--shared DIR] [--static-frames 120] [--seed 1] [--part all|loops|localize|calibrate|sequences]
 #include <vmap/features/orb.hpp>
 #include <vmap/features/sift.hpp>
 #include <vmap/geometry/fundamental.hpp>
@@ -39,7 +45,10 @@
 #include <vmap/lcd/calibration.hpp>
 #include <vmap/lcd/evaluation.hpp>
 #include <vmap/lcd/loop_detector.hpp>
+#include <vmap/lcd/sequence.hpp>
+#include <vmap/place/consistency.hpp>
 #include <vmap/matching/brute_force.hpp>
+#include <vmap/memory/sequence.hpp>
 #include <vmap/memory/stacks.hpp>
 #include <vmap/memory/visual_memory.hpp>
 #include <vmap/runtime/calibration.hpp>
@@ -139,6 +148,10 @@ struct LoopRow {
   std::vector<double> true_conf, false_conf, true_inliers, false_inliers, true_ratio, false_ratio, true_spread,
       false_spread;
   bool stationary = false;
+  // The same stream decided by temporal consistency (2 earlier queries) and by the
+  // sequence's evidence (the trailing 8 queries), from the same verifications.
+  std::size_t tc_tp = 0, tc_fp = 0, seq_tp = 0, seq_fp = 0;
+  double seq_recall_full = 0.0;
 };
 
 LoopRow run_loops(const Sequence& s, const std::vector<vmap::Features>& features) {
@@ -155,6 +168,10 @@ LoopRow run_loops(const Sequence& s, const std::vector<vmap::Features>& features
   const auto& gt = *s.gt;
   row.loops_gt = gt.loop_frames();
   std::vector<vmap::LoopScore> now, before;
+  std::vector<vmap::SequenceQuery> seq_queries;
+  std::vector<vmap::PlaceStatus> single_status;
+  const vmap::PlaceDecisionOptions dec;
+  vmap::TemporalConsistency<std::size_t> consistency({.required = 3});
   for (const auto& f : features) {
     const auto t0 = std::chrono::steady_clock::now();
     const vmap::LoopResult r = det.add(f, {});
@@ -166,6 +183,16 @@ LoopRow run_loops(const Sequence& s, const std::vector<vmap::Features>& features
     const bool by_threshold = r.status == vmap::PlaceStatus::accepted || r.status == vmap::PlaceStatus::unknown_place;
     now.push_back({r.frame, r.best, by_threshold ? r.confidence : 0.0});
     if (r.loop()) (gt(r.frame, *r.best) ? row.tp : row.fp) += 1;
+    if (consistency.update(r.loop() ? r.best : std::nullopt).accepted) (gt(r.frame, *r.best) ? row.tc_tp : row.tc_fp) += 1;
+    vmap::SequenceQuery sq;
+    if (r.status != vmap::PlaceStatus::not_a_revisit)  // the revisit rule stands for sequences too
+      for (const auto& c : r.considered) {
+        if (c.stage != vmap::CandidateStage::chosen && c.stage != vmap::CandidateStage::weaker) continue;
+        if (r.loop() && c.stage == vmap::CandidateStage::chosen) sq.accepted = sq.candidates.size();
+        sq.candidates.push_back({c.frame, vmap::weighed_significance(c.evidence, dec)});
+      }
+    seq_queries.push_back(std::move(sq));
+    single_status.push_back(r.status);
     if (r.best && by_threshold) {
       const bool t = gt(r.frame, *r.best);
       (t ? row.true_conf : row.false_conf).push_back(r.confidence);
@@ -181,6 +208,25 @@ LoopRow run_loops(const Sequence& s, const std::vector<vmap::Features>& features
     before.push_back({r.frame, best, static_cast<double>(inliers)});
     if (best && inliers >= 50) (gt(r.frame, *best) ? row.before_tp : row.before_fp) += 1;
   }
+  const auto seq = vmap::sequence_evidence(
+      seq_queries, [](std::size_t) { return 0; }, {.window = 8}, dec, vmap::SequencePlacement::trailing);
+  std::vector<vmap::LoopScore> seq_scores;
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    const auto& a = seq[i];
+    if (!a.candidate) {
+      seq_scores.push_back({i, std::nullopt, 0.0});
+      continue;
+    }
+    const std::size_t match = seq_queries[i].candidates[*a.candidate].key;
+    seq_scores.push_back({i, match, a.confidence});
+    if (vmap::sequence_reason(a, single_status[i], dec) == vmap::DecisionReason::confident) {
+      (gt(i, match) ? row.seq_tp : row.seq_fp) += 1;
+      if (!gt(i, match))
+        std::fprintf(stderr, "%s, a false loop of the sequence of 8: frame %zu -> frame %zu (%zu of %zu on the line)\n",
+                     s.name.c_str(), i, match, a.on_line, a.weighed);
+    }
+  }
+  row.seq_recall_full = vmap::recall_at_full_precision(vmap::precision_recall_curve(seq_scores, gt)).recall;
   row.verifications = det.verifications();
   row.recall_full = vmap::recall_at_full_precision(vmap::precision_recall_curve(now, gt)).recall;
   row.before_recall_full = vmap::recall_at_full_precision(vmap::precision_recall_curve(before, gt)).recall;
@@ -318,6 +364,118 @@ void localization_section(const std::vector<Sequence>& sequences, const fs::path
       cabinet, same, sequences);
 }
 
+// ---- 8. sequences of images as evidence ------------------------------------------------
+
+/// Whether key frame `k` shows the place of frame `f`: by the poses (0.5 m, 30 degrees;
+/// 2 m for kitti07_160), or for rtabmap_loop (no poses) within 10 frames or a loop of its
+/// matrix.
+struct SamePlace {
+  std::optional<vmap::LoopGroundTruth> poses;
+  const vmap::LoopGroundTruth* loops = nullptr;
+  bool operator()(std::size_t f, std::size_t k) const {
+    const std::size_t a = std::max(f, k), b = std::min(f, k);  // the matrices hold each pair once, newer first
+    if (poses) return a == b || (*poses)(a, b);
+    return a - b <= 10 || (*loops)(a, b);
+  }
+};
+
+struct SequenceCount {
+  std::size_t accepted = 0, right = 0;
+  void add(const vmap::MemoryLocalization& a, const vmap::OrbVisualMemory& mem, std::size_t frame, const SamePlace& same) {
+    if (!a.ok()) return;
+    ++accepted;
+    right += same(frame, mem.map().keys[a.best()->key].frame_index) ? 1 : 0;
+  }
+};
+
+void sequence_section(const std::vector<Sequence>& sequences, const fs::path& shared, double max_speed) {
+  const fs::path d = shared / "data";
+  const vmap::PoseLoopOptions near{.max_distance = 0.5, .max_angle_deg = 30, .window = 0};
+  std::vector<double> rpy_times;
+  for (const auto& f : sequences[2].frames) rpy_times.push_back(f.timestamp);
+  std::vector<SamePlace> same(4);
+  same[0].loops = &*sequences[0].gt;
+  same[1].poses = vmap::ground_truth_from_poses(vmap::load_tum_poses(d / "tum_fr3_cabinet_kf/truth_cam_poses.txt"), near);
+  same[2].poses = vmap::ground_truth_from_poses(
+      vmap::poses_for_frames(vmap::load_tum_poses(d / "tum_fr1_rpy/groundtruth.txt"), rpy_times, "groundtruth.txt", 0.05,
+                             false),
+      near);
+  // A car drives 0.57 m per frame of kitti07_160, and its memory keeps a key image every
+  // 2-3 frames: the nearest key image of a held-out frame lies 0.6-1.7 m away.
+  same[3].poses = vmap::ground_truth_from_poses(vmap::load_kitti_poses(d / "kitti07_160/poses.txt"),
+                                                {.max_distance = 2.0, .max_angle_deg = 30, .window = 0});
+  const std::vector<std::size_t> windows{5, 8, 10};
+  std::printf("\n## 8. Sequences as evidence (ORB defaults; memory without every 5th frame; the held-out frames "
+              "localized in order, alone and with the window of held-out frames around each (centred) or ending at "
+              "each (trailing), lines of at most %.1f key images per query; foreign: every 10th frame of each other sequence, in order)\n\n", max_speed);
+  std::printf("| sequence | key images | held out | alone: accepted, right | ");
+  for (std::size_t w : windows) std::printf("window %zu: accepted, right | ", w);
+  std::printf("trailing 8: accepted, right | foreign queries | foreign accepted: alone, window 8, trailing 8 | ms per "
+              "query alone | ms per answer, window 8 |\n|---|---|---|---|");
+  for (std::size_t i = 0; i < windows.size(); ++i) std::printf("---|");
+  std::printf("---|---|---|---|---|\n");
+  std::fflush(stdout);
+  for (std::size_t si = 0; si < 4; ++si) {
+    const Sequence& home = sequences[si];
+    vmap::OrbVisualMemory mem;
+    std::vector<const vmap::Frame*> held;
+    for (std::size_t i = 0; i < home.frames.size(); ++i) {
+      if (i % 5 == 2)
+        held.push_back(&home.frames[i]);
+      else
+        mem.push(home.frames[i]);
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    std::vector<vmap::MemoryLocalization> singles;
+    for (const vmap::Frame* f : held) singles.push_back(mem.localize(f->image));
+    const double single_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / static_cast<double>(held.size());
+    const vmap::PlaceDecisionOptions& dec = mem.options().loops.decision;
+    SequenceCount alone;
+    for (std::size_t i = 0; i < held.size(); ++i) {
+      alone.add(singles[i], mem, held[i]->index, same[si]);
+      if (singles[i].ok() && !same[si](held[i]->index, mem.map().keys[singles[i].best()->key].frame_index))
+        std::fprintf(stderr, "%s alone, another place: frame %zu -> key frame %zu (confidence %.2f)\n", home.name.c_str(),
+                     held[i]->index, mem.map().keys[singles[i].best()->key].frame_index, singles[i].confidence);
+    }
+    std::printf("| %s | %zu | %zu | %zu, %zu |", home.name.c_str(), mem.key_images(), held.size(), alone.accepted,
+                alone.right);
+    double seq_ms = 0.0;
+    for (std::size_t w : windows) {
+      const auto ts = std::chrono::steady_clock::now();
+      const auto answers = vmap::with_sequence_evidence(singles, mem.sessions(), {.window = w, .line = {.max_speed = max_speed}}, dec);
+      if (w == 8)
+        seq_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - ts).count() /
+                 static_cast<double>(held.size());
+      SequenceCount c;
+      for (std::size_t i = 0; i < held.size(); ++i) c.add(answers[i], mem, held[i]->index, same[si]);
+      std::printf(" %zu, %zu |", c.accepted, c.right);
+    }
+    {
+      const auto answers = vmap::with_sequence_evidence(singles, mem.sessions(), {.window = 8, .line = {.max_speed = max_speed}}, dec,
+                                                        vmap::SequencePlacement::trailing);
+      SequenceCount c;
+      for (std::size_t i = 0; i < held.size(); ++i) c.add(answers[i], mem, held[i]->index, same[si]);
+      std::printf(" %zu, %zu |", c.accepted, c.right);
+    }
+    std::size_t foreign = 0, f_alone = 0, f_seq = 0, f_trail = 0;
+    for (const auto& t : sequences) {
+      if (same_place(home.name, t.name)) continue;
+      std::vector<vmap::MemoryLocalization> theirs;
+      for (std::size_t i = 0; i < t.frames.size(); i += 10) theirs.push_back(mem.localize(t.frames[i].image));
+      foreign += theirs.size();
+      for (const auto& a : theirs) f_alone += a.ok() ? 1 : 0;
+      for (const auto& a : vmap::with_sequence_evidence(theirs, mem.sessions(), {.window = 8, .line = {.max_speed = max_speed}}, dec))
+        f_seq += a.ok() ? 1 : 0;
+      for (const auto& a : vmap::with_sequence_evidence(theirs, mem.sessions(), {.window = 8, .line = {.max_speed = max_speed}}, dec,
+                                                        vmap::SequencePlacement::trailing))
+        f_trail += a.ok() ? 1 : 0;
+    }
+    std::printf(" %zu | %zu, %zu, %zu | %.1f | %.3f |\n", foreign, f_alone, f_seq, f_trail, single_ms, seq_ms);
+    std::fflush(stdout);
+  }
+}
+
 // ---- 7. the chance rate of each stack ------------------------------------------------
 
 void calibration_section(const std::vector<Sequence>& sequences, const fs::path& shared) {
@@ -385,11 +543,13 @@ int main(int argc, char** argv) {
   app.add_option("--shared", shared, "The shared folder (data/)");
   app.add_option("--static-frames", static_frames, "Frames of the static clip")->check(CLI::Range(11, 100000));
   app.add_option("--seed", seed, "Seed of the static clip's noise and jitter");
+  double max_speed = vmap::SequenceLine{}.max_speed;
+  app.add_option("--max-speed", max_speed, "Section 8: the fastest line, key images per query")->check(CLI::Range(0.0, 1000.0));
   std::string part = "all";
   app.add_option("--part", part,
-                 "all: sections 1-7; localize: section 6 only, calibrate: section 7 only (minutes each: XFeat* verifies "
-                 "on the CPU)")
-      ->check(CLI::IsMember({"all", "localize", "calibrate"}));
+                 "all: sections 1-8; loops: section 1's tables; localize: section 6 only, calibrate: section 7 only (minutes each: XFeat* verifies "
+                 "on the CPU), sequences: section 8 only")
+      ->check(CLI::IsMember({"all", "loops", "localize", "calibrate", "sequences"}));
   CLI11_PARSE(app, argc, argv);
 
   const auto sequences = load_sequences(shared);
@@ -399,6 +559,10 @@ int main(int argc, char** argv) {
   }
   if (part == "calibrate") {
     calibration_section(sequences, shared);
+    return 0;
+  }
+  if (part == "sequences") {
+    sequence_section(sequences, shared, max_speed);
     return 0;
   }
   vmap::OrbDescriptor orb;
@@ -420,6 +584,18 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
     rows.push_back(r);
   }
+  std::printf("\nThe same streams decided by temporal consistency (a loop stands when the 2 queries before it were "
+              "accepted within 3 frames of it) and by the sequence's evidence (lcd/sequence.hpp: the trailing 8 "
+              "queries, lines of at most 5 frames per query), from the same verifications:\n\n");
+  std::printf("| sequence | loop queries | alone: TP / FP, recall | temporal consistency 2: TP / FP, recall | sequence "
+              "of 8: TP / FP, recall | alone: recall@100%%P | sequence of 8: recall@100%%P |\n|---|---|---|---|---|---|---|\n");
+  for (const auto& r : rows) {
+    const auto recall = [&](std::size_t tp) { return r.loops_gt ? static_cast<double>(tp) / static_cast<double>(r.loops_gt) : 0.0; };
+    std::printf("| %s | %zu | %zu / %zu, %.3f | %zu / %zu, %.3f | %zu / %zu, %.3f | %.3f | %.3f |\n", r.name.c_str(),
+                r.loops_gt, r.tp, r.fp, recall(r.tp), r.tc_tp, r.tc_fp, recall(r.tc_tp), r.seq_tp, r.seq_fp,
+                recall(r.seq_tp), r.recall_full, r.seq_recall_full);
+  }
+  if (part == "loops") return 0;
   std::printf("\nEvidence of the best candidate of each query the threshold decides (accepted or unknown place):\n\n");
   std::printf("| sequence | true: n, min confidence, median inliers, median ratio, median spread | false: n, max "
               "confidence, max inliers, median ratio, median spread |\n|---|---|---|\n");
@@ -538,5 +714,6 @@ int main(int argc, char** argv) {
   }
   localization_section(sequences, shared);
   calibration_section(sequences, shared);
+  sequence_section(sequences, shared, max_speed);
   return 0;
 }

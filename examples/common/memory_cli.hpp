@@ -15,6 +15,7 @@
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/image.hpp>
 #include <vmap/memory/replace.hpp>
+#include <vmap/memory/sequence.hpp>
 #include <vmap/runtime/memory.hpp>
 #include <vmap/runtime/recorder.hpp>
 #include <vmap/runtime/stack.hpp>
@@ -331,6 +332,24 @@ inline nlohmann::json loop_json(const AnyMemory& mem, const LoopEdge& e) {
 }
 
 /// One query image's answer.
+/// --sequence and --max-speed of `localize --memory` and `memory localize`.
+struct SequenceArgs {
+  std::size_t window = 1;  ///< 1: each image alone
+  std::optional<double> max_speed;  ///< default: SequenceLine's
+};
+
+/// Adds --sequence and --max-speed to a subcommand that localizes in a memory.
+inline void add_sequence_options(CLI::App& app, SequenceArgs& a) {
+  app.add_option("--sequence", a.window,
+                 "Answer each query with the evidence of the N queries around it, in the order given (a robot's "
+                 "consecutive frames; 1: each image alone)")
+      ->check(count_in(1, static_cast<long long>(max_sequence_window)));
+  app.add_option("--max-speed", a.max_speed,
+                 "With --sequence: the fastest the queries move along the memory's key images, in key images per query "
+                 "(default 5)")
+      ->check(real_in(0.0, 1000.0));
+}
+
 struct MemoryQuery {
   std::string image;
   MemoryLocalization answer;
@@ -422,6 +441,15 @@ inline nlohmann::json localizations_json(const AnyMemory& mem, const std::vector
     // The query's camera relative to the best key image's (X_key = R X_query + t, |t| = 1),
     // present when the memory has a camera (--camera) and the F-matrix was verified.
     j["relative_pose"] = relative_pose_json(q.answer.relative_pose);
+    // What the neighbours in the sequence added (--sequence N > 1); null for images alone.
+    j["sequence"] = nullptr;
+    if (const auto& s = q.answer.sequence)
+      j["sequence"] = {{"window", s->window},
+                       {"weighed", s->weighed},
+                       {"on_line", s->on_line},
+                       {"significance", s->significance},
+                       {"single_confidence", s->single_confidence},
+                       {"single_key", s->single_key ? nlohmann::json(*s->single_key) : nlohmann::json(nullptr)}};
     for (const auto& l : q.answer.matches) j["matches"].push_back(link_json(mem, l));
     out.push_back(std::move(j));
   }
@@ -442,6 +470,9 @@ inline void print_localizations(const AnyMemory& mem, const std::vector<MemoryQu
       std::printf("%s: %s (%s), %.1f ms\n", q.image.c_str(), std::string(to_string(q.answer.status)).c_str(),
                   q.answer.reason.c_str(), q.ms);
     }
+    if (const auto& s = q.answer.sequence)
+      std::printf("  sequence: %zu of %zu images with evidence on the line (window %zu); alone: confidence %.2f\n",
+                  s->on_line, s->weighed, s->window, s->single_confidence);
     if (q.answer.best() && q.answer.relative_pose) {
       const RelativePose& p = *q.answer.relative_pose;
       std::printf("  relative to the key image: rotation %.2f deg, translation direction (%.3f, %.3f, %.3f)\n",
@@ -459,12 +490,21 @@ inline void print_localizations(const AnyMemory& mem, const std::vector<MemoryQu
 /// image, or a folder, list or video of query images.
 inline int localize_from_memory(const std::filesystem::path& file, const std::string& option,
                                 const std::vector<std::string>& queries, bool json,
-                                std::optional<double> min_confidence = std::nullopt) {
+                                std::optional<double> min_confidence = std::nullopt, const SequenceArgs& sequence = {}) {
   current_inputs() = {file.string()};
   auto mem = open_memory_input(file, option);
   PlaceDecisionOptions decision = mem.options().loops.decision;
   if (min_confidence) decision.min_confidence = *min_confidence;
-  const auto answers = localize_queries(mem, queries, decision);
+  auto answers = localize_queries(mem, queries, decision);
+  if (sequence.max_speed && sequence.window == 1) usage_error("--max-speed needs --sequence N with N > 1");
+  if (sequence.window > 1) {
+    std::vector<MemoryLocalization> singles;
+    for (const auto& q : answers) singles.push_back(q.answer);
+    singles = with_sequence_evidence(std::move(singles), mem.sessions(),
+                                     {.window = sequence.window, .line = {.max_speed = sequence.max_speed.value_or(SequenceLine{}.max_speed)}},
+                                     decision);
+    for (std::size_t i = 0; i < answers.size(); ++i) answers[i].answer = std::move(singles[i]);
+  }
   if (!json) {
     print_localizations(mem, answers);
     return 0;
@@ -478,6 +518,7 @@ inline int localize_from_memory(const std::filesystem::path& file, const std::st
               {"key_images", mem.key_images()},
               {"min_confidence", decision.min_confidence},
               {"chance_inlier_rate", decision.chance_inlier_rate},
+              {"sequence", sequence.window},
               {"queries", localizations_json(mem, answers)},
               {"localized", localized}});
   return 0;

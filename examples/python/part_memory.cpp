@@ -14,6 +14,7 @@
 #include <vmap/io/calibration.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/memory/replace.hpp>
+#include <vmap/memory/sequence.hpp>
 #include <vmap/runtime/exports.hpp>
 #include <vmap/runtime/memory.hpp>
 #include <vmap/runtime/recorder.hpp>
@@ -26,6 +27,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <string>
 #include <thread>
 #include <utility>
@@ -246,6 +248,22 @@ void bind(py::module_& m) {
         return std::string(buf);
       });
 
+  py::class_<SequenceSupport>(m, "SequenceSupport",
+                              "What the neighbours of an image in a sequence added to its answer (localize_sequence,\n"
+                              "localize_window).")
+      .def_readonly("window", &SequenceSupport::window, "images weighed, this one included")
+      .def_readonly("weighed", &SequenceSupport::weighed, "of those, the images that verified a candidate with evidence")
+      .def_readonly("on_line", &SequenceSupport::on_line, "of those, the images whose candidate lies on the answer's line")
+      .def_readonly("significance", &SequenceSupport::significance, "the line's combined significance (Fisher's method)")
+      .def_readonly("single_confidence", &SequenceSupport::single_confidence, "the image's own answer, alone")
+      .def_readonly("single_key", &SequenceSupport::single_key, "the key image the image alone chose, or None")
+      .def("__repr__", [](const SequenceSupport& s) {
+        char buf[128];
+        std::snprintf(buf, sizeof buf, "<vmap.SequenceSupport %zu of %zu on the line, window %zu, alone %.2f>", s.on_line,
+                      s.weighed, s.window, s.single_confidence);
+        return std::string(buf);
+      });
+
   py::class_<MemoryLocalization>(m, "Localization",
                                  "localize()'s answer: status 'accepted', or why not ('unknown place', 'ambiguous',\n"
                                  "'too little evidence'), with the verified key images behind it.")
@@ -265,6 +283,9 @@ void bind(py::module_& m) {
       }, "the accepted key image, or None")
       .def_readonly("matches", &MemoryLocalization::matches,
                     "every verified key image (PlaceLink), the decision's first, then by confidence")
+      .def_readonly("match_evidence", &MemoryLocalization::match_evidence, "the evidence of each of matches, in order")
+      .def_readonly("sequence", &MemoryLocalization::sequence,
+                    "what the sequence's other images added (SequenceSupport), None for an image alone")
       .def_readonly("verified_candidates", &MemoryLocalization::verified_candidates, "key images the estimator ran on")
       .def_readonly("relative_pose", &MemoryLocalization::relative_pose,
                     "the query's pose relative to the best key image when the memory has a camera, else None")
@@ -434,6 +455,54 @@ void bind(py::module_& m) {
           py::arg("image"), py::kw_only(), py::arg("min_confidence") = py::none(),
           "Where the image was taken: the place decision over the best key images by bag of words,\n"
           "verified by the F-matrix (Localization; status 'accepted' or why not).")
+      .def(
+          "localize_sequence",
+          [](PyMemory& self, const std::vector<py::array>& images, std::size_t window, double max_speed,
+             std::size_t tolerance, std::optional<double> min_confidence) {
+            std::vector<cv::Mat> views;
+            for (std::size_t i = 0; i < images.size(); ++i)
+              views.push_back(image_copy(images[i], "images[" + std::to_string(i) + "]"));
+            return self.locked([&](AnyMemory& mem) {
+              PlaceDecisionOptions d = mem.options().loops.decision;
+              if (min_confidence) d.min_confidence = *min_confidence;
+              return localize_sequence(mem, views, {.window = window, .line = {max_speed, tolerance}}, &d);
+            });
+          },
+          py::arg("images"), py::kw_only(), py::arg("window") = SequenceOptions{}.window,
+          py::arg("max_speed") = SequenceLine{}.max_speed, py::arg("tolerance") = SequenceLine{}.tolerance,
+          py::arg("min_confidence") = py::none(),
+          "Each of a sequence of images (consecutive, in order) localized with the evidence of the `window` images\n"
+          "around it: images that agree on consecutive key images of one place raise each other's confidence, one\n"
+          "that contradicts its neighbours is lowered (a list of Localization, each with .sequence). max_speed: the\n"
+          "fastest the images move along the key images, per image; tolerance: key images off the line.")
+      .def(
+          "localize_window",
+          [](PyMemory& self, const py::list& recent, double max_speed, std::size_t tolerance,
+             std::optional<double> min_confidence) {
+            // Answers are decided as they are; images are localized first.
+            std::vector<MemoryLocalization> answers;
+            std::vector<cv::Mat> images;
+            for (std::size_t i = 0; i < recent.size(); ++i) {
+              const py::handle item = recent[i];
+              if (py::isinstance<MemoryLocalization>(item))
+                answers.push_back(item.cast<MemoryLocalization>());
+              else
+                images.push_back(image_copy(item.cast<py::array>(), "recent[" + std::to_string(i) + "]"));
+            }
+            if (!answers.empty() && !images.empty())
+              vmap::detail::fail("localize_window: `recent` mixes Localization answers and images; give one kind");
+            return self.locked([&](AnyMemory& mem) {
+              PlaceDecisionOptions d = mem.options().loops.decision;
+              if (min_confidence) d.min_confidence = *min_confidence;
+              if (!images.empty()) return localize_window(mem, std::span<const cv::Mat>(images), {max_speed, tolerance}, &d);
+              return localize_window(mem, std::span<const MemoryLocalization>(answers), {max_speed, tolerance}, &d);
+            });
+          },
+          py::arg("recent"), py::kw_only(), py::arg("max_speed") = SequenceLine{}.max_speed,
+          py::arg("tolerance") = SequenceLine{}.tolerance, py::arg("min_confidence") = py::none(),
+          "The last of `recent`, consecutive and oldest first, decided with the evidence of all of them. `recent`\n"
+          "holds localize()'s answers (nothing is verified again: a robot keeps its last few answers and calls this\n"
+          "for each new one), or images (each localized first).")
       .def("sync", [](PyMemory& self) { self.locked([](AnyMemory& mem) { mem.sync(); mem.flush(); }); },
            "Writes what the memory made since the last sync into its store and waits until it is committed\n"
            "(a no-op in RAM). push() syncs at every key image and loop edge without waiting.")

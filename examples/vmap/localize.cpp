@@ -57,6 +57,7 @@ struct Settings {
   bool json = false;
   std::string memory;               // --memory M: answer from a saved visual memory
   std::optional<double> min_confidence;  // --min-confidence: with --memory, the place decision's threshold
+  ex::SequenceArgs sequence;             // --sequence, --max-speed: with --memory
   std::vector<std::string> images;  // its query images
 };
 
@@ -363,6 +364,10 @@ void check_settings(const Settings& s, const CLI::App& app) {
     if (s.train.empty()) ex::usage_error("give --room, --train or --memory (see vmap localize --help)");
     for (const char* o : {"--posters", "--margin", "--laps", "--images-per-lap", "--tests", "--pan"})
       if (given(o)) ex::usage_error(std::string(o) + " is an option of --room");
+  }
+  for (const char* o : {"--min-confidence", "--sequence", "--max-speed"})
+    if (given(o)) ex::usage_error(std::string(o) + " is an option of --memory");
+  if (!s.room) {
     if (s.poses.empty()) ex::usage_error("--train needs --poses");
     if (s.every_other && (!s.query.empty() || !s.query_poses.empty()))
       ex::usage_error("--every-other and --query/--query-poses conflict (--every-other takes the queries from --train)");
@@ -415,11 +420,15 @@ std::function<int()> setup(CLI::App& app) {
                  "With --memory: accept a key image at this place-decision confidence in [0, 1] (default: the "
                  "memory's, 0.5); below it the answer is \"unknown place\"")
       ->check(ex::real_in(0.0, 1.0));
+  ex::add_sequence_options(app, s->sequence);
   return [s, &app] {
     if (!s->memory.empty()) {
-      ex::refuse_other_options(app, {"--memory", "IMAGE", "--json", "--min-confidence", "--topic", "--record-time"}, "--memory");
+      ex::refuse_other_options(
+          app, {"--memory", "IMAGE", "--json", "--min-confidence", "--sequence", "--max-speed", "--topic", "--record-time"},
+          "--memory");
       if (s->images.empty()) ex::usage_error("--memory needs query images: vmap localize --memory M IMAGE...");
-      return ex::localize_from_memory(vmap::memory_path(s->memory), "--memory", s->images, s->json, s->min_confidence);
+      return ex::localize_from_memory(vmap::memory_path(s->memory), "--memory", s->images, s->json, s->min_confidence,
+                                      s->sequence);
     }
     if (!s->images.empty())
       ex::usage_error("query images on the command line need --memory M (the GCS modes take --query or --every-other)");

@@ -35,6 +35,7 @@ struct MemoryArgs {
   std::string merge_a, merge_b;
   std::string export_out;
   std::optional<double> min_confidence;  // localize: the query's threshold
+  ex::SequenceArgs sequence;             // localize: --sequence, --max-speed
 };
 
 /// One session of a memory as `memory info` shows it.
@@ -232,6 +233,7 @@ std::function<int()> setup(CLI::App& app) {
   l->add_option("--min-confidence", a->min_confidence,
                 "Accept a key image at this place-decision confidence in [0, 1] (default: the memory's)")
       ->check(ex::real_in(0.0, 1.0));
+  ex::add_sequence_options(*l, a->sequence);
   auto* i = app.add_subcommand("info", "Sessions, key images and loop edges of a memory");
   i->add_option("memory", a->memory, "Memory store or .vmem file (a folder: DIR/memory.vmdb)")->required();
   i->add_flag("--json", a->json, "Print as JSON (every key image and loop edge)");
@@ -256,7 +258,8 @@ std::function<int()> setup(CLI::App& app) {
   return [a, l, x, c, g]() {
     if (g->parsed()) return merge(*a);
     if (l->parsed())
-      return ex::localize_from_memory(vmap::memory_path(a->memory), "memory", a->queries, a->json, a->min_confidence);
+      return ex::localize_from_memory(vmap::memory_path(a->memory), "memory", a->queries, a->json, a->min_confidence,
+                                      a->sequence);
     if (x->parsed()) return export_files(*a);
     if (c->parsed()) return convert(*a);
     return info(*a);

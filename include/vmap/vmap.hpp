@@ -74,6 +74,7 @@
 #include <vmap/lcd/label_sources.hpp>
 #include <vmap/lcd/label_vector.hpp>
 #include <vmap/lcd/loop_detector.hpp>
+#include <vmap/lcd/sequence.hpp>
 
 #include <vmap/som/gcs.hpp>
 #include <vmap/som/histogram.hpp>
@@ -86,6 +87,7 @@
 
 // memory/: the visual memory a robot keeps (key images, loops, localization, resume)
 #include <vmap/memory/replace.hpp>
+#include <vmap/memory/sequence.hpp>
 #include <vmap/memory/stacks.hpp>
 #include <vmap/memory/store.hpp>
 #include <vmap/memory/types.hpp>

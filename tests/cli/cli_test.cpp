@@ -646,6 +646,43 @@ TEST_CASE("cli: localize --memory answers every query with its place decision; -
   CHECK(a == b);
 }
 
+TEST_CASE("cli: localize --memory --sequence answers each query with its neighbours; memory localize too") {
+  const auto& file = sample_memory().first;
+  const Run alone = run_vmap({"localize", "--memory", file.string(), sample, "--json"});
+  const Run seq = run_vmap({"localize", "--memory", file.string(), sample, "--json", "--sequence", "8"});
+  INFO(seq.err);
+  REQUIRE(alone.code == 0);
+  REQUIRE(seq.code == 0);
+  const auto a = nlohmann::json::parse(alone.out), s = nlohmann::json::parse(seq.out);
+  CHECK(a["sequence"] == 1);
+  CHECK(s["sequence"] == 8);
+  REQUIRE(s["queries"].size() == 60);
+  for (std::size_t i = 0; i < 60; ++i) {
+    CAPTURE(i);
+    const auto& q = s["queries"][i];
+    CHECK(a["queries"][i]["sequence"].is_null());
+    REQUIRE(q["sequence"].is_object());
+    CHECK(q["sequence"]["window"] == 8);
+    CHECK(q["sequence"]["on_line"].get<int>() <= q["sequence"]["weighed"].get<int>());
+    CHECK(q["sequence"]["single_confidence"] == a["queries"][i]["confidence"]);
+    // The sample frames are the memory's: each is accepted alone, and the sequence keeps
+    // the key image it was accepted at.
+    CHECK(a["queries"][i]["localized"] == true);
+    CHECK(q["localized"] == true);
+    CHECK(q["key"] == a["queries"][i]["key"]);
+  }
+  const Run text = run_vmap({"memory", "localize", file.string(), sample, "--sequence", "4", "--max-speed", "2"});
+  INFO(text.err);
+  REQUIRE(text.code == 0);
+  CHECK(text.out.find("  sequence: 4 of 4 images with evidence on the line (window 4); alone: confidence 1.00") !=
+        std::string::npos);
+  usage_error({"localize", "--memory", file.string(), sample, "--max-speed", "2"}, "--max-speed needs --sequence N with N > 1");
+  usage_error({"localize", "--memory", file.string(), sample, "--sequence", "0"}, "--sequence");
+  usage_error({"localize", "--memory", file.string(), sample, "--sequence", "101"}, "--sequence");
+  usage_error({"memory", "localize", file.string(), sample, "--sequence", "2", "--max-speed", "-1"}, "--max-speed");
+  usage_error({"localize", "--room", "--sequence", "3"}, "--sequence is an option of --memory");
+}
+
 TEST_CASE("cli: localize --memory errors: mixed modes, no image, missing or non-memory file") {
   const auto& file = sample_memory().first;
   usage_error({"localize", "--memory", file.string(), frame_a, "--room"}, "--memory and --room conflict");

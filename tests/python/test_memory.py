@@ -127,6 +127,40 @@ def test_localize_answers_and_decisions(sample_frames):
     assert empty.status == "too little evidence" and empty.key is None
 
 
+def test_localize_sequence_and_window(sample_frames, tmp_path, vmap_cli):
+    # A memory of the even sample frames; the odd ones are the queries, in order.
+    mem = vmap.VisualMemory(vocabulary_after=5)
+    for img, t, _ in sample_frames[0::2]:
+        mem.push(img, timestamp=t)
+    queries = [img for img, _, _ in sample_frames[1::2]]
+    alone = [mem.localize(img) for img in queries]
+    answers = mem.localize_sequence(queries, window=8)
+    assert len(answers) == len(queries) == 30
+    for a, s in zip(alone, answers):
+        assert a.sequence is None
+        assert s.sequence is not None and s.sequence.window == 8
+        assert s.sequence.on_line <= s.sequence.weighed <= 8
+        assert s.sequence.single_confidence == pytest.approx(a.confidence, abs=1e-12)
+        assert len(s.match_evidence) == len(s.matches)
+        if a.ok:  # an image accepted alone keeps its key image
+            assert s.key == a.key
+    assert sum(s.ok for s in answers) >= sum(a.ok for a in alone)
+    # The window of answers and the window of images decide the newest image alike.
+    from_answers = mem.localize_window(alone[-5:])
+    from_images = mem.localize_window(queries[-5:])
+    assert from_answers.sequence.window == from_images.sequence.window == 5
+    assert (from_answers.status, from_answers.key) == (from_images.status, from_images.key)
+    assert from_answers.confidence == pytest.approx(from_images.confidence, abs=1e-12)
+    with pytest.raises(vmap.Error, match="window must be in 1..100, got 0"):
+        mem.localize_sequence(queries, window=0)
+    with pytest.raises(vmap.Error, match="no answers given"):
+        mem.localize_window([])
+    with pytest.raises(vmap.Error, match="mixes Localization answers and images"):
+        mem.localize_window([alone[0], queries[1]])
+    # A window of 1 answers each image alone.
+    assert all(a.sequence is None for a in mem.localize_sequence(queries[:3], window=1))
+
+
 def test_resume_equals_the_uninterrupted_run(tmp_path, sample_frames):
     whole = vmap.VisualMemory.create(str(tmp_path / "whole.vmdb"), vocabulary_after=5)
     for img, t, _ in sample_frames:

@@ -1,7 +1,7 @@
 # Type stubs of examples/python/part_memory.cpp: the visual memory and its answers.
 
 from types import TracebackType
-from typing import Any, Callable, Literal, Optional
+from typing import Any, Callable, Literal, Optional, Sequence
 
 import numpy
 import numpy.typing as npt
@@ -71,6 +71,22 @@ class RelativePose:
     @property
     def points_in_front(self) -> int: ...
 
+class SequenceSupport:
+    """What the neighbours of an image in a sequence added to its answer."""
+
+    @property
+    def window(self) -> int: ...
+    @property
+    def weighed(self) -> int: ...
+    @property
+    def on_line(self) -> int: ...
+    @property
+    def significance(self) -> float: ...
+    @property
+    def single_confidence(self) -> float: ...
+    @property
+    def single_key(self) -> Optional[int]: ...
+
 class Localization:
     """localize()'s answer: accepted, or why not, with the verified key images behind it."""
 
@@ -90,6 +106,10 @@ class Localization:
     def key(self) -> Optional[int]: ...
     @property
     def matches(self) -> list[PlaceLink]: ...
+    @property
+    def match_evidence(self) -> list[PlaceEvidence]: ...
+    @property
+    def sequence(self) -> Optional[SequenceSupport]: ...
     @property
     def verified_candidates(self) -> int: ...
     @property
@@ -194,6 +214,23 @@ class VisualMemory:
     ) -> PushSummary: ...
     def localize(
         self, image: npt.NDArray[numpy.uint8] | npt.NDArray[numpy.uint16], *, min_confidence: Optional[float] = None
+    ) -> Localization: ...
+    def localize_sequence(
+        self,
+        images: Sequence[npt.NDArray[numpy.uint8] | npt.NDArray[numpy.uint16]],
+        *,
+        window: int = 8,
+        max_speed: float = 5.0,
+        tolerance: int = 1,
+        min_confidence: Optional[float] = None,
+    ) -> list[Localization]: ...
+    def localize_window(
+        self,
+        recent: Sequence[Localization] | Sequence[npt.NDArray[numpy.uint8] | npt.NDArray[numpy.uint16]],
+        *,
+        max_speed: float = 5.0,
+        tolerance: int = 1,
+        min_confidence: Optional[float] = None,
     ) -> Localization: ...
     def sync(self) -> None: ...
     def close(self) -> None: ...

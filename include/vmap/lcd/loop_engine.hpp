@@ -102,6 +102,7 @@ struct PlaceCandidate {
   /// unless verified).
   VerificationStatus status = VerificationStatus::too_few_matches;
   cv::Matx33d model = cv::Matx33d::zeros();
+  PlaceEvidence evidence{};  ///< what the verification says (zeros unless verified)
 };
 
 /// The answer for one query (a frame of the stream, or an image to localize).
@@ -598,7 +599,7 @@ class LoopEngine {
       PlaceEvidence e = measure_place_evidence(f, old, matches, v, model_, dec);
       e.bow_score = score;
       const double conf = place_confidence(e, dec);
-      d.considered.push_back({j, score, e.inliers, conf, CandidateStage::weaker, e.matches, v.status, v.model});
+      d.considered.push_back({j, score, e.inliers, conf, CandidateStage::weaker, e.matches, v.status, v.model, e});
       verified.push_back({j, conf, e, std::move(v), d.considered.size() - 1});
     }
     d.verify_ms = ms_since(t0);

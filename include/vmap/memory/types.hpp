@@ -63,6 +63,18 @@ struct MemoryStep {
   std::vector<LoopEdge> loops;           ///< loop edges found in this step
 };
 
+/// What the neighbours of an image in a sequence added to its answer
+/// (memory/sequence.hpp, lcd/sequence.hpp).
+struct SequenceSupport {
+  std::size_t window = 0;   ///< images weighed, this one included
+  std::size_t weighed = 0;  ///< of those, the images that verified a candidate with evidence
+  std::size_t on_line = 0;  ///< of those, the images whose candidate lies on the answer's line
+  double significance = 0.0;       ///< the line's combined significance (Fisher's method)
+  double single_confidence = 0.0;  ///< the image's own answer, alone
+  /// The key image the image alone chose (accepted or not), if it verified one.
+  std::optional<std::uint32_t> single_key;
+};
+
 /// localize()'s answer: the place decision (lcd/loop_engine.hpp) and the verified key
 /// images behind it.
 struct MemoryLocalization {
@@ -77,6 +89,7 @@ struct MemoryLocalization {
   /// Every verified key image, most confident first (matches.front() is the decision's
   /// candidate, accepted or not).
   std::vector<PlaceLink> matches;
+  std::vector<PlaceEvidence> match_evidence;  ///< the evidence of each of `matches`, in order
   std::size_t verified_candidates = 0;  ///< key images the estimator ran on
   /// The query's pose relative to the best key image (R and the direction of t), when the
   /// memory's estimator recovers one (EssentialEstimator with a calibrated camera).
@@ -85,6 +98,8 @@ struct MemoryLocalization {
   /// trained (VisualMemory::train_gcs) and the query has features; independent of the
   /// place decision.
   std::optional<Localization> position;
+  /// How a sequence of images decided (memory/sequence.hpp); empty for a single image.
+  std::optional<SequenceSupport> sequence;
   [[nodiscard]] bool ok() const noexcept { return status == PlaceStatus::accepted; }
   /// The accepted key image; nullptr unless ok().
   [[nodiscard]] const PlaceLink* best() const noexcept { return ok() && !matches.empty() ? &matches.front() : nullptr; }

@@ -255,7 +255,10 @@ MemoryLocalization VisualMemory<D, M, E, S>::localize(const cv::Mat& image, cons
       return (a->stage == CandidateStage::chosen) > (b->stage == CandidateStage::chosen) ||
              ((a->stage == CandidateStage::chosen) == (b->stage == CandidateStage::chosen) && a->confidence > b->confidence);
     });
-    for (const PlaceCandidate* c : verified) out.matches.push_back(link_of(*c, q));
+    for (const PlaceCandidate* c : verified) {
+      out.matches.push_back(link_of(*c, q));
+      out.match_evidence.push_back(c->evidence);
+    }
     if (gcs_) out.position = gcs_->localize(q);
     return out;
   }
