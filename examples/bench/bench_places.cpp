@@ -34,7 +34,12 @@
 //      and 10 of them (centred, and 8 trailing); every 10th frame of the other sequences
 //      as foreign sequences; the time per answer.
 //
-//   bench_places [--shared DIR] [--static-frames 120] [--seed 1] [--part all|loops|localize|calibrate|sequences]
+//   9. Small images: every sequence resized to 160 (or --small-width) pixels wide; ORB
+//      with and without its small-image rule (features/orb.hpp), and variants: loops,
+//      held-out frames and foreign frames as in sections 1 and 8.
+//
+//   bench_places [--shared DIR] [--static-frames 120] [--seed 1] [--max-speed 5] [--small-width 160]
+//                [--part all|loops|localize|calibrate|sequences|small]
 #include <vmap/features/orb.hpp>
 #include <vmap/features/sift.hpp>
 #include <vmap/geometry/fundamental.hpp>
@@ -388,7 +393,9 @@ struct SequenceCount {
   }
 };
 
-void sequence_section(const std::vector<Sequence>& sequences, const fs::path& shared, double max_speed) {
+/// The ground truth of section 8 for rtabmap_loop, tum_fr3_cabinet_kf, tum_fr1_rpy and
+/// kitti07_160 (sequences[0..3]).
+std::vector<SamePlace> same_places(const std::vector<Sequence>& sequences, const fs::path& shared) {
   const fs::path d = shared / "data";
   const vmap::PoseLoopOptions near{.max_distance = 0.5, .max_angle_deg = 30, .window = 0};
   std::vector<double> rpy_times;
@@ -404,6 +411,11 @@ void sequence_section(const std::vector<Sequence>& sequences, const fs::path& sh
   // 2-3 frames: the nearest key image of a held-out frame lies 0.6-1.7 m away.
   same[3].poses = vmap::ground_truth_from_poses(vmap::load_kitti_poses(d / "kitti07_160/poses.txt"),
                                                 {.max_distance = 2.0, .max_angle_deg = 30, .window = 0});
+  return same;
+}
+
+void sequence_section(const std::vector<Sequence>& sequences, const fs::path& shared, double max_speed) {
+  const std::vector<SamePlace> same = same_places(sequences, shared);
   const std::vector<std::size_t> windows{5, 8, 10};
   std::printf("\n## 8. Sequences as evidence (ORB defaults; memory without every 5th frame; the held-out frames "
               "localized in order, alone and with the window of held-out frames around each (centred) or ending at "
@@ -476,6 +488,115 @@ void sequence_section(const std::vector<Sequence>& sequences, const fs::path& sh
   }
 }
 
+// ---- 9. small images ----------------------------------------------------------------
+
+/// ORB on the image upsampled by `factor`, keypoints mapped back to the image's pixels.
+struct UpsampledOrb {
+  vmap::OrbDescriptor orb;
+  double factor = 2.0;
+  vmap::Features extract(const cv::Mat& image) {
+    cv::Mat big;
+    cv::resize(image, big, cv::Size(), factor, factor, cv::INTER_LINEAR);
+    vmap::Features f = orb.extract(big);
+    for (auto& k : f.keypoints) {
+      k.pt.x = static_cast<float>((k.pt.x + 0.5) / factor - 0.5);
+      k.pt.y = static_cast<float>((k.pt.y + 0.5) / factor - 0.5);
+      k.size /= static_cast<float>(factor);
+    }
+    f.image_size = image.size();
+    return f;
+  }
+  static vmap::DescriptorLayout layout() noexcept { return vmap::OrbDescriptor::layout(); }
+};
+
+std::vector<Sequence> shrink(const std::vector<Sequence>& sequences, int width) {
+  std::vector<Sequence> out;
+  for (const auto& s : sequences) {
+    if (s.name == "sample_60") continue;
+    Sequence t{s.name, {}, s.gt};
+    for (const auto& f : s.frames) {
+      vmap::Frame g = f;
+      const int height = static_cast<int>(std::lround(f.image.rows * static_cast<double>(width) / f.image.cols));
+      cv::resize(f.image, g.image, cv::Size(width, height), 0, 0, cv::INTER_AREA);
+      t.frames.push_back(std::move(g));
+    }
+    out.push_back(std::move(t));
+  }
+  return out;
+}
+
+template <class D>
+void small_row(const char* variant, const D& descriptor, const std::vector<Sequence>& small,
+               const std::vector<SamePlace>& same) {
+  for (std::size_t si = 0; si < small.size(); ++si) {
+    const Sequence& home = small[si];
+    D d = descriptor;
+    std::vector<vmap::Features> features;
+    double feats = 0.0;
+    for (const auto& f : home.frames) {
+      features.push_back(d.extract(f.image));
+      feats += static_cast<double>(features.back().size());
+    }
+    std::string loop_text;
+    try {
+      const LoopRow loops = run_loops(home, features);
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%zu / %zu, %.3f", loops.tp, loops.fp, loops.recall_full);
+      loop_text = buf;
+    } catch (const vmap::Error& e) {  // e.g. no features at all to learn a vocabulary from
+      loop_text = e.what();
+    }
+    vmap::VisualMemory<D, vmap::BruteForceMatcher, vmap::FundamentalEstimator, vmap::InlierRatio> mem(descriptor);
+    std::vector<const vmap::Frame*> held;
+    for (std::size_t i = 0; i < home.frames.size(); ++i) {
+      if (i % 5 == 2)
+        held.push_back(&home.frames[i]);
+      else
+        mem.push(home.frames[i]);
+    }
+    std::size_t accepted = 0, right = 0, foreign = 0, foreign_accepted = 0;
+    for (const vmap::Frame* f : held) {
+      const auto a = mem.localize(f->image);
+      if (!a.ok()) continue;
+      ++accepted;
+      right += same[si](f->index, mem.map().keys[a.best()->key].frame_index) ? 1 : 0;
+    }
+    for (const auto& t : small) {
+      if (same_place(home.name, t.name)) continue;
+      for (std::size_t i = 0; i < t.frames.size(); i += 10) {
+        ++foreign;
+        foreign_accepted += mem.localize(t.frames[i].image).ok() ? 1 : 0;
+      }
+    }
+    std::printf("| %s | %s %dx%d | %.0f | %s | %zu | %zu of %zu, %zu right | %zu of %zu |\n", variant,
+                home.name.c_str(), home.frames[0].image.cols, home.frames[0].image.rows,
+                feats / static_cast<double>(features.size()), loop_text.c_str(), mem.key_images(), accepted,
+                held.size(), right, foreign_accepted, foreign);
+    std::fflush(stdout);
+  }
+}
+
+void small_section(const std::vector<Sequence>& sequences, const fs::path& shared, int width) {
+  const auto small = shrink(sequences, width);
+  const auto same = same_places(sequences, shared);
+  std::printf("\n## 9. Small images (every sequence resized to %d pixels wide): ORB variants; loops with the defaults "
+              "(section 1), a memory without every 5th frame (section 8's ground truth), every 10th frame of the "
+              "other sequences as foreign queries\n\n", width);
+  std::printf("| ORB | sequence | features per frame | loops: TP / FP, recall@100%%P | key images | held out: accepted, "
+              "right | foreign accepted |\n|---|---|---|---|---|---|---|\n");
+  std::fflush(stdout);
+  // Without the small-image rule (max_side 0): ORB as it was for every image size.
+  const vmap::OrbSmallImages none{.max_side = 0};
+  small_row("border 31, FAST 20 (before)", vmap::OrbDescriptor({.small = none}), small, same);
+  small_row("border 15, FAST 20", vmap::OrbDescriptor({.edge_threshold = 15, .small = none}), small, same);
+  small_row("border 15, FAST 10", vmap::OrbDescriptor({.edge_threshold = 15, .fast_threshold = 10, .small = none}), small,
+            same);
+  small_row("default (the rule: border 15, FAST 10 up to 200 px)", vmap::OrbDescriptor{}, small, same);
+  small_row("border 15, FAST 10, 4 levels",
+            vmap::OrbDescriptor({.levels = 4, .edge_threshold = 15, .fast_threshold = 10, .small = none}), small, same);
+  small_row("upsampled x2, border 31, FAST 20", UpsampledOrb{vmap::OrbDescriptor({.small = none}), 2.0}, small, same);
+}
+
 // ---- 7. the chance rate of each stack ------------------------------------------------
 
 void calibration_section(const std::vector<Sequence>& sequences, const fs::path& shared) {
@@ -545,11 +666,14 @@ int main(int argc, char** argv) {
   app.add_option("--seed", seed, "Seed of the static clip's noise and jitter");
   double max_speed = vmap::SequenceLine{}.max_speed;
   app.add_option("--max-speed", max_speed, "Section 8: the fastest line, key images per query")->check(CLI::Range(0.0, 1000.0));
+  int small_width = 160;
+  app.add_option("--small-width", small_width, "Section 9: the width the sequences are resized to")
+      ->check(CLI::Range(32, 4096));
   std::string part = "all";
   app.add_option("--part", part,
-                 "all: sections 1-8; loops: section 1's tables; localize: section 6 only, calibrate: section 7 only (minutes each: XFeat* verifies "
-                 "on the CPU), sequences: section 8 only")
-      ->check(CLI::IsMember({"all", "loops", "localize", "calibrate", "sequences"}));
+                 "all: sections 1-9; loops: section 1's tables; localize: section 6 only, calibrate: section 7 only (minutes each: XFeat* verifies "
+                 "on the CPU), sequences: section 8 only, small: section 9 only")
+      ->check(CLI::IsMember({"all", "loops", "localize", "calibrate", "sequences", "small"}));
   CLI11_PARSE(app, argc, argv);
 
   const auto sequences = load_sequences(shared);
@@ -563,6 +687,10 @@ int main(int argc, char** argv) {
   }
   if (part == "sequences") {
     sequence_section(sequences, shared, max_speed);
+    return 0;
+  }
+  if (part == "small") {
+    small_section(sequences, shared, small_width);
     return 0;
   }
   vmap::OrbDescriptor orb;
@@ -715,5 +843,6 @@ int main(int argc, char** argv) {
   localization_section(sequences, shared);
   calibration_section(sequences, shared);
   sequence_section(sequences, shared, max_speed);
+  small_section(sequences, shared, small_width);
   return 0;
 }
