@@ -8,6 +8,7 @@
 #include <doctest/doctest.h>
 #include <opencv2/imgproc.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -109,4 +110,38 @@ TEST_CASE("ORB options reach the detector") {
   CHECK(a.size() >= 90);
   CHECK(b.size() > a.size());
   CHECK(a.descriptors.cols == 32);  // 256 bits
+}
+
+TEST_CASE("ORB describes small images with a smaller border and FAST threshold") {
+  vmap::OrbDescriptor orb;
+  CHECK(orb.small({160, 120}));
+  CHECK(orb.small({640, 200}));  // the shorter side decides
+  CHECK_FALSE(orb.small({320, 240}));
+  CHECK_FALSE(vmap::OrbDescriptor({.small = {.max_side = 0}}).small({160, 120}));
+  // The border of 31 pixels leaves 98 x 58 of a 160 x 120 image: the rule's 15 pixels
+  // find keypoints nearer the edges, and more of them.
+  const cv::Mat small = vmap::test::textured_image(3, {160, 120});
+  vmap::OrbDescriptor before({.small = {.max_side = 0}});
+  const auto with_rule = orb.extract(small), without = before.extract(small);
+  CHECK(with_rule.size() > without.size());
+  const auto nearest_edge = [](const vmap::Features& f) {
+    float d = 1e9f;
+    for (const cv::KeyPoint& k : f.keypoints) d = std::min({d, k.pt.x, k.pt.y, 159.0f - k.pt.x, 119.0f - k.pt.y});
+    return d;
+  };
+  CHECK(nearest_edge(without) >= 30.0f);
+  CHECK(nearest_edge(with_rule) < 30.0f);
+  CHECK(nearest_edge(with_rule) >= 14.0f);
+  // A large image is described as before.
+  const cv::Mat large = vmap::test::textured_image();
+  CHECK(orb.extract(large).keypoints.size() == before.extract(large).keypoints.size());
+  // The default rule is not written, so memories recorded before name the same descriptor.
+  CHECK(orb.describe() ==
+        "OrbDescriptor features=1000 scale_factor=1.2000000476837158 levels=8 edge_threshold=31 fast_threshold=20");
+  CHECK(before.describe() ==
+        "OrbDescriptor features=1000 scale_factor=1.2000000476837158 levels=8 edge_threshold=31 fast_threshold=20 "
+        "small_max_side=0 small_edge_threshold=15 small_fast_threshold=10");
+  CHECK_THROWS_WITH_AS(vmap::OrbDescriptor({.small = {.max_side = -1}}), doctest::Contains("small.max_side"), vmap::Error);
+  CHECK_THROWS_WITH_AS(vmap::OrbDescriptor({.small = {.fast_threshold = 0}}), doctest::Contains("small.fast_threshold"),
+                       vmap::Error);
 }
