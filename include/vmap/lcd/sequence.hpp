@@ -1,25 +1,31 @@
 #pragma once
 
-// A sequence of images as evidence of a place (examples/localize.md, "A sequence of
+// A sequence of images as evidence of a place (examples/memory.md, "A sequence of
 // images"). A robot that is lost has its last few frames, not one: consecutive queries
 // that agree on consecutive key images of one place draw a line in the query-by-key
-// matrix of verified candidates (SeqSLAM's line, Milford and Wyeth, ICRA 2012, with the
-// line's speed constant and at most `max_speed` key images per query), and their independent
+// matrix of verified candidates (SeqSLAM's line, Milford and Wyeth, ICRA 2012, at a
+// constant speed of at most `max_speed` key images per query), and their independent
 // evidences combine; a query whose candidate lies off its neighbours' line gains nothing
 // from them and counts against the line it does not join.
 //
 // The evidence of one verified candidate is its significance (lcd/place_decision.hpp) as
 // the decision weighs it: the significance of its confidence, which is 0 below
 // min_inliers and lowered by a spread below full_spread (weighed_significance). A line's
-// evidence is Fisher's method (Fisher 1925, sec. 21.1) over the queries of the window that have any evidence: with
-// p_i = 10^(-s_i) and S = sum of the s_i on the line, -2 sum ln p_i follows chi-square
-// with 2n degrees of freedom under chance, so the combined significance is
+// evidence is Fisher's method (Fisher 1925, sec. 21.1) over the queries of the window
+// that have any evidence: with p_i = 10^(-s_i) and S = sum of the s_i on the line,
+// -2 sum ln p_i follows chi-square with 2n degrees of freedom under chance, so the
+// combined significance is
 //   S - log10( sum_{j<n} (S ln 10)^j / j! ),
 // n counting every query of the window that verified a candidate somewhere (a query off
 // the line adds 0 to S and 1 to n: it lowers the line). Queries that verified nothing
 // (a blurred frame) neither raise nor lower it. With n = 1 the combined significance is
 // the query's own. The combined significance maps to a confidence as a single image's
 // does (1 - 2^(-S / half_significance)), and the one threshold decides.
+//
+// Two rules keep one strong image from deciding for the others (examples/results/
+// localize.md, "Sequences as evidence", how the choices were made): a neighbour adds no
+// more than the image's own evidence, and an image accepted alone keeps its key image
+// (the sequence can lower it, never move it).
 
 #include <vmap/core/error.hpp>
 #include <vmap/lcd/options.hpp>
@@ -31,6 +37,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace vmap {
