@@ -271,19 +271,26 @@ bool before_localized(const vmap::MemoryLocalization& a) {
 
 // ---- 6. localization with another verifier ------------------------------------------
 
-/// Section 6 for one feature stack: the memory of `home` without its held-out frames,
-/// then the held-out frames and the other sequences' every 10th frame localized in it.
+/// Pushes every frame of `home` into `mem` but every 5th (from frame 2), and returns those.
 template <class Memory>
-void localization_row(const char* stack, Memory mem, const Sequence& home, const vmap::LoopGroundTruth& same,
-                      const std::vector<Sequence>& sequences) {
+std::vector<const vmap::Frame*> hold_out(Memory& mem, const Sequence& home) {
   std::vector<const vmap::Frame*> held;
-  const auto t0 = std::chrono::steady_clock::now();
   for (std::size_t i = 0; i < home.frames.size(); ++i) {
     if (i % 5 == 2)
       held.push_back(&home.frames[i]);
     else
       mem.push(home.frames[i]);
   }
+  return held;
+}
+
+/// Section 6 for one feature stack: the memory of `home` without its held-out frames,
+/// then the held-out frames and the other sequences' every 10th frame localized in it.
+template <class Memory>
+void localization_row(const char* stack, Memory mem, const Sequence& home, const vmap::LoopGroundTruth& same,
+                      const std::vector<Sequence>& sequences) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::vector<const vmap::Frame*> held = hold_out(mem, home);
   const double build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::size_t accepted = 0, right = 0, foreign = 0, foreign_accepted = 0;
   double query_ms = 0.0;
@@ -430,13 +437,7 @@ void sequence_section(const std::vector<Sequence>& sequences, const fs::path& sh
   for (std::size_t si = 0; si < 4; ++si) {
     const Sequence& home = sequences[si];
     vmap::OrbVisualMemory mem;
-    std::vector<const vmap::Frame*> held;
-    for (std::size_t i = 0; i < home.frames.size(); ++i) {
-      if (i % 5 == 2)
-        held.push_back(&home.frames[i]);
-      else
-        mem.push(home.frames[i]);
-    }
+    const std::vector<const vmap::Frame*> held = hold_out(mem, home);
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<vmap::MemoryLocalization> singles;
     for (const vmap::Frame* f : held) singles.push_back(mem.localize(f->image));
@@ -547,13 +548,7 @@ void small_row(const char* variant, const D& descriptor, const std::vector<Seque
       loop_text = e.what();
     }
     vmap::VisualMemory<D, vmap::BruteForceMatcher, vmap::FundamentalEstimator, vmap::InlierRatio> mem(descriptor);
-    std::vector<const vmap::Frame*> held;
-    for (std::size_t i = 0; i < home.frames.size(); ++i) {
-      if (i % 5 == 2)
-        held.push_back(&home.frames[i]);
-      else
-        mem.push(home.frames[i]);
-    }
+    const std::vector<const vmap::Frame*> held = hold_out(mem, home);
     std::size_t accepted = 0, right = 0, foreign = 0, foreign_accepted = 0;
     for (const vmap::Frame* f : held) {
       const auto a = mem.localize(f->image);

@@ -183,6 +183,16 @@ py::dict stack_dict(const PolicyStack& s) {
   return d;
 }
 
+/// The memory's place decision, with `min_confidence` when given (localize's keyword).
+PlaceDecisionOptions decision_with(const AnyMemory& mem, std::optional<double> min_confidence) {
+  PlaceDecisionOptions d = mem.options().loops.decision;
+  if (min_confidence) d.min_confidence = *min_confidence;
+  return d;
+}
+
+/// "list[i]": an item of a list argument, as errors name it.
+std::string item_name(const char* list, std::size_t i) { return std::string(list) + "[" + std::to_string(i) + "]"; }
+
 std::string text_of(const PlaceEvidence& e) {
   char buf[160];
   std::snprintf(buf, sizeof buf, "%d/%d inliers, significance %.1f, spread %.2f, BoW %.3f, %s", e.inliers, e.matches,
@@ -447,8 +457,7 @@ void bind(py::module_& m) {
           [](PyMemory& self, const py::array& image, std::optional<double> min_confidence) {
             const cv::Mat view = image_copy(image, "image");
             return self.locked([&](AnyMemory& mem) {
-              PlaceDecisionOptions d = mem.options().loops.decision;
-              if (min_confidence) d.min_confidence = *min_confidence;
+              const PlaceDecisionOptions d = decision_with(mem, min_confidence);
               return mem.localize(view, &d);
             });
           },
@@ -460,11 +469,9 @@ void bind(py::module_& m) {
           [](PyMemory& self, const std::vector<py::array>& images, std::size_t window, double max_speed,
              std::size_t tolerance, std::optional<double> min_confidence) {
             std::vector<cv::Mat> views;
-            for (std::size_t i = 0; i < images.size(); ++i)
-              views.push_back(image_copy(images[i], "images[" + std::to_string(i) + "]"));
+            for (std::size_t i = 0; i < images.size(); ++i) views.push_back(image_copy(images[i], item_name("images", i)));
             return self.locked([&](AnyMemory& mem) {
-              PlaceDecisionOptions d = mem.options().loops.decision;
-              if (min_confidence) d.min_confidence = *min_confidence;
+              const PlaceDecisionOptions d = decision_with(mem, min_confidence);
               return localize_sequence(mem, views, {.window = window, .line = {max_speed, tolerance}}, &d);
             });
           },
@@ -487,13 +494,12 @@ void bind(py::module_& m) {
               if (py::isinstance<MemoryLocalization>(item))
                 answers.push_back(item.cast<MemoryLocalization>());
               else
-                images.push_back(image_copy(item.cast<py::array>(), "recent[" + std::to_string(i) + "]"));
+                images.push_back(image_copy(item.cast<py::array>(), item_name("recent", i)));
             }
             if (!answers.empty() && !images.empty())
               vmap::detail::fail("localize_window: `recent` mixes Localization answers and images; give one kind");
             return self.locked([&](AnyMemory& mem) {
-              PlaceDecisionOptions d = mem.options().loops.decision;
-              if (min_confidence) d.min_confidence = *min_confidence;
+              const PlaceDecisionOptions d = decision_with(mem, min_confidence);
               if (!images.empty()) return localize_window(mem, std::span<const cv::Mat>(images), {max_speed, tolerance}, &d);
               return localize_window(mem, std::span<const MemoryLocalization>(answers), {max_speed, tolerance}, &d);
             });

@@ -79,6 +79,27 @@ inline void apply_sequence_answer(MemoryLocalization& a, const SequenceAnswer& s
   a.reason = buf;
 }
 
+/// The sequence's answer for each of `singles` (localize()'s answers, in order).
+[[nodiscard]] inline std::vector<SequenceAnswer> sequence_answers(std::span<const MemoryLocalization> singles,
+                                                                  const std::vector<MemorySession>& sessions,
+                                                                  const SequenceOptions& options,
+                                                                  const PlaceDecisionOptions& decision,
+                                                                  SequencePlacement placement) {
+  std::vector<SequenceQuery> queries(singles.size());
+  for (std::size_t i = 0; i < singles.size(); ++i) {
+    const MemoryLocalization& a = singles[i];
+    check(a.match_evidence.size() == a.matches.size(), [&] {
+      return "with_sequence_evidence: answer " + std::to_string(i) + " has " + std::to_string(a.matches.size()) +
+             " matches but evidence for " + std::to_string(a.match_evidence.size());
+    });
+    for (std::size_t m = 0; m < a.matches.size(); ++m)
+      queries[i].candidates.push_back({a.matches[m].key, weighed_significance(a.match_evidence[m], decision)});
+    if (a.ok()) queries[i].accepted = 0;  // best(): the decision's candidate comes first
+  }
+  return sequence_evidence(
+      queries, [&](std::size_t key) { return session_of_key(sessions, key); }, options, decision, placement);
+}
+
 }  // namespace detail
 
 /// `singles` (one answer per image of a sequence, in order, as localize() gave them)
@@ -91,19 +112,7 @@ inline void apply_sequence_answer(MemoryLocalization& a, const SequenceAnswer& s
     const PlaceDecisionOptions& decision, SequencePlacement placement = SequencePlacement::centred) {
   detail::check_sequence_options(options, "SequenceOptions");
   if (options.window == 1) return singles;
-  std::vector<SequenceQuery> queries(singles.size());
-  for (std::size_t i = 0; i < singles.size(); ++i) {
-    const MemoryLocalization& a = singles[i];
-    detail::check(a.match_evidence.size() == a.matches.size(), [&] {
-      return "with_sequence_evidence: answer " + std::to_string(i) + " has " + std::to_string(a.matches.size()) +
-             " matches but evidence for " + std::to_string(a.match_evidence.size());
-    });
-    for (std::size_t m = 0; m < a.matches.size(); ++m)
-      queries[i].candidates.push_back({a.matches[m].key, weighed_significance(a.match_evidence[m], decision)});
-    if (a.ok()) queries[i].accepted = 0;  // best(): the decision's candidate comes first
-  }
-  const std::vector<SequenceAnswer> answers = sequence_evidence(
-      queries, [&](std::size_t key) { return detail::session_of_key(sessions, key); }, options, decision, placement);
+  const std::vector<SequenceAnswer> answers = detail::sequence_answers(singles, sessions, options, decision, placement);
   for (std::size_t i = 0; i < singles.size(); ++i) detail::apply_sequence_answer(singles[i], answers[i], decision);
   return singles;
 }
@@ -135,10 +144,15 @@ template <class Memory>
                                                  const SequenceLine& line = {},
                                                  const PlaceDecisionOptions* decision = nullptr) {
   detail::check_window(recent.size(), "answers");
-  std::vector<MemoryLocalization> all(recent.begin(), recent.end());
-  return with_sequence_evidence(std::move(all), memory.sessions(), {.window = recent.size(), .line = line},
-                                decision_of(memory, decision), SequencePlacement::trailing)
-      .back();
+  const PlaceDecisionOptions& d = decision_of(memory, decision);
+  const SequenceOptions options{.window = recent.size(), .line = line};
+  detail::check_sequence_options(options, "SequenceOptions");
+  // Only the newest answer is rewritten: the others are not copied.
+  MemoryLocalization newest = recent.back();
+  if (recent.size() == 1) return newest;  // a window of 1: the image alone, as with_sequence_evidence
+  detail::apply_sequence_answer(
+      newest, detail::sequence_answers(recent, memory.sessions(), options, d, SequencePlacement::trailing).back(), d);
+  return newest;
 }
 
 /// The last of `recent` (consecutive images, oldest first) localized in `memory` with the
