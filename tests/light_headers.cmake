@@ -10,6 +10,7 @@
 #     runtime/policy_stack.hpp) compile none of the classes that make the answers, in
 #     either form.
 # Run by CTest: cmake -DCXX=... -DINCLUDE_DIR=... -DOPENCV_INCLUDE_DIR=... -DEIGEN_INCLUDE_DIR=...
+#   -DPG_INCLUDE_DIR=... (libpq's, which the memory store includes)
 #   -P light_headers.cmake
 function(includes_of out header)
   execute_process(
@@ -58,8 +59,8 @@ message(STATUS "<vmap/io/frame_source.hpp>: the readers only header-only")
 
 # The run-time layer's memory, and the value headers, against the headers that make them.
 set(_heavy "memory/visual_memory.hpp" "keyframe/selector.hpp" "place/vocabulary_tree.hpp" "som/gcs.hpp"
-           "memory/store.hpp" "sqlite3.h" "features/orb.hpp" "geometry/fundamental.hpp")
-set(_flags "-I${INCLUDE_DIR}" "-isystem${OPENCV_INCLUDE_DIR}" "-isystem${EIGEN_INCLUDE_DIR}")
+           "memory/store.hpp" "sqlite3.h" "libpq-fe.h" "features/orb.hpp" "geometry/fundamental.hpp")
+set(_flags "-I${INCLUDE_DIR}" "-isystem${OPENCV_INCLUDE_DIR}" "-isystem${EIGEN_INCLUDE_DIR}" "-isystem${PG_INCLUDE_DIR}")
 foreach(h vmap/runtime/memory.hpp vmap/memory/types.hpp vmap/runtime/policy_stack.hpp)
   string(MAKE_C_IDENTIFIER "${h}" _id)
   set(_modes -DVMAP_COMPILED_STACKS)

@@ -50,6 +50,7 @@ inline constexpr int exit_unsupported_version = 5;  ///< an input of a newer for
 inline constexpr int exit_policy_mismatch = 6;      ///< a memory or vocabulary of other policies
 inline constexpr int exit_busy = 7;                 ///< the memory is being written by another program
 inline constexpr int exit_io = 8;                   ///< a write failed (a full disk, permissions)
+inline constexpr int exit_unavailable = 9;          ///< the memory's database server cannot be reached
 
 /// The exit code of a run that stopped on a vmap::Error of kind `k`.
 [[nodiscard]] constexpr int exit_code_of(vmap::ErrorKind k) noexcept {
@@ -60,6 +61,7 @@ inline constexpr int exit_io = 8;                   ///< a write failed (a full 
     case vmap::ErrorKind::policy_mismatch: return exit_policy_mismatch;
     case vmap::ErrorKind::busy: return exit_busy;
     case vmap::ErrorKind::io: return exit_io;
+    case vmap::ErrorKind::unavailable: return exit_unavailable;
     case vmap::ErrorKind::invalid_argument: break;
   }
   return exit_failure;

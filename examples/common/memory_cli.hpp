@@ -14,8 +14,11 @@
 #include <vmap/core/error.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/image.hpp>
+#include <vmap/io/postgres.hpp>
 #include <vmap/memory/replace.hpp>
 #include <vmap/memory/sequence.hpp>
+#include <vmap/memory/store.hpp>
+#include <vmap/runtime/fleet.hpp>
 #include <vmap/runtime/memory.hpp>
 #include <vmap/runtime/recorder.hpp>
 #include <vmap/runtime/stack.hpp>
@@ -30,6 +33,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <variant>
@@ -80,9 +84,30 @@ inline nlohmann::json stack_json(const PolicyStack& s) {
 /// is a memory (a mistyped path never overwrites another file), and refused otherwise.
 /// The replacement itself is the library's (MemoryCreateOptions::replace), which checks
 /// the same again under the memory's writer lock.
+///
+/// A fleet's memory (a postgresql:// URI) is written as robot `robot` (--robot): a robot
+/// the fleet has is continued only with --resume or --session new, and never replaced;
+/// one that holds nothing (a first run killed before its first key image) is started
+/// again with --force.
 inline void prepare_memory_output(const std::filesystem::path& file, const std::string& option,
                                   const std::vector<std::filesystem::path>& inputs, bool resume = false,
-                                  bool force = false) {
+                                  bool force = false, const std::string& robot = {}) {
+  if (pg::is_uri(file.native())) {
+    if (robot.empty())
+      usage_error(option + ": a fleet's memory (a PostgreSQL URI) holds one memory per robot: give --robot NAME");
+    const auto robots = MemoryStore::robots(file.native());
+    const bool exists = std::find(robots.begin(), robots.end(), robot) != robots.end();
+    if (force) {
+      if (!exists || MemoryStore::remove_unsynced_robot(file.native(), robot)) return;
+      usage_error("--force: robot '" + robot + "' holds a memory, and a fleet's robot is not replaced (name another "
+                  "robot with --robot, or continue it with --resume or --session new)");
+    }
+    if (exists && !resume)
+      usage_error(option + ": robot '" + robot + "' of memory '" + pg::redacted(file.native()) + "' exists: " +
+                  (option == "--memory" ? "give --resume to continue it or --session new to add a run to it"
+                                        : "name another robot with --robot"));
+    return;
+  }
   const std::filesystem::path dir = file.has_parent_path() ? file.parent_path() : std::filesystem::path(".");
   std::error_code ec;
   // An --out folder is replaced as a whole by the next --out run: a memory kept there
@@ -108,16 +133,33 @@ inline void prepare_memory_output(const std::filesystem::path& file, const std::
 /// A memory given as an input (`option` names it): a missing path, a folder or a device
 /// is a usage error; a file that is no memory is an Error naming it (corrupt: exit 4).
 inline void check_memory_input(const std::filesystem::path& file, const std::string& option) {
+  if (pg::is_uri(file.native())) return;  // a fleet's memory: the server says (AnyMemory::open)
   check_input_file(file, option);
   if (memory_kind(file) == MemoryKind::other)
     vmap::detail::fail(vmap::ErrorKind::corrupt, "'" + file.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file)");
 }
 
 /// Opens a memory given as an input to read (a snapshot; `pixels` to decode its key
-/// images' pixels, which only the commands that write them again need).
-inline AnyMemory open_memory_input(const std::filesystem::path& file, const std::string& option, bool pixels = false) {
+/// images' pixels, which only the commands that write them again need); `robot` is the
+/// robot of a fleet's memory (--robot).
+inline AnyMemory open_memory_input(const std::filesystem::path& file, const std::string& option, bool pixels = false,
+                                   const std::string& robot = {}) {
   check_memory_input(file, option);
-  return AnyMemory::open(file, {.pixels = pixels});
+  if (pg::is_uri(file.native()) && robot.empty())
+    usage_error(option + ": a fleet's memory (a PostgreSQL URI) holds one memory per robot: give --robot NAME");
+  return AnyMemory::open(file, {.robot = robot, .pixels = pixels});
+}
+
+/// The bytes of a memory file; none for a fleet's memory (on a server).
+inline std::optional<std::uintmax_t> memory_bytes(const std::filesystem::path& file) {
+  if (pg::is_uri(file.native())) return std::nullopt;
+  return std::filesystem::file_size(file);
+}
+
+/// `--robot NAME`: the robot of a fleet's memory (a PostgreSQL URI given as the memory).
+inline void add_robot_option(CLI::App& app, std::string& robot) {
+  app.add_option("--robot", robot,
+                 "The robot whose memory it is, when the memory is a fleet's (a postgresql:// URI)");
 }
 
 /// How a run continues an existing memory: its last session after its last frame
@@ -150,13 +192,25 @@ inline const std::vector<std::string>& stack_options() {
 /// a missing file, a .vmem file and a store that holds nothing yet are usage errors that
 /// say what to do.
 inline void check_continuable(const std::filesystem::path& file, const CLI::App& app,
-                              const std::vector<std::string>& options_kept, Continuation how) {
+                              const std::vector<std::string>& options_kept, Continuation how,
+                              const std::string& robot = {}) {
   const std::string flag = how == Continuation::resume ? "--resume" : "--session new";
   for (const auto& list : {options_kept, stack_options()})
     for (const auto& o : list)
       if (app.get_option(o)->count() > 0)
         usage_error(flag + " and " + o + " conflict (a continued memory keeps the options it was started with)");
   std::error_code ec;
+  if (pg::is_uri(file.native())) {
+    const auto robots = MemoryStore::robots(file.native());
+    if (std::find(robots.begin(), robots.end(), robot) == robots.end())
+      usage_error(flag + ": memory '" + pg::redacted(file.native()) + "' has no robot '" + robot +
+                  "' to continue (run without " + flag + " to start it)");
+    auto store = MemoryStore::open(file, sqlite::Access::read, robot);
+    if (!store.synced())
+      usage_error(flag + ": robot '" + robot + "' holds nothing yet (its first run stopped before its first key image "
+                  "was written): start it again with --force");
+    return;
+  }
   if (!std::filesystem::exists(file, ec))
     usage_error(flag + ": no memory file '" + file.string() + "' to continue (run without " + flag + " to start one)");
   check_memory_input(file, "--memory");
@@ -221,14 +275,28 @@ inline void check_frames_left(const AnyMemory& memory, const FrameSource& src, c
 /// unclosed, it leaves the memory it was to replace as it was).
 class NewMemoryGuard {
  public:
-  NewMemoryGuard(std::optional<AnyMemory>& memory, bool created) : memory_(&memory), armed_(created) {}
+  /// `location` is the memory as given: for a fleet's memory, the URI of its server.
+  NewMemoryGuard(std::optional<AnyMemory>& memory, bool created, std::string location = {})
+      : memory_(&memory), armed_(created), location_(std::move(location)) {}
   NewMemoryGuard(const NewMemoryGuard&) = delete;
   NewMemoryGuard& operator=(const NewMemoryGuard&) = delete;
   void keep() noexcept { armed_ = false; }
   ~NewMemoryGuard() {
     if (!armed_ || !*memory_ || (*memory_)->replaces()) return;
     const std::filesystem::path file = (*memory_)->path();
+    const std::string robot = (*memory_)->robot();
     memory_->reset();  // waits for the sync in flight
+    if (!robot.empty()) {
+      // A fleet's robot that holds nothing is removed, so that the name can start again.
+      try {
+        if (!MemoryStore::remove_unsynced_robot(location_, robot))
+          std::fprintf(stderr, "robot '%s' of memory '%s' keeps what was committed before the error (--resume continues "
+                       "it)\n", robot.c_str(), file.c_str());
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "robot '%s' is kept as the error left it (%s)\n", robot.c_str(), e.what());
+      }
+      return;
+    }
     // Removed only when it is known to hold nothing: a store that cannot be read back
     // now (the error may still be there) is kept as it is.
     try {
@@ -249,6 +317,7 @@ class NewMemoryGuard {
  private:
   std::optional<AnyMemory>* memory_;
   bool armed_;
+  std::string location_;
 };
 
 // ---------------------------------------------------------------------------------------
@@ -354,6 +423,7 @@ struct MemoryQuery {
   std::string image;
   MemoryLocalization answer;
   double ms = 0.0;
+  std::size_t robot = 0;  ///< a fleet's: the robot whose memory answered (FleetMemory::robots)
 };
 
 /// The query images of `inputs`: each an image file, or a sequence (a folder, a list, a
@@ -361,12 +431,14 @@ struct MemoryQuery {
 /// grey, as the memory's frames were;
 /// an unreadable image given alone is an Error naming it, a sequence's unreadable frames
 /// are skipped and reported.
-inline std::vector<MemoryQuery> localize_queries(AnyMemory& mem, const std::vector<std::string>& inputs,
-                                                 const PlaceDecisionOptions& decision) {
+/// `localize` answers one image (a memory's, or a fleet's with the robot that answered).
+inline std::vector<MemoryQuery> localize_queries(const std::function<MemoryQuery(const cv::Mat&)>& localize,
+                                                 const std::vector<std::string>& inputs) {
   std::vector<MemoryQuery> out;
   const auto answer = [&](const std::string& name, const cv::Mat& img) {
     const auto t0 = std::chrono::steady_clock::now();
-    MemoryQuery q{name, mem.localize(img, &decision), 0.0};
+    MemoryQuery q = localize(img);
+    q.image = name;
     q.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     out.push_back(std::move(q));
   };
@@ -485,17 +557,56 @@ inline void print_localizations(const AnyMemory& mem, const std::vector<MemoryQu
   }
 }
 
+/// `localize --memory URI QUERY...` without --robot: each query among every robot's key
+/// images of a fleet's memory (FleetMemory), answered by the robot whose memory is the
+/// most confident; the answers as localize_from_memory gives them, with the robot.
+inline int localize_in_fleet(const std::string& uri, const std::vector<std::string>& queries, bool json,
+                             std::optional<double> min_confidence, const SequenceArgs& sequence) {
+  if (sequence.window > 1 || sequence.max_speed)
+    usage_error("--sequence: a sequence is placed along one robot's key images: give --robot NAME");
+  auto fleet = FleetMemory::open(uri);
+  auto answers = localize_queries(
+      [&](const cv::Mat& img) {
+        FleetLocalization where = fleet.localize(img, min_confidence);
+        return MemoryQuery{{}, std::move(where.answer), 0.0, where.index};
+      },
+      queries);
+  const std::string shown = pg::redacted(uri);
+  if (!json) {
+    for (const auto& q : answers) {
+      std::printf("robot '%s': ", fleet.robots()[q.robot].c_str());
+      print_localizations(fleet.memory(q.robot), {q});
+    }
+    return 0;
+  }
+  nlohmann::json out = nlohmann::json::array();
+  std::size_t localized = 0;
+  for (const auto& q : answers) {
+    nlohmann::json j = localizations_json(fleet.memory(q.robot), {q})[0];
+    j["robot"] = fleet.robots()[q.robot];
+    out.push_back(std::move(j));
+    localized += q.answer.ok() ? 1 : 0;
+  }
+  print_json({{"command", "localize"}, {"memory", shown}, {"robots", fleet.robots()}, {"queries", out},
+              {"localized", localized}});
+  return 0;
+}
+
 /// `vmap localize --memory M QUERY...` and `vmap memory localize M QUERY...`: the answers
 /// as lines, or with `json` one object whose `queries` list every answer. A QUERY is an
 /// image, or a folder, list or video of query images.
 inline int localize_from_memory(const std::filesystem::path& file, const std::string& option,
                                 const std::vector<std::string>& queries, bool json,
-                                std::optional<double> min_confidence = std::nullopt, const SequenceArgs& sequence = {}) {
+                                std::optional<double> min_confidence = std::nullopt, const SequenceArgs& sequence = {},
+                                const std::string& robot = {}) {
   current_inputs() = {file.string()};
-  auto mem = open_memory_input(file, option);
+  if (pg::is_uri(file.native()) && robot.empty())
+    return localize_in_fleet(file.native(), queries, json, min_confidence, sequence);
+  auto mem = open_memory_input(file, option, false, robot);
   PlaceDecisionOptions decision = mem.options().loops.decision;
   if (min_confidence) decision.min_confidence = *min_confidence;
-  auto answers = localize_queries(mem, queries, decision);
+  auto answers = localize_queries([&](const cv::Mat& img) { return MemoryQuery{{}, mem.localize(img, &decision)}; },
+                                  queries);
   if (sequence.max_speed && sequence.window == 1) usage_error("--max-speed needs --sequence N with N > 1");
   if (sequence.window > 1) {
     std::vector<MemoryLocalization> singles;

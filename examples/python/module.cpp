@@ -60,6 +60,8 @@ void bind_errors(py::module_& m) {
        "A memory or vocabulary made with other policies (descriptor, stack, options)."},
       {ErrorKind::busy, "BusyError", PyExc_OSError, "A memory store another program writes (one writer at a time)."},
       {ErrorKind::io, "IoError", PyExc_OSError, "A write, flush or rename the system refused (a full disk, permissions)."},
+      {ErrorKind::unavailable, "UnavailableError", PyExc_ConnectionError,
+       "A database server (a fleet's memory) that cannot be reached or went away: try again later."},
   };
   // Kept for the translator, which runs after this function returned (as `error` is).
   static std::vector<PyObject*> classes;

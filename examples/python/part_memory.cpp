@@ -13,6 +13,7 @@
 
 #include <vmap/io/calibration.hpp>
 #include <vmap/io/frame_source.hpp>
+#include <vmap/io/postgres.hpp>
 #include <vmap/memory/replace.hpp>
 #include <vmap/memory/sequence.hpp>
 #include <vmap/runtime/exports.hpp>
@@ -105,8 +106,15 @@ AnyVocabulary vocabulary_of(const std::optional<std::string>& file) {
 /// A new memory store at `path`; an existing memory is replaced with force (by the
 /// library, when the new one is closed), any other existing file refused.
 std::unique_ptr<PyMemory> create_memory(const std::string& given, const PolicyStack& stack, const MemoryOptions& o,
-                                        AnyVocabulary vocabulary, bool force, std::size_t working_memory) {
+                                        AnyVocabulary vocabulary, bool force, std::size_t working_memory,
+                                        const std::optional<std::string>& robot) {
   const fs::path path = memory_path(given);
+  if (pg::is_uri(given)) {
+    if (!robot) fail("create: a fleet's memory (a postgresql:// URI) holds one memory per robot: give robot='NAME'");
+    return std::make_unique<PyMemory>(AnyMemory::create(path, stack, o, std::move(vocabulary),
+                                                        {.robot = *robot, .working_memory = working_memory, .replace = force}));
+  }
+  if (robot) fail("create: robot= needs a fleet's memory (a postgresql:// URI as path)");
   std::error_code ec;
   if (!force && fs::exists(path, ec)) {
     if (memory_kind(path) == MemoryKind::other)
@@ -365,11 +373,11 @@ void bind(py::module_& m) {
              const std::string& refine_model, const std::string& estimator, const std::optional<std::string>& camera,
              double tau, const std::string& rule, const std::string& images, const std::optional<std::string>& vocabulary,
              std::size_t vocabulary_after, double min_confidence, std::optional<double> chance_inlier_rate, bool force,
-             std::size_t working_memory) {
+             std::size_t working_memory, const std::optional<std::string>& robot) {
             const PolicyStack stack = policy_stack(features, nfeatures, model, refine_model, estimator, camera);
             return create_memory(path, stack,
                                  options_of(stack, tau, rule, images, vocabulary_after, min_confidence, chance_inlier_rate),
-                                 vocabulary_of(vocabulary), force, working_memory);
+                                 vocabulary_of(vocabulary), force, working_memory, robot);
           },
           py::arg("path"), py::kw_only(), py::arg("features") = "orb", py::arg("nfeatures") = 1000,
           py::arg("model") = "", py::arg("refine_model") = "", py::arg("estimator") = "magsac",
@@ -378,26 +386,32 @@ void bind(py::module_& m) {
           py::arg("vocabulary_after") = MemoryOptions{}.vocabulary_after,
           py::arg("min_confidence") = PlaceDecisionOptions{}.min_confidence, py::arg("chance_inlier_rate") = py::none(),
           py::arg("force") = false,
-          py::arg("working_memory") = std::size_t{200},
+          py::arg("working_memory") = std::size_t{200}, py::arg("robot") = py::none(),
           "A new memory store at `path` (a folder means path/memory.vmdb), synced at every key image and loop\n"
           "edge, holding the features of its `working_memory` newest key images in RAM (0: all). An existing\n"
           "memory is replaced only with force=True, when the new one is closed (close() or the end of a with\n"
           "block): until then readers see the old one, which stays if the new one is never closed or its with\n"
           "block ends in an exception; refused while another program writes it. Any other existing file is\n"
-          "refused.")
+          "refused. A postgresql:// URI as path is a fleet's memory on that server: the memory is robot\n"
+          "`robot`'s there (a new robot; the fleet's schema is made on first use).")
       .def_static(
           "open",
-          [](const std::string& path, bool read_only, bool new_session, std::size_t working_memory) {
+          [](const std::string& path, bool read_only, bool new_session, std::size_t working_memory,
+             const std::optional<std::string>& robot) {
             if (new_session && read_only) fail("open: new_session and read_only conflict (a new session writes the memory)");
+            if (pg::is_uri(path) && !robot)
+              fail("open: a fleet's memory (a postgresql:// URI) holds one memory per robot: give robot='NAME'");
+            if (!pg::is_uri(path) && robot) fail("open: robot= needs a fleet's memory (a postgresql:// URI as path)");
             return std::make_unique<PyMemory>(AnyMemory::open(
-                memory_path(path),
-                {.write = !read_only, .new_session = new_session, .pixels = !read_only, .working_memory = working_memory}));
+                memory_path(path), {.robot = robot.value_or(""), .write = !read_only, .new_session = new_session,
+                                    .pixels = !read_only, .working_memory = working_memory}));
           },
           py::arg("path"), py::kw_only(), py::arg("read_only") = false, py::arg("new_session") = false,
-          py::arg("working_memory") = std::size_t{200},
+          py::arg("working_memory") = std::size_t{200}, py::arg("robot") = py::none(),
           "An existing memory: a store continued where it stopped (new_session=True: a new run), or\n"
           "read while another program writes it (read_only=True: a snapshot; push refused); or a .vmem\n"
-          "file, read into RAM. Its policy stack is the one it records.")
+          "file, read into RAM. Its policy stack is the one it records. A postgresql:// URI as path opens\n"
+          "robot `robot`'s memory in that fleet's memory.")
       .def(
           "push",
           [](PyMemory& self, const py::array& image, std::optional<double> timestamp,
@@ -549,7 +563,11 @@ void bind(py::module_& m) {
       .def_property_readonly("path", [](PyMemory& self) -> py::object {
         const std::string p = self.locked([](AnyMemory& mem) { return mem.path().string(); });
         return p.empty() ? py::object(py::none()) : py::object(py::str(p));
-      }, "the file it was opened from or created at, or None in RAM")
+      }, "the file it was opened from or created at (a fleet's URI without its password), or None in RAM")
+      .def_property_readonly("robot", [](PyMemory& self) -> py::object {
+        const std::string r = self.locked([](AnyMemory& mem) { return mem.robot(); });
+        return r.empty() ? py::object(py::none()) : py::object(py::str(r));
+      }, "the robot whose memory it is in a fleet's memory, or None")
       .def_property_readonly("read_only", [](PyMemory& self) { return self.locked([](AnyMemory& mem) { return mem.read_only(); }); },
                              "whether it was opened read-only (push and the other changes refused)")
       .def_property_readonly("stack", [](PyMemory& self) {

@@ -51,6 +51,7 @@ struct BuildArgs {
   std::string memory;  // --memory DIR|FILE; empty: no memory
   bool resume = false;
   std::string session;  // --session new: add this run to --memory as a new session
+  std::string robot;    // --robot NAME: the robot whose memory it is in a fleet's memory (a URI)
   bool force = false;   // --force: replace an existing memory
   std::size_t save_every = 0;
   std::size_t working_memory = ex::default_working_memory;
@@ -183,7 +184,8 @@ struct MemoryRun {
   vmap::RecordResult record;
   std::size_t loops = 0;  ///< loop edges in the whole memory
   std::optional<std::size_t> last_frame;
-  std::uintmax_t bytes = 0;
+  std::optional<std::uintmax_t> bytes;  ///< the memory file's (none on a server)
+  std::string robot;                    ///< a fleet's robot
   /// Writes the memory's exports (runtime/exports.hpp) into a folder.
   std::function<std::vector<std::string>(const std::filesystem::path&)> write_exports;
   vmap::PolicyStack stack;  ///< the memory's policies (a resumed memory's own)
@@ -224,7 +226,8 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
                    {"loops", memory->loops},
                    {"new_loops", new_loops},
                    {"last_frame_index", memory->last_frame ? nlohmann::json(*memory->last_frame) : nlohmann::json(nullptr)},
-                   {"bytes", memory->bytes},
+                   {"bytes", memory->bytes ? nlohmann::json(*memory->bytes) : nlohmann::json(nullptr)},
+                   {"robot", memory->robot.empty() ? nlohmann::json(nullptr) : nlohmann::json(memory->robot)},
                    {"stack", ex::stack_json(memory->stack)}};
   }
   if (a.json) {
@@ -270,10 +273,11 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
     std::fprintf(out, "  quality (eq. 7)   not a finite number\n");
   std::fprintf(out, "  time              %.2f s (%.1f frames/s)\n", seconds, fps);
   if (memory)
-    std::fprintf(out, "  memory            %s: session %zu %s %zu frames, %zu loop edges (%zu new), last frame %zu, %ju bytes\n",
-                 memory->file.c_str(), memory->session, memory->resumed ? "resumed with" : "pushed", memory->record.pushed,
-                 memory->loops, memory->record.loops.size(), memory->last_frame.value_or(0),
-                 static_cast<std::uintmax_t>(memory->bytes));
+    std::fprintf(out, "  memory            %s%s: session %zu %s %zu frames, %zu loop edges (%zu new), last frame %zu%s\n",
+                 memory->file.c_str(), memory->robot.empty() ? "" : (", robot '" + memory->robot + "'").c_str(),
+                 memory->session, memory->resumed ? "resumed with" : "pushed", memory->record.pushed, memory->loops,
+                 memory->record.loops.size(), memory->last_frame.value_or(0),
+                 memory->bytes ? (", " + std::to_string(*memory->bytes) + " bytes").c_str() : "");
   if (out_dir) {
     std::fprintf(out, "\n  wrote %s\n", ex::written_files(a.out, written).c_str());
   }
@@ -323,21 +327,24 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   // conflict, check_continuable).
   vmap::PolicyStack stack;
   if (!continued) stack = ex::stack_of_args(a.features, a.nfeatures, a.model, a.refine_model, a.estimator, a.camera, a.input);
-  ex::prepare_memory_output(file, "--memory", inputs, continued, args.force);
+  const bool fleet = vmap::pg::is_uri(file.native());
+  if (!fleet && !args.robot.empty()) ex::usage_error("--robot needs a fleet's memory: --memory postgresql://...");
+  ex::prepare_memory_output(file, "--memory", inputs, continued, args.force, args.robot);
   if (continued)
     ex::check_continuable(file, app, {"--threshold", "--rule", "--images", "--vocabulary", "--vocabulary-after",
-                                      "--min-confidence", "--chance-rate"}, how);
+                                      "--min-confidence", "--chance-rate"}, how, args.robot);
   if (!args.vocabulary.empty()) ex::check_input_file(args.vocabulary, "--vocabulary");
   const vmap::SyncPolicy sync{args.save_every};
   std::optional<vmap::AnyMemory> mem;
   if (continued)
-    mem.emplace(vmap::AnyMemory::open(file, {.write = true, .new_session = how == ex::Continuation::new_session,
+    mem.emplace(vmap::AnyMemory::open(file, {.robot = args.robot, .write = true,
+                                             .new_session = how == ex::Continuation::new_session,
                                              .working_memory = args.working_memory, .sync = sync}));
-  inputs.push_back(file);
+  if (!fleet) inputs.push_back(file);
   std::optional<ex::OutputFolder> out_dir;
   if (!a.out.empty()) {
     // The --out folder is replaced as a whole when the run ends: a memory inside it would go.
-    if (ex::cli_detail::inside(ex::cli_detail::resolved(file), ex::cli_detail::resolved(a.out)))
+    if (!fleet && ex::cli_detail::inside(ex::cli_detail::resolved(file), ex::cli_detail::resolved(a.out)))
       ex::usage_error("--memory: '" + file.string() + "' is inside the --out folder '" + a.out +
                       "', which is replaced as a whole (keep the memory elsewhere)");
     std::vector<std::string> files{"map.vmap", "key_images.txt", "contact_sheet.png", "matches.png"};
@@ -368,12 +375,14 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
     // --force: the memory there is replaced when the run closes it; until then readers
     // see it, and a failed run leaves it as it was.
     mem.emplace(vmap::AnyMemory::create(file, stack, memory_options(args, stack), std::move(vocabulary),
-                                        {.working_memory = args.working_memory, .sync = sync, .replace = args.force}));
+                                        {.robot = args.robot, .working_memory = args.working_memory, .sync = sync,
+                                         .replace = args.force && !fleet}));
     vmap::set_session_input(*mem, input);
   }
-  ex::NewMemoryGuard guard(mem, !continued);
+  ex::NewMemoryGuard guard(mem, !continued, file.native());
   ex::Progress progress("vmap build", expected_frames(src, so));
-  MemoryRun run{file, args.resume, mem->sessions().size() - 1, {}, 0, std::nullopt, 0, {}, mem->stack()};
+  MemoryRun run{mem->path(), args.resume, mem->sessions().size() - 1, {}, 0, std::nullopt, std::nullopt, args.robot, {},
+                mem->stack()};
   vmap::RecordOptions record;
   if (poses) record.poses = [&](const vmap::Frame& f) { return (*poses)(f); };
   record.on_frame = [&](const vmap::AnyMemory& m) {
@@ -394,7 +403,7 @@ int build_memory(const BuildArgs& args, const CLI::App& app) {
   mem->close();
   run.loops = mem->loops().size();
   run.last_frame = mem->last_frame_index();
-  run.bytes = fs::file_size(file);
+  run.bytes = ex::memory_bytes(file);
   run.write_exports = [&](const fs::path& dir) { return vmap::export_memory(*mem, dir, false); };
   // map.vmap and the pictures need every key image's features: the released ones are
   // read back from the memory.
@@ -431,6 +440,9 @@ std::function<int()> setup(CLI::App& app) {
                  "images; loops are searched across sessions)")
       ->check(CLI::IsMember({"new"}));
   app.add_flag("--force", args->force, "With --memory: replace an existing memory instead of refusing to");
+  app.add_option("--robot", args->robot,
+                 "With --memory postgresql://...: the robot whose memory this run writes in the fleet's memory (new, "
+                 "or continued with --resume or --session new)");
   app.add_option("--save-every", args->save_every,
                  "With --memory: also write it every N frames (0: only at key images, loop edges and the end)")
       ->check(ex::count_in(0, ex::max_frame_index));
@@ -464,7 +476,7 @@ std::function<int()> setup(CLI::App& app) {
     ex::current_inputs() = {a.input};
     ex::check_range(a);
     if (!args->memory.empty()) return build_memory(*args, app);
-    for (const char* o : {"--resume", "--session", "--save-every", "--working-memory", "--images", "--vocabulary",
+    for (const char* o : {"--resume", "--session", "--robot", "--save-every", "--working-memory", "--images", "--vocabulary",
                           "--vocabulary-after", "--min-confidence", "--chance-rate", "--poses", "--gcs"})
       if (app.get_option(o)->count() > 0) ex::usage_error(std::string(o) + " needs --memory DIR|FILE");
     const auto camera = ex::camera_option(a.camera, a.input);

@@ -56,6 +56,7 @@ struct Settings {
   std::string out;
   bool json = false;
   std::string memory;               // --memory M: answer from a saved visual memory
+  std::string robot;  // --robot NAME: the robot of a fleet's memory (a postgresql:// URI)
   std::optional<double> min_confidence;  // --min-confidence: with --memory, the place decision's threshold
   ex::SequenceArgs sequence;             // --sequence, --max-speed: with --memory
   std::vector<std::string> images;  // its query images
@@ -421,14 +422,16 @@ std::function<int()> setup(CLI::App& app) {
                  "memory's, 0.5); below it the answer is \"unknown place\"")
       ->check(ex::real_in(0.0, 1.0));
   ex::add_sequence_options(app, s->sequence);
+  ex::add_robot_option(app, s->robot);
   return [s, &app] {
     if (!s->memory.empty()) {
-      ex::refuse_other_options(
-          app, {"--memory", "IMAGE", "--json", "--min-confidence", "--sequence", "--max-speed", "--topic", "--record-time"},
-          "--memory");
+      ex::refuse_other_options(app,
+                               {"--memory", "--robot", "IMAGE", "--json", "--min-confidence", "--sequence", "--max-speed",
+                                "--topic", "--record-time"},
+                               "--memory");
       if (s->images.empty()) ex::usage_error("--memory needs query images: vmap localize --memory M IMAGE...");
       return ex::localize_from_memory(vmap::memory_path(s->memory), "--memory", s->images, s->json, s->min_confidence,
-                                      s->sequence);
+                                      s->sequence, s->robot);
     }
     if (!s->images.empty())
       ex::usage_error("query images on the command line need --memory M (the GCS modes take --query or --every-other)");

@@ -65,6 +65,7 @@ struct LoopsArgs {
   bool verbose = false;
   std::string out;
   std::string memory;  // --memory M: the loop edges of a saved visual memory
+  std::string robot;   // --robot NAME: the robot of a fleet's memory (M a postgresql:// URI)
   double time_offset = 0.0;
   bool edges = false;  // --memory: every loop edge instead of a summary
   ex::DescriptorChoice descriptor;  // --features, --nfeatures, --features-model, --refine-model
@@ -81,13 +82,14 @@ vmap::OptionNames option_names() {
 
 /// `vmap loops --memory M [--gt MATRIX | --gt-poses POSES] [--json]`.
 int run_memory(const LoopsArgs& a, const CLI::App& app) {
-  ex::refuse_other_options(app, {"--memory", "--gt", "--gt-poses", "--gt-distance", "--gt-angle", "--json", "--edges"}, "--memory");
+  ex::refuse_other_options(app, {"--memory", "--robot", "--gt", "--gt-poses", "--gt-distance", "--gt-angle", "--json", "--edges"},
+                           "--memory");
   if (!a.gt.empty() && !a.gt_poses.empty()) ex::usage_error("give at most one of --gt MATRIX and --gt-poses POSES");
   const auto file = vmap::memory_path(a.memory);
   ex::current_inputs() = {file.string()};
   for (const auto& [path, option] : {std::pair{a.gt, "--gt"}, std::pair{a.gt_poses, "--gt-poses"}})
     if (!path.empty()) ex::check_input_file(path, option);
-  const auto mem = ex::open_memory_input(file, "--memory");
+  const auto mem = ex::open_memory_input(file, "--memory", false, a.robot);
   {
     const double min_confidence = mem.options().loops.decision.min_confidence;
     nlohmann::json loops = nlohmann::json::array();
@@ -541,6 +543,7 @@ std::function<int()> setup(CLI::App& app) {
                  "Instead of INPUT: the loop edges of a saved visual memory (vmap build --memory; a folder means "
                  "DIR/memory.vmdb), evaluated over its key images with --gt / --gt-poses");
   app.add_flag("--edges", a->edges, "With --memory: list every loop edge (default: a summary and the 5 strongest)");
+  ex::add_robot_option(app, a->robot);
   return [a, &app] {
     if (app.count("--index") > 0) {
       old_spelling("--index", "--rank", "--index");

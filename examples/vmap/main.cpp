@@ -28,7 +28,8 @@ constexpr const char* exit_codes_text =
     "2 usage (unknown subcommand or option, bad option value, conflicting options, an output\n"
     "that is an input); 3 an input does not exist; 4 an input is damaged (corrupt); 5 an input\n"
     "of a newer format version; 6 a memory or vocabulary of other policies; 7 the memory is\n"
-    "being written by another program; 8 a write failed (a full disk). Every subcommand takes --config FILE: a YAML file (OpenCV FileStorage)\n"
+    "being written by another program; 8 a write failed (a full disk); 9 the memory's database\n"
+    "server cannot be reached. Every subcommand takes --config FILE: a YAML file (OpenCV FileStorage)\n"
     "whose keys are the long option names, e.g. \"features: akaze\"; the command line wins.";
 
 /// The subcommand named on the command line: the first argument that is not an option.

@@ -4,6 +4,7 @@
 // code (0 ok, 1 bad input or failed run, 2 usage) and never aborts (134).
 
 #include "support/euroc_layout.hpp"
+#include "support/pg_server.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/place/vocabulary.hpp>
@@ -2024,5 +2025,130 @@ TEST_SUITE("data") {
     INFO(r.err);
     REQUIRE(r.code == 0);
     CHECK(nlohmann::json::parse(r.out)["memory"]["last_frame_index"] == 15);
+  }
+}
+
+TEST_CASE("cli: robots of a fleet's memory on PostgreSQL build with --robot, find loops between them, move to files and back") {
+  auto* server = vmap::test::test_server();
+  if (!server) return;
+  const std::string uri = server->uri("cli_fleet");
+  const fs::path dir = fresh_dir("fleet");
+  // One vocabulary for every robot: bags of words of two vocabularies do not compare.
+  const std::string voc = (dir / "voc.bin").string();
+  REQUIRE(run_vmap({"vocabulary", sample, "--words", "512", "--depth", "3", "--out", voc}).code == 0);
+  const std::string file = (dir / "a.vmdb").string();
+  REQUIRE(run_vmap({"memory", "build", sample, "--memory", file, "--vocabulary", voc}).code == 0);
+  const Run a = run_vmap({"memory", "build", sample, "--memory", uri, "--robot", "a", "--vocabulary", voc, "--json"});
+  INFO(a.err);
+  REQUIRE(a.code == 0);
+  const auto aj = nlohmann::json::parse(a.out);
+  CHECK(aj["memory"]["robot"] == "a");
+  CHECK(aj["memory"]["file"] == uri);
+  CHECK(aj["memory"]["bytes"].is_null());
+  // Robot a's memory is the file's, key image for key image and loop for loop.
+  const auto in_file = nlohmann::json::parse(run_vmap({"memory", "info", file, "--json"}).out);
+  const auto on_server = nlohmann::json::parse(run_vmap({"memory", "info", uri, "--robot", "a", "--json"}).out);
+  CHECK(on_server["key_images"] == in_file["key_images"]);
+  CHECK(on_server["loops"] == in_file["loops"]);
+  CHECK(on_server["frames"] == in_file["frames"]);
+  CHECK(on_server["robot"] == "a");
+  // Robot b maps the same place: its key images are found among robot a's.
+  const Run b = run_vmap({"memory", "build", sample, "--memory", uri, "--robot", "b", "--vocabulary", voc});
+  INFO(b.err);
+  REQUIRE(b.code == 0);
+  CHECK(b.out.find("robot 'b'") != std::string::npos);
+  const auto fleet = nlohmann::json::parse(run_vmap({"memory", "info", uri, "--json"}).out);
+  REQUIRE(fleet["robots"].size() == 2);
+  CHECK(fleet["robots"][0]["robot"] == "a");
+  CHECK(fleet["robots"][0]["key_images"] == in_file["key_images"].size());
+  CHECK(fleet["robots"][1]["robot"] == "b");
+  CHECK(fleet["robots"][1]["fleet_loops"].get<std::size_t>() * 2 >= fleet["robots"][1]["key_images"].get<std::size_t>());
+  REQUIRE(!fleet["fleet_loops"].empty());
+  for (const auto& l : fleet["fleet_loops"]) {
+    CHECK(l["from_robot"] == "b");
+    CHECK(l["to_robot"] == "a");
+  }
+  const Run text = run_vmap({"memory", "info", uri});
+  CHECK(text.out.find("2 robots") != std::string::npos);
+  // Moved into a file and back into the fleet: equal record for record.
+  const std::string back = (dir / "back.vmdb").string();
+  REQUIRE(run_vmap({"memory", "convert", uri, back, "--robot", "a"}).code == 0);
+  const auto back_info = nlohmann::json::parse(run_vmap({"memory", "info", back, "--json"}).out);
+  CHECK(back_info["key_images"] == in_file["key_images"]);
+  CHECK(back_info["loops"] == in_file["loops"]);
+  // (convert copies the records; the note of the input a session was built from stays behind)
+  REQUIRE(back_info["sessions"].size() == in_file["sessions"].size());
+  for (const char* field : {"first_key", "frames", "key_images", "loops_within", "loops_across", "bytes"})
+    CHECK(back_info["sessions"][0][field] == in_file["sessions"][0][field]);
+  REQUIRE(run_vmap({"memory", "convert", file, uri, "--robot", "a2"}).code == 0);
+  const auto a2 = nlohmann::json::parse(run_vmap({"memory", "info", uri, "--robot", "a2", "--json"}).out);
+  CHECK(a2["key_images"] == in_file["key_images"]);
+  CHECK(a2["loops"] == in_file["loops"]);
+  // Merged files written into the fleet as one robot.
+  const Run merged = run_vmap({"memory", "merge", file, back, "--out", uri, "--robot", "ab", "--json"});
+  INFO(merged.err);
+  REQUIRE(merged.code == 0);
+  CHECK(nlohmann::json::parse(merged.out)["sessions"] == 2);
+  // Localized among every robot, or in one.
+  const Run where = run_vmap({"localize", "--memory", uri, frame_a, "--json"});
+  INFO(where.err);
+  REQUIRE(where.code == 0);
+  const auto wj = nlohmann::json::parse(where.out);
+  CHECK(wj["queries"][0]["localized"] == true);
+  CHECK(wj["robots"].size() == 4);
+  const Run in_b = run_vmap({"localize", "--memory", uri, "--robot", "b", frame_a, "--json"});
+  CHECK(nlohmann::json::parse(in_b.out)["queries"][0]["localized"] == true);
+  // Continued: --resume, --session new; an existing robot is never replaced.
+  const Run again = run_vmap({"memory", "build", sample, "--memory", uri, "--robot", "a"});
+  CHECK(again.code == 2);
+  CHECK(again.err.find("robot 'a' of memory '" + uri + "' exists") != std::string::npos);
+  const Run force = run_vmap({"memory", "build", sample, "--memory", uri, "--robot", "a", "--force"});
+  CHECK(force.code == 2);
+  CHECK(force.err.find("a fleet's robot is not replaced") != std::string::npos);
+  const Run session = run_vmap({"memory", "build", sample, "--memory", uri, "--robot", "a", "--session", "new", "--json"});
+  INFO(session.err);
+  CHECK(session.code == 0);
+  CHECK(nlohmann::json::parse(run_vmap({"memory", "info", uri, "--robot", "a", "--json"}).out)["sessions"].size() == 2);
+  // Usage: no robot where one writes; --robot with a file; a server that cannot be reached.
+  const Run no_robot = run_vmap({"memory", "build", sample, "--memory", uri});
+  CHECK(no_robot.code == 2);
+  CHECK(no_robot.err.find("give --robot NAME") != std::string::npos);
+  CHECK(run_vmap({"memory", "build", sample, "--memory", (dir / "c.vmdb").string(), "--robot", "c"}).code == 2);
+  const Run away = run_vmap({"memory", "info", "postgresql://fleet:s3cret@127.0.0.1:1/vmap?connect_timeout=2", "--robot", "a"});
+  CHECK(away.code == 9);
+  CHECK(away.err.find("s3cret") == std::string::npos);
+  const Run missing = run_vmap({"memory", "info", uri, "--robot", "zed"});
+  CHECK(missing.code == 3);
+  CHECK(missing.err.find("its robots: a, b, a2, ab") != std::string::npos);
+}
+
+TEST_CASE("cli: a robot of a fleet's memory killed (SIGKILL) at any moment resumes to the memory of an uninterrupted run") {
+  auto* server = vmap::test::test_server();
+  if (!server) return;
+  const std::string uri = server->uri("cli_fleet_kill");
+  REQUIRE(run_vmap({"memory", "build", sample, "--memory", uri, "--robot", "ref", "--images", "jpeg"}).code == 0);
+  const auto whole = nlohmann::json::parse(run_vmap({"memory", "info", uri, "--robot", "ref", "--json"}).out);
+  REQUIRE(whole["key_images"].size() >= 12);
+  int trial = 0;
+  for (const char* delay : {"0.05", "0.2", "0.35", "0.5", "0.7", "0.9"}) {
+    CAPTURE(delay);
+    const std::string robot = "killed" + std::to_string(trial++);
+    const std::string cmd = "cd " + quote(VMAP_TEST_SOURCE_DIR) + " && timeout -s KILL " + delay + " " +
+                            quote(VMAP_CLI_BINARY) + " memory build " + quote(sample) + " --memory " + quote(uri) +
+                            " --robot " + robot + " --images jpeg >/dev/null 2>&1";
+    (void)std::system(cmd.c_str());
+    // What the kill left: no robot, a robot without a sync (started again with --force), or
+    // a memory to resume; the server freed the killed writer's lock with its connection.
+    const Run resumed = run_vmap({"memory", "build", sample, "--memory", uri, "--robot", robot, "--resume"});
+    if (resumed.code != 0 && resumed.err.find("already holds every frame") == std::string::npos) {
+      INFO(resumed.err);
+      const Run again = run_vmap({"memory", "build", sample, "--memory", uri, "--robot", robot, "--images", "jpeg", "--force"});
+      INFO(again.err);
+      REQUIRE(again.code == 0);
+    }
+    const auto got = nlohmann::json::parse(run_vmap({"memory", "info", uri, "--robot", robot, "--json"}).out);
+    CHECK(got["key_images"] == whole["key_images"]);
+    CHECK(got["loops"] == whole["loops"]);
+    CHECK(got["frames"] == whole["frames"]);
   }
 }

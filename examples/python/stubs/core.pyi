@@ -56,6 +56,10 @@ class IoError(Error, OSError):
     """A write, flush or rename the system refused (a full disk, permissions)."""
     kind: str
 
+class UnavailableError(Error, ConnectionError):
+    """A database server (a fleet's memory) that cannot be reached or went away: try again later."""
+    kind: str
+
 class Frames:
     """The frames of a source, as (image, timestamp, name) tuples (vmap.frames)."""
 

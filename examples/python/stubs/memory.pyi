@@ -183,10 +183,16 @@ class VisualMemory:
         chance_inlier_rate: Optional[float] = None,
         force: bool = False,
         working_memory: int = 200,
+        robot: Optional[str] = None,
     ) -> VisualMemory: ...
     @staticmethod
     def open(
-        path: str, *, read_only: bool = False, new_session: bool = False, working_memory: int = 200
+        path: str,
+        *,
+        read_only: bool = False,
+        new_session: bool = False,
+        working_memory: int = 200,
+        robot: Optional[str] = None,
     ) -> VisualMemory: ...
     def push(
         self,
@@ -246,6 +252,8 @@ class VisualMemory:
     def export(self, folder: str) -> list[str]: ...
     @property
     def path(self) -> Optional[str]: ...
+    @property
+    def robot(self) -> Optional[str]: ...
     @property
     def read_only(self) -> bool: ...
     @property

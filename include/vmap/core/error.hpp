@@ -23,17 +23,19 @@ enum class ErrorKind : std::uint8_t {
   policy_mismatch,      ///< a memory or vocabulary made with other policies (descriptor, stack)
   busy,                 ///< a resource held by another program (a store's writer lock)
   io,                   ///< a write, flush or rename that the system refused (disk full, permissions)
+  unavailable,          ///< a database server that cannot be reached or went away: try again later
 };
 
 /// The names of the kinds, as written above (core/names.hpp).
 [[nodiscard]] constexpr auto names_of(ErrorKind) noexcept {
-  return detail::NameTable<ErrorKind, 7>{{{{ErrorKind::invalid_argument, "invalid_argument"},
+  return detail::NameTable<ErrorKind, 8>{{{{ErrorKind::invalid_argument, "invalid_argument"},
                                            {ErrorKind::not_found, "not_found"},
                                            {ErrorKind::corrupt, "corrupt"},
                                            {ErrorKind::unsupported_version, "unsupported_version"},
                                            {ErrorKind::policy_mismatch, "policy_mismatch"},
                                            {ErrorKind::busy, "busy"},
-                                           {ErrorKind::io, "io"}}}};
+                                           {ErrorKind::io, "io"},
+                                           {ErrorKind::unavailable, "unavailable"}}}};
 }
 [[nodiscard]] constexpr std::string_view to_string(ErrorKind k) noexcept { return names_of(k).name(k); }
 

@@ -413,10 +413,23 @@ class LoopEngine {
       for (std::size_t j = 0; j < d.candidates; ++j) to_verify.emplace_back(j, 0.0);
     }
     d.rank_ms = ms_since(t0);
-    std::vector<Verified> verified = verify(d, q, to_verify, lookup, dec);
-    const auto td = std::chrono::steady_clock::now();
-    choose(d, verified, lookup, false, !to_verify.empty(), dec);
-    d.decide_ms = ms_since(td);
+    decide_among(d, q, to_verify, lookup, dec);
+    return d;
+  }
+
+  /// Where image features `q` were taken among the candidates `ranked` (an id the lookup
+  /// knows and its bag-of-words score, best first), ranked elsewhere: each is verified
+  /// and the place decided as localize() decides (a single image: no revisit rule, no
+  /// temporal consistency). What a fleet's memory uses for the key images of other
+  /// robots, which its own inverted file ranked (memory/fleet.hpp).
+  template <FeatureLookup L>
+  PlaceDecision decide(const Features& q, const std::vector<std::pair<std::size_t, double>>& ranked, const L& lookup,
+                       const PlaceDecisionOptions* decision = nullptr) const {
+    const PlaceDecisionOptions& dec = decision ? *decision : options_.decision;
+    if (decision) detail::check_place_decision_options(*decision, "LoopEngine::decide");
+    PlaceDecision d;
+    d.candidates = ranked.size();
+    decide_among(d, q, ranked, lookup, dec);
     return d;
   }
 
@@ -568,6 +581,15 @@ class LoopEngine {
       c.lowest = std::min(c.lowest, similarity_to_j(k));
     }
     return c.lowest < bar;
+  }
+
+  template <FeatureLookup L>
+  void decide_among(PlaceDecision& d, const Features& q, const std::vector<std::pair<std::size_t, double>>& to_verify,
+                    const L& lookup, const PlaceDecisionOptions& dec) const {
+    std::vector<Verified> verified = verify(d, q, to_verify, lookup, dec);
+    const auto td = std::chrono::steady_clock::now();
+    choose(d, verified, lookup, false, !to_verify.empty(), dec);
+    d.decide_ms = ms_since(td);
   }
 
   struct Verified {

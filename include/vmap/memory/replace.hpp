@@ -27,6 +27,7 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
+#include <vmap/io/postgres.hpp>
 #include <vmap/io/sqlite.hpp>
 #include <vmap/memory/detail/format.hpp>
 #include <vmap/memory/types.hpp>
@@ -51,8 +52,10 @@ namespace vmap {
 
 /// The kind of memory `file` holds. A path that is not a regular file (a folder, a FIFO,
 /// a device or a socket; a symbolic link is followed) is `other` without being opened:
-/// opening a FIFO would wait for a writer.
+/// opening a FIFO would wait for a writer. A PostgreSQL URI (a fleet's memory) is a
+/// store, without connecting.
 [[nodiscard]] inline MemoryKind memory_kind(const std::filesystem::path& file) {
+  if (pg::is_uri(file.native())) return MemoryKind::store;
   std::error_code ec;
   if (!std::filesystem::is_regular_file(file, ec)) return MemoryKind::other;
   if (std::filesystem::file_size(file, ec) == 0 && !ec) return MemoryKind::store;

@@ -66,7 +66,9 @@
 #include <vmap/core/error.hpp>
 #include <vmap/io/binary.hpp>
 #include <vmap/io/sqlite.hpp>
+#include <vmap/memory/detail/fleet_schema.hpp>
 #include <vmap/memory/detail/format.hpp>
+#include <vmap/memory/detail/store_db.hpp>
 #include <vmap/memory/detail/record_codecs.hpp>
 #include <vmap/memory/records.hpp>
 #include <vmap/memory/visual_memory.hpp>
@@ -129,6 +131,7 @@ struct MemoryStoreRows {
     std::int64_t key = 0;
     std::string record;
     std::int64_t crc = 0;
+    BowVector bow;  ///< its words and weights: the fleet's postings, on a server
   };
   struct Loop {
     std::int64_t id = 0, from_key = 0, to_key = 0, inliers = 0;
@@ -193,7 +196,7 @@ inline MemoryStoreRows store_rows(const MemoryRecords& r) {
   }
   for (std::size_t i = 0; i < r.bows.size(); ++i) {
     const auto id = static_cast<std::uint32_t>(r.first_bow + i);
-    MemoryStoreRows::Bow row{id, PlaceDatabase<std::uint32_t>::record_of(id, r.bows[i]), 0};
+    MemoryStoreRows::Bow row{id, PlaceDatabase<std::uint32_t>::record_of(id, r.bows[i]), 0, r.bows[i]};
     row.crc = row_crc(row.record);
     rows.bows.push_back(std::move(row));
   }
@@ -269,13 +272,12 @@ inline MemoryStoreRows store_rows(const MemoryRecords& r) {
   return rows;
 }
 
-/// A store's SQLite connection and, for a writer, the thread that commits its syncs, one
-/// at a time. MemoryStore holds it on the heap, so that the thread keeps using it while
-/// the MemoryStore object moves.
+/// A store's connection (an SQLite file or a PostgreSQL server) and, for a writer, the
+/// thread that commits its syncs, one at a time. MemoryStore holds it on the heap, so that
+/// the thread keeps using it while the MemoryStore object moves.
 class MemoryStoreConnection {
  public:
-  MemoryStoreConnection(const std::filesystem::path& path, sqlite::Access access, std::string what)
-      : db(path, access, std::move(what)) {}
+  explicit MemoryStoreConnection(StoreDb connection) : db(std::move(connection)) {}
   MemoryStoreConnection(const MemoryStoreConnection&) = delete;
   MemoryStoreConnection& operator=(const MemoryStoreConnection&) = delete;
   /// Lets the writer thread commit the rows in flight, then joins it. Their error, if
@@ -290,7 +292,15 @@ class MemoryStoreConnection {
     thread_.join();
   }
 
-  sqlite::Database db;  ///< declared first: closed after the statements and the thread
+  StoreDb db;  ///< declared first: closed after the statements and the thread
+  /// A server's connection that broke (the server restarted) is made again, and its
+  /// session set up again, by this, before the next transaction (MemoryStore sets it).
+  std::function<void()> revive;
+  /// On a server: the robot's number, whose bags of words each sync also writes into the
+  /// fleet's inverted file (memory/fleet.hpp), tagged with the CRC-32 of the vocabulary's
+  /// record (set from the store, then by each sync that writes the vocabulary).
+  std::int64_t fleet_robot = 0;
+  std::int64_t vocabulary_crc = 0;
 
   /// Whether the connection writes (a writer thread runs).
   [[nodiscard]] bool writes() const noexcept { return thread_.joinable(); }
@@ -308,19 +318,31 @@ class MemoryStoreConnection {
   /// Prepares the statements that insert rows (once).
   void prepare_statements() {
     if (insert_key_) return;
+    // A server's COMMIT whose answer was lost (the server went away) may have committed:
+    // the sync is sent again, and the rows it holds already are kept as they are (one
+    // writer per memory, so they are the same rows). A file's commit is never in doubt,
+    // and a row written twice stays an error there.
+    const std::string again = db.postgres() ? " ON CONFLICT DO NOTHING" : "";
     insert_key_.emplace(db.prepare(
         "INSERT INTO key_images(id, frame_index, timestamp, time_ns, name, keypoints, record, detections, crc) "
-        "VALUES(?,?,?,?,?,?,?,?,?)",
+        "VALUES(?,?,?,?,?,?,?,?,?)" + again,
         "insert a key image"));
     insert_link_.emplace(db.prepare(
-        "INSERT INTO links(key, matches, inliers, similarity, record, crc) VALUES(?,?,?,?,?,?)", "insert a link"));
+        "INSERT INTO links(key, matches, inliers, similarity, record, crc) VALUES(?,?,?,?,?,?)" + again, "insert a link"));
     update_bow_.emplace(db.prepare("UPDATE key_images SET bow = ?, bow_crc = ? WHERE id = ?", "write a bag of words"));
     insert_loop_.emplace(db.prepare(
-        "INSERT INTO loops(id, from_key, to_key, inliers, confidence, record, crc) VALUES(?,?,?,?,?,?,?)",
+        "INSERT INTO loops(id, from_key, to_key, inliers, confidence, record, crc) VALUES(?,?,?,?,?,?,?)" + again,
         "insert a loop edge"));
-    put_meta_.emplace(db.prepare("INSERT OR REPLACE INTO meta(name, value, crc) VALUES(?,?,?)", "write the state"));
+    put_meta_.emplace(db.prepare("INSERT INTO meta(name, value, crc) VALUES(?,?,?) "
+                                 "ON CONFLICT(name) DO UPDATE SET value = excluded.value, crc = excluded.crc",
+                                 "write the state"));
     insert_session_.emplace(
-        db.prepare("INSERT INTO sessions(id, first_key, first_frame) VALUES(?,?,?)", "insert a session"));
+        db.prepare("INSERT INTO sessions(id, first_key, first_frame) VALUES(?,?,?)" + again, "insert a session"));
+    if (fleet_robot > 0)
+      insert_postings_.emplace(db.prepare(
+          "INSERT INTO vmap.postings(robot, key, word, weight, vocabulary) SELECT ?, ?, w, x, ? "
+          "FROM unnest(CAST(? AS integer[]), CAST(? AS double precision[])) AS t(w, x) ON CONFLICT DO NOTHING",
+          "write the bag of words into the fleet's inverted file"));
   }
 
   /// Hands one sync's rows to the writer thread. None may be in flight (wait() first):
@@ -361,7 +383,8 @@ class MemoryStoreConnection {
       lock.unlock();
       std::exception_ptr error;
       try {
-        sqlite::Transaction t(db, "write the memory");
+        if (revive) revive();
+        StoreTransaction t(db, "write the memory");
         insert(*rows_);
         t.commit();
       } catch (const std::exception& e) {
@@ -402,9 +425,17 @@ class MemoryStoreConnection {
       insert_link_->bind(1, l.key).bind(2, l.matches).bind(3, l.inliers).bind(4, l.similarity).bind_blob(5, l.record).bind(6, l.crc);
       insert_link_->run();
     }
+    for (const auto& [name, value] : rows.meta)
+      if (std::string_view(name) == "vocabulary") vocabulary_crc = row_crc(value);
     for (const auto& b : rows.bows) {
       update_bow_->bind_blob(1, b.record).bind(2, b.crc).bind(3, b.key);
       update_bow_->run();
+      if (insert_postings_) {
+        const auto [words, weights] = l1_postings(b.bow);
+        insert_postings_->bind(1, fleet_robot).bind(2, b.key).bind(3, vocabulary_crc);
+        insert_postings_->bind_text(4, pg_array(words)).bind_text(5, pg_array(weights));
+        insert_postings_->run();
+      }
     }
     for (const auto& e : rows.loops) {
       insert_loop_->bind(1, e.id)
@@ -427,7 +458,8 @@ class MemoryStoreConnection {
   }
 
   // Prepared once for a writer, used by one thread at a time (its thread, or write_now).
-  std::optional<sqlite::Statement> insert_key_, insert_link_, update_bow_, insert_loop_, put_meta_, insert_session_;
+  std::optional<StoreQuery> insert_key_, insert_link_, update_bow_, insert_loop_, put_meta_, insert_session_,
+      insert_postings_;
   std::mutex mutex_;
   std::condition_variable changed_;      ///< busy_ or stop_ changed
   std::optional<MemoryStoreRows> rows_;  ///< the sync in flight
@@ -444,10 +476,16 @@ class MemoryStore {
   /// A new, empty store at `path`; refused when the file exists. `what` names it in
   /// messages (default "memory '<path>'"; a store built to replace another under a
   /// temporary name is named as the memory it replaces).
-  [[nodiscard]] static MemoryStore create(const std::filesystem::path& path, std::string what = {}) {
+  ///
+  /// A PostgreSQL connection URI (pg::is_uri) instead of a path is a fleet's memory on
+  /// that server: the store is robot `robot`'s memory there, new (refused when the fleet
+  /// has the robot), the fleet's schema created on first use.
+  [[nodiscard]] static MemoryStore create(const std::filesystem::path& path, std::string what = {},
+                                          const std::string& robot = {}) {
+    if (pg::is_uri(path.native())) return open_on_server(path.native(), robot, sqlite::Access::create);
     MemoryStore s(path, sqlite::Access::create, std::move(what));
     try {
-      sqlite::Transaction t(s.db(), "create the tables");
+      detail::StoreTransaction t(s.db(), "create the tables");
       s.db().exec(schema_sql(), "create the tables");
       t.commit();
     } catch (...) {
@@ -463,8 +501,14 @@ class MemoryStore {
   /// An existing store: `write` to sync a memory into it (one writer at a time; a store
   /// of an older schema is brought to the current one first), `read` to load it while
   /// another program may write.
-  [[nodiscard]] static MemoryStore open(const std::filesystem::path& path, sqlite::Access access = sqlite::Access::write) {
+  ///
+  /// A PostgreSQL connection URI instead of a path opens robot `robot`'s memory in that
+  /// fleet's memory (not_found when the fleet has no such robot, busy when another program
+  /// writes it).
+  [[nodiscard]] static MemoryStore open(const std::filesystem::path& path, sqlite::Access access = sqlite::Access::write,
+                                        const std::string& robot = {}) {
     detail::check(access != sqlite::Access::create, "MemoryStore::open: use MemoryStore::create for a new store");
+    if (pg::is_uri(path.native())) return open_on_server(path.native(), robot, access);
     std::error_code ec;
     if (std::filesystem::is_regular_file(path, ec) && std::filesystem::file_size(path, ec) == 0 && !ec)
       detail::fail(ErrorKind::corrupt, "memory '" + path.string() + "' is empty: its creation was interrupted before the tables were "
@@ -477,6 +521,44 @@ class MemoryStore {
     return s;
   }
 
+  /// The robots of the fleet's memory at `uri` (a postgresql:// URI), in the order they
+  /// joined; empty when the database holds no vmap memory yet.
+  [[nodiscard]] static std::vector<std::string> robots(const std::string& uri) {
+    const std::string shown = "memory '" + pg::redacted(uri) + "'";
+    detail::StoreDb db(pg::Connection(uri, shown));
+    if (!detail::fleet_present(db, detail::fleet_version)) return {};
+    return detail::fleet_robots(db);
+  }
+
+  /// Removes robot `robot` from the fleet's memory at `uri` when its memory holds
+  /// nothing (no sync was committed: a first run that failed before its first key
+  /// image), so that the name can start again; true when it was removed. A robot that
+  /// holds a memory, or that another program writes, is kept (false).
+  static bool remove_unsynced_robot(const std::string& uri, const std::string& robot) {
+    const std::string shown = pg::redacted(uri);
+    detail::StoreDb db(pg::Connection(uri, "robot '" + robot + "' of memory '" + shown + "'"));
+    if (!detail::fleet_present(db, detail::fleet_version)) return false;
+    const auto id = detail::fleet_robot(db, robot);
+    if (!id) return false;
+    try {
+      detail::enter_fleet_robot(db, *id, true);
+    } catch (const Error& e) {
+      if (e.kind() == ErrorKind::busy) return false;
+      throw;
+    }
+    detail::StoreTransaction t(db, "remove the robot");
+    {
+      auto q = db.prepare("SELECT count(*) FROM meta", "look for a sync");
+      if (!q.step() || q.integer(0) > 0) return false;
+    }
+    auto q = db.prepare("DELETE FROM vmap.robots WHERE id = ?", "remove the robot");
+    q.bind(1, *id);
+    q.run();
+    db.exec("DROP SCHEMA " + detail::robot_schema(*id) + " CASCADE", "remove the robot's tables");
+    t.commit();
+    return true;
+  }
+
   /// A move keeps the sync in flight going (the writer thread and the connection stay
   /// where they are); a store assigned over waits for its own, as the destructor does.
   MemoryStore(MemoryStore&&) noexcept = default;
@@ -487,7 +569,18 @@ class MemoryStore {
   /// thrown from a destructor and is dropped: flush() first to learn it.
   ~MemoryStore() = default;
 
+  /// The file, or a fleet's URI without its password.
   [[nodiscard]] const std::filesystem::path& path() const noexcept { return path_; }
+  /// The robot whose memory it is in a fleet's memory; empty for a file.
+  [[nodiscard]] const std::string& robot() const noexcept { return robot_; }
+  /// Whether it is kept on a PostgreSQL server (a fleet's memory) rather than in a file.
+  [[nodiscard]] bool on_server() const noexcept { return db().postgres(); }
+  /// On a server: the CRC-32 of the vocabulary record the fleet's inverted file tags this
+  /// robot's bags of words with (memory/fleet.hpp); flushes first.
+  [[nodiscard]] std::int64_t vocabulary_crc() {
+    flush();
+    return connection_->vocabulary_crc;
+  }
   /// The schema version of the file (memory_store_version once a writer opened it).
   [[nodiscard]] std::int64_t version() const noexcept { return version_; }
   /// Key images in the store, once every sync handed over is committed (flush() first,
@@ -531,14 +624,17 @@ class MemoryStore {
 
   /// Waits until every sync handed over is committed; a transaction that failed in the
   /// writer thread is thrown here as its vmap::Error (once; nothing of that sync was
-  /// stored, and the next sync writes its rows again). A no-op for a reader.
+  /// stored, and the next sync writes its rows again). On a server, a connection that
+  /// broke is then made again: an Error of kind unavailable while the server is away.
   void flush() {
-    if (!connection_->writes()) return;
-    if (std::exception_ptr error = connection_->wait()) {
-      held_ = committed_;
-      std::rethrow_exception(error);
+    if (connection_->writes()) {
+      if (std::exception_ptr error = connection_->wait()) {
+        held_ = committed_;
+        std::rethrow_exception(error);
+      }
+      committed_ = held_;
     }
-    committed_ = held_;
+    revive();
   }
 
   /// Bounds `memory`'s RAM to the features of its `working_memory` most recent key
@@ -560,20 +656,29 @@ class MemoryStore {
   [[nodiscard]] std::function<Features(std::uint32_t)> features() {
     flush();
     struct Reader {
-      sqlite::Database db;
-      sqlite::Statement query;
+      detail::StoreDb db;
+      detail::StoreQuery query;
       std::int64_t version;
+      std::function<void()> revive;
     };
-    auto connection = sqlite::Database(path_, sqlite::Access::read, db().what());
+    auto connection = reader_connection();
     auto query = connection.prepare(version_ >= 4 ? "SELECT record, detections, crc FROM key_images WHERE id = ?"
                                                    : "SELECT record FROM key_images WHERE id = ?",
                                     "read a key image's features");
-    auto reader = std::make_shared<Reader>(Reader{std::move(connection), std::move(query), version_});
+    auto reader = std::make_shared<Reader>(Reader{std::move(connection), std::move(query), version_, {}});
+    if (reader->db.postgres())
+      reader->revive = [r = reader.get(), robot = robot_id_] {
+        if (r->db.server().broken()) {
+          r->db.server().reconnect();
+          detail::enter_fleet_robot(r->db, robot, false);
+        }
+      };
     return [reader](std::uint32_t key) {
-      sqlite::Statement& q = reader->query;
+      if (reader->revive) reader->revive();
+      detail::StoreQuery& q = reader->query;
       q.bind(1, static_cast<std::int64_t>(key));
       struct Reset {
-        sqlite::Statement& q;
+        detail::StoreQuery& q;
         ~Reset() { q.reset(); }
       } reset{q};
       if (!q.step()) reader->db.fail("holds no key image " + std::to_string(key));
@@ -596,7 +701,7 @@ class MemoryStore {
     flush();
     std::vector<std::uintmax_t> out;
     auto q = db().prepare(
-        "SELECT length(record) + length(detections) + ifnull(length(bow), 0) FROM key_images ORDER BY id",
+        "SELECT length(record) + length(detections) + coalesce(length(bow), 0) FROM key_images ORDER BY id",
         "measure the key images");
     while (q.step()) out.push_back(static_cast<std::uintmax_t>(q.integer(0)));
     return out;
@@ -607,7 +712,8 @@ class MemoryStore {
   void set_note(std::string_view name, std::string_view value) {
     if (!connection_->writes()) db().fail("is open read-only: open it with Access::write to write a note");
     flush();
-    auto q = db().prepare("INSERT OR REPLACE INTO notes(name, value) VALUES(?,?)", "write a note");
+    auto q = db().prepare("INSERT INTO notes(name, value) VALUES(?,?) ON CONFLICT(name) DO UPDATE SET value = excluded.value",
+                          "write a note");
     q.bind_text(1, name).bind_text(2, value);
     q.run();
   }
@@ -622,10 +728,11 @@ class MemoryStore {
   }
 
   /// Flushes, then moves the write-ahead log into the database file (the file then holds
-  /// every sync and its size is the memory's); a no-op for a reader.
+  /// every sync and its size is the memory's); a no-op for a reader and on a server.
   void checkpoint() {
     if (!connection_->writes()) return;
     flush();
+    if (on_server()) return;
     db().exec("PRAGMA wal_checkpoint(TRUNCATE)", "checkpoint the write-ahead log");
   }
 
@@ -649,7 +756,7 @@ class MemoryStore {
   [[nodiscard]] MemoryRecords records(std::size_t working_memory = 0, const MapLoadOptions& limits = {},
                                       bool* pixels_skipped = nullptr) {
     flush();
-    sqlite::Transaction snapshot(db(), "read the memory", sqlite::Transaction::Kind::read);
+    detail::StoreTransaction snapshot(db(), "read the memory", detail::StoreTransaction::Kind::read);
     MemoryRecords r = read_records(working_memory, limits, pixels_skipped);
     snapshot.commit();
     return r;
@@ -717,10 +824,70 @@ class MemoryStore {
 
   MemoryStore(const std::filesystem::path& path, sqlite::Access access, std::string what = {})
       : path_(path),
-        connection_(std::make_unique<detail::MemoryStoreConnection>(
-            path, access, what.empty() ? "memory '" + path.string() + "'" : std::move(what))) {}
+        connection_(std::make_unique<detail::MemoryStoreConnection>(detail::StoreDb(
+            sqlite::Database(path, access, what.empty() ? "memory '" + path.string() + "'" : std::move(what))))) {}
 
-  [[nodiscard]] sqlite::Database& db() const noexcept { return connection_->db; }
+  /// Robot `robot`'s memory in the fleet's memory at `uri` (see create and open).
+  static MemoryStore open_on_server(const std::string& uri, const std::string& robot, sqlite::Access access) {
+    const std::string shown = pg::redacted(uri);
+    const std::string who = "robot '" + robot + "' of memory '" + shown + "'";
+    detail::check_robot_name(robot, "memory '" + shown + "'");
+    MemoryStore s(uri, shown, robot, detail::StoreDb(pg::Connection(uri, who)));
+    detail::StoreDb& db = s.db();
+    if (access == sqlite::Access::create) {
+      detail::ensure_fleet(db, detail::fleet_version);
+      s.robot_id_ = detail::add_fleet_robot(db, robot);
+    } else {
+      if (!detail::fleet_present(db, detail::fleet_version))
+        db.fail("does not exist: the database holds no vmap memory", ErrorKind::not_found);
+      const auto id = detail::fleet_robot(db, robot);
+      if (!id) {
+        std::string robots;
+        for (const std::string& r : detail::fleet_robots(db)) robots += (robots.empty() ? "" : ", ") + r;
+        db.fail("does not exist: the fleet has no such robot (its robots: " + (robots.empty() ? "none" : robots) + ")",
+                ErrorKind::not_found);
+      }
+      s.robot_id_ = *id;
+    }
+    const bool write = access != sqlite::Access::read;
+    detail::enter_fleet_robot(db, s.robot_id_, write);
+    s.count_rows();
+    s.connection_->fleet_robot = s.robot_id_;
+    if (s.synced_) s.connection_->vocabulary_crc = detail::row_crc(s.meta("vocabulary"));
+    if (write) {
+      s.connection_->revive = [c = s.connection_.get(), id = s.robot_id_] {
+        if (!c->db.server().broken()) return;
+        c->db.server().reconnect();
+        detail::enter_fleet_robot(c->db, id, true);
+      };
+      s.connection_->start_writer();
+    }
+    return s;
+  }
+
+  MemoryStore(std::string location, const std::string& shown, std::string robot, detail::StoreDb db)
+      : path_(shown),
+        location_(std::move(location)),
+        robot_(std::move(robot)),
+        connection_(std::make_unique<detail::MemoryStoreConnection>(std::move(db))) {}
+
+  [[nodiscard]] detail::StoreDb& db() const noexcept { return connection_->db; }
+
+  /// A connection of its own to read what was committed (features()).
+  [[nodiscard]] detail::StoreDb reader_connection() const {
+    if (!db().postgres()) return detail::StoreDb(sqlite::Database(path_, sqlite::Access::read, db().what()));
+    detail::StoreDb reader(pg::Connection(location_, db().what()));
+    detail::enter_fleet_robot(reader, robot_id_, false);
+    return reader;
+  }
+
+  /// A server's connection that broke is made again (a reader's, or a writer's with
+  /// nothing in flight: called after flush()).
+  void revive() {
+    if (!db().postgres() || !db().server().broken()) return;
+    db().server().reconnect();
+    detail::enter_fleet_robot(db(), robot_id_, connection_->writes());
+  }
 
   static const std::string& schema_sql() {
     static const std::string sql =
@@ -766,7 +933,7 @@ class MemoryStore {
   /// key images' encoded pixels kept byte for byte), its notes kept.
   void upgrade() {
     const std::int64_t from = version_;
-    sqlite::Transaction t(db(), "bring the store from version " + std::to_string(from) + " to version " +
+    detail::StoreTransaction t(db(), "bring the store from version " + std::to_string(from) + " to version " +
                                     std::to_string(memory_store_version));
     std::optional<detail::MemoryStoreRows> rows;
     {
@@ -1108,6 +1275,9 @@ class MemoryStore {
   }
 
   std::filesystem::path path_;
+  std::string location_;       ///< a server's URI as given (with its password, if any): never shown
+  std::string robot_;          ///< the robot's name on a server
+  std::int64_t robot_id_ = 0;  ///< the robot's number on a server
   std::unique_ptr<detail::MemoryStoreConnection> connection_;
   RecordsHeld held_;       ///< with the sync in flight committed: where the next sync goes on from
   RecordsHeld committed_;  ///< without it: what a failure of the sync in flight leaves

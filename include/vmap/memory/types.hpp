@@ -56,11 +56,25 @@ struct LoopEdge {
   PlaceLink link;
 };
 
+/// A loop edge between two robots of a fleet's memory (memory/fleet.hpp): key image
+/// `from_key` of robot `from_robot` (the robot that found it) shows the place of key image
+/// `to_key` of robot `to_robot`.
+struct FleetLoop {
+  std::string from_robot;
+  std::uint32_t from_key = 0;
+  std::string to_robot;
+  std::uint32_t to_key = 0;
+  PlaceLink link;  ///< the verification (link.key is to_key)
+};
+
 /// What push() did: the selector's answer, the key image it added, the loops found.
 struct MemoryStep {
   FrameResult frame;
   std::optional<std::uint32_t> new_key;  ///< index of the key image added, if any
   std::vector<LoopEdge> loops;           ///< loop edges found in this step
+  /// A fleet's robot (AnyMemory on a server): loops to other robots' key images found for
+  /// the key images this push synced.
+  std::vector<FleetLoop> fleet_loops;
 };
 
 /// What the neighbours of an image in a sequence added to its answer

@@ -58,6 +58,7 @@
 namespace vmap {
 
 class AnyVocabulary;
+class FleetIndex;
 class MemoryReplacement;
 class MemoryStore;
 struct MemoryRecords;
@@ -67,10 +68,12 @@ struct VisualMap;
 inline constexpr const char* memory_file_name = "memory.vmdb";
 
 /// A memory path as a user gives it: an existing folder, or a path ending in '/', means
-/// the folder's memory.vmdb; anything else is the memory file itself.
+/// the folder's memory.vmdb; a PostgreSQL URI (postgresql://..., a fleet's memory) is
+/// kept as it is; anything else is the memory file itself.
 [[nodiscard]] inline std::filesystem::path memory_path(std::string_view given) {
   std::error_code ec;
   const std::filesystem::path p(given);
+  if (given.starts_with("postgresql://") || given.starts_with("postgres://")) return p;
   if (!given.empty() && (given.back() == '/' || std::filesystem::is_directory(p, ec))) return p / memory_file_name;
   return p;
 }
@@ -84,6 +87,9 @@ struct SyncPolicy {
 
 /// How AnyMemory::open opens a memory.
 struct MemoryOpenOptions {
+  /// A fleet's memory (a postgresql:// URI): the robot whose memory to open. Unused for
+  /// a file.
+  std::string robot = {};
   /// Open a store to push into it (one writer at a time; an older schema is brought to
   /// the current one). false: read it as it was last synced.
   bool write = false;
@@ -100,6 +106,9 @@ struct MemoryOpenOptions {
 
 /// How AnyMemory::create (and copy_into_store) makes a memory store.
 struct MemoryCreateOptions {
+  /// A fleet's memory (a postgresql:// URI): the new robot whose memory it is (refused
+  /// when the fleet has it). Unused for a file.
+  std::string robot = {};
   std::size_t working_memory = 0;  ///< as MemoryOpenOptions::working_memory
   SyncPolicy sync{};
   /// Replace an existing memory at the path (a store or a .vmem file; any other file is
@@ -165,8 +174,13 @@ class AnyMemory {
   // ---- what it is ---------------------------------------------------------------------
 
   [[nodiscard]] const PolicyStack& stack() const noexcept { return stack_; }
-  /// The file it was opened from or created at; empty for a memory in RAM.
+  /// The file it was opened from or created at (a fleet's URI without its password);
+  /// empty for a memory in RAM.
   [[nodiscard]] const std::filesystem::path& path() const noexcept { return path_; }
+  /// The robot whose memory it is in a fleet's memory; empty otherwise.
+  [[nodiscard]] const std::string& robot() const noexcept { return robot_; }
+  /// How messages name it: "memory 'run.vmdb'", or "robot 'a' of memory 'postgresql://...'".
+  [[nodiscard]] std::string name() const;
   /// store, file, or other for a memory in RAM.
   [[nodiscard]] MemoryKind kind() const noexcept { return kind_; }
   /// Whether push() and the other changes are allowed (a memory in RAM, a store opened
@@ -262,6 +276,9 @@ class AnyMemory {
   AnyMemory();
 
   void writable(const char* what) const;
+  /// A fleet's robot: looks for the key images checked since the last call among the
+  /// other robots' (after their sync's commit), keeping the loops found for push().
+  void link_fleet();
 
   [[nodiscard]] std::string where() const { return path_.empty() ? std::string() : " '" + path_.string() + "'"; }
 
@@ -271,6 +288,14 @@ class AnyMemory {
   std::unique_ptr<detail::MemoryConcept> impl_;  ///< never null but after a move
   PolicyStack stack_;
   std::filesystem::path path_;
+  std::string location_;  ///< a server's URI as given (with its password, if any): never shown
+  std::string robot_;
+  /// A fleet's robot that writes: its key images are looked for among the other robots'
+  /// (memory/fleet.hpp) once their sync is committed; those before fleet_linked_ were.
+  std::unique_ptr<FleetIndex> fleet_;
+  std::size_t fleet_linked_ = 0;
+  /// The loops to other robots found by the syncs since the last push() returned.
+  std::vector<FleetLoop> fleet_found_;
   MemoryKind kind_ = MemoryKind::other;
   bool writes_ = false;
   bool closed_ = false;

@@ -65,7 +65,8 @@ vmap::OrbVisualMemory load(const fs::path& path, vmap::OrbDescriptor descriptor 
 
 TEST_CASE("error kinds: names both ways; a plain Error is an invalid argument and still a runtime_error") {
   for (ErrorKind k : {ErrorKind::invalid_argument, ErrorKind::not_found, ErrorKind::corrupt,
-                      ErrorKind::unsupported_version, ErrorKind::policy_mismatch, ErrorKind::busy, ErrorKind::io}) {
+                      ErrorKind::unsupported_version, ErrorKind::policy_mismatch, ErrorKind::busy, ErrorKind::io,
+                      ErrorKind::unavailable}) {
     CAPTURE(to_string(k));
     CHECK(to_string(k) != "unknown");
     CHECK(vmap::from_string<ErrorKind>(to_string(k)) == k);

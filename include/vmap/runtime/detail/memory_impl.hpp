@@ -9,6 +9,7 @@
 #include <vmap/core/error.hpp>
 #include <vmap/io/files.hpp>
 #include <vmap/keyframe/map_io.hpp>
+#include <vmap/memory/fleet.hpp>
 #include <vmap/memory/records.hpp>
 #include <vmap/memory/replace.hpp>
 #include <vmap/memory/store.hpp>
@@ -37,6 +38,13 @@ inline constexpr const char* camera_source_note = "camera source";
 /// refused there when a file is).
 VMAP_INLINE std::unique_ptr<MemoryReplacement> memory_replacement_of(const std::filesystem::path& path,
                                                                    const MemoryCreateOptions& how) {
+  if (pg::is_uri(path.native())) {
+    // A robot's memory on a server is written in place: its first sync is one transaction.
+    if (how.replace)
+      fail("robot '" + how.robot + "' of memory '" + pg::redacted(path.native()) +
+           "': a fleet's robot is not replaced (name another robot)");
+    return nullptr;
+  }
   std::error_code ec;
   const bool exists = std::filesystem::exists(std::filesystem::symlink_status(path, ec));
   if (!(exists ? how.replace : how.whole_at_close)) return nullptr;
@@ -45,12 +53,14 @@ VMAP_INLINE std::unique_ptr<MemoryReplacement> memory_replacement_of(const std::
 
 /// A new store at `path`, or beside it when it replaces the memory there (named as
 /// that memory in messages).
-VMAP_INLINE MemoryStore new_memory_store(const std::filesystem::path& path, const MemoryReplacement* replacement) {
-  if (!replacement) return MemoryStore::create(path);
+VMAP_INLINE MemoryStore new_memory_store(const std::filesystem::path& path, const MemoryReplacement* replacement,
+                                         const std::string& robot) {
+  if (!replacement) return MemoryStore::create(path, {}, robot);
   return MemoryStore::create(replacement->path(), "memory '" + path.string() + "'");
 }
 
 VMAP_INLINE void check_memory_input(const std::filesystem::path& path) {
+  if (pg::is_uri(path.native())) return;  // the server says (MemoryStore::open)
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) fail(ErrorKind::not_found, "memory '" + path.string() + "' does not exist");
   if (!std::filesystem::is_regular_file(path, ec))
@@ -131,7 +141,8 @@ VMAP_INLINE AnyMemory AnyMemory::open(const std::filesystem::path& path, const M
   AnyMemory out;
   out.path_ = path;
   out.sync_ = options.sync;
-  if (memory_kind(path) == MemoryKind::file) {
+  const bool server = pg::is_uri(path.native());
+  if (!server && memory_kind(path) == MemoryKind::file) {
     // Read whole; pushed into (write) in RAM, kept by save().
     const std::string bytes = read_file(path, limits.max_file_bytes, "memory file");
     MemoryRecords records = detail::read_vmem(bytes, path.string(), limits, &skipped);
@@ -142,8 +153,14 @@ VMAP_INLINE AnyMemory AnyMemory::open(const std::filesystem::path& path, const M
                                         std::nullopt);
     return out;
   }
-  MemoryStore store = MemoryStore::open(path, options.write ? sqlite::Access::write : sqlite::Access::read);
-  const std::string who = "memory '" + path.string() + "'";
+  MemoryStore store =
+      MemoryStore::open(path, options.write ? sqlite::Access::write : sqlite::Access::read, server ? options.robot : "");
+  if (server) {
+    out.location_ = path.native();
+    out.path_ = store.path();
+    out.robot_ = options.robot;
+  }
+  const std::string who = out.name();
   if (!store.synced())
     detail::fail(who + " holds nothing yet (its first run stopped before its first key image was written)");
   out.stack_ = detail::stack_of_store(store, who);
@@ -153,6 +170,10 @@ VMAP_INLINE AnyMemory AnyMemory::open(const std::filesystem::path& path, const M
   MemoryRecords records = store.records(bound, limits, &skipped);
   out.impl_ = detail::load_any_memory(out.stack_, std::move(records), who, skipped, std::move(store));
   out.impl_->bound(bound);
+  if (server && options.write) {
+    out.fleet_ = std::make_unique<FleetIndex>(out.location_, out.robot_);
+    out.fleet_linked_ = std::min(out.fleet_->linked(), out.impl_->checked_key_images());
+  }
   if (options.new_session) out.start_session();
   return out;
 }
@@ -168,17 +189,23 @@ VMAP_INLINE AnyMemory AnyMemory::create(const std::filesystem::path& path, const
   const PolicyStack stack = detail::recordable_stack(given);
   AnyMemory out;
   out.stack_ = stack;
-  if (path.has_parent_path()) {
+  const bool server = pg::is_uri(path.native());
+  if (!server && path.has_parent_path()) {
     std::error_code ec;
     std::filesystem::create_directories(path.parent_path(), ec);
     if (ec) detail::fail("memory '" + path.string() + "': cannot create its folder: " + ec.message());
   }
   out.replacement_ = detail::memory_replacement_of(path, how);
   out.impl_ = detail::new_any_memory(stack, options, std::move(vocabulary));
-  MemoryStore store = detail::new_memory_store(path, out.replacement_.get());
+  MemoryStore store = detail::new_memory_store(path, out.replacement_.get(), server ? how.robot : "");
   if (stack.camera && !stack.camera_source.empty()) store.set_note(detail::camera_source_note, stack.camera_source);
+  out.path_ = server ? store.path() : path;
+  if (server) {
+    out.location_ = path.native();
+    out.robot_ = how.robot;
+  }
   out.impl_->attach(std::move(store));
-  out.path_ = path;
+  if (server) out.fleet_ = std::make_unique<FleetIndex>(out.location_, out.robot_);
   out.kind_ = MemoryKind::store;
   out.writes_ = true;
   out.sync_ = how.sync;
@@ -206,17 +233,21 @@ VMAP_INLINE AnyMemory AnyMemory::copy_into_store(AnyMemory&& source, const std::
   AnyMemory out = std::move(source);
   if (auto* s = out.impl_->store()) s->flush();
   out.replacement_ = detail::memory_replacement_of(path, how);
-  MemoryStore store = detail::new_memory_store(path, out.replacement_.get());
+  const bool server = pg::is_uri(path.native());
+  MemoryStore store = detail::new_memory_store(path, out.replacement_.get(), server ? how.robot : "");
   if (out.stack_.camera && !out.stack_.camera_source.empty())
     store.set_note(detail::camera_source_note, out.stack_.camera_source);
+  out.path_ = server ? store.path() : path;
+  out.location_ = server ? path.native() : std::string();
+  out.robot_ = server ? how.robot : std::string();
   // The memory's records, written whole by the first sync into the new store (a memory
   // bounded by its old store reads its released features through that store's own
   // reader, which stays open).
   out.impl_->attach(std::move(store));
-  out.path_ = path;
   out.kind_ = MemoryKind::store;
   out.writes_ = true;
-  out.impl_->sync();
+  if (server) out.fleet_ = std::make_unique<FleetIndex>(out.location_, out.robot_);
+  out.sync();
   out.flush();
   return out;
 }
@@ -227,7 +258,14 @@ VMAP_INLINE MemoryStep AnyMemory::push(const Frame& frame, const OdometryPose& p
   MemoryStep step = impl_->push(frame, pose, detections);
   ++unsynced_;
   if (impl_->store() && (step.new_key || !step.loops.empty() || (sync_.every > 0 && unsynced_ >= sync_.every))) sync();
+  step.fleet_loops = std::move(fleet_found_);
+  fleet_found_.clear();
   return step;
+}
+
+VMAP_INLINE std::string AnyMemory::name() const {
+  if (!robot_.empty()) return "robot '" + robot_ + "' of memory '" + path_.string() + "'";
+  return "memory '" + path_.string() + "'";
 }
 
 VMAP_INLINE MemoryStore* AnyMemory::store() noexcept { return closed_ ? nullptr : impl_->store(); }
@@ -262,6 +300,19 @@ VMAP_INLINE void AnyMemory::sync() {
   sync_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ++syncs_;
   unsynced_ = 0;
+  link_fleet();
+}
+
+VMAP_INLINE void AnyMemory::link_fleet() {
+  if (!fleet_ || impl_->checked_key_images() <= fleet_linked_) return;
+  // The other robots see this robot's bags of words once committed; its own query after
+  // that commit makes every pair of key images of two robots meet at least once.
+  MemoryStore& store = *impl_->store();
+  store.flush();
+  std::vector<FleetLoop> found = impl_->link_fleet(*fleet_, fleet_linked_, store.vocabulary_crc());
+  fleet_linked_ = impl_->checked_key_images();
+  fleet_->set_linked(fleet_linked_);
+  for (auto& l : found) fleet_found_.push_back(std::move(l));
 }
 
 VMAP_INLINE void AnyMemory::flush() {
