@@ -5,14 +5,19 @@ option(VMAP_WARNINGS_AS_ERRORS "Treat warnings in vmap's own tests and examples 
 
 set(VMAP_SHARED_DIR "${PROJECT_SOURCE_DIR}/../shared" CACHE PATH
     "Folder with the shared test data (data/) and models (models/)")
-# Default from the environment so CI can require the data while running the README's
-# exact command; absence of the folder is then a configure error, never a skipped test.
-if(DEFINED ENV{VMAP_REQUIRE_SHARED_DATA} AND "$ENV{VMAP_REQUIRE_SHARED_DATA}")
-  set(_vmap_require_default ON)
-else()
-  set(_vmap_require_default OFF)
-endif()
-option(VMAP_REQUIRE_SHARED_DATA "Fail instead of skipping when VMAP_SHARED_DIR is missing" ${_vmap_require_default})
+# The VMAP_REQUIRE_* options default from the environment so CI can require what the
+# tests need while running the README's exact command; absence is then a configure
+# error, never a skipped test.
+function(vmap_required_option name doc)
+  if(DEFINED ENV{${name}} AND "$ENV{${name}}")
+    option(${name} "${doc}" ON)
+  else()
+    option(${name} "${doc}" OFF)
+  endif()
+endfunction()
+vmap_required_option(VMAP_REQUIRE_SHARED_DATA "Fail instead of skipping when VMAP_SHARED_DIR is missing")
+# The fleet's tests start a PostgreSQL server of their own (tests/support/pg_server.hpp).
+vmap_required_option(VMAP_REQUIRE_POSTGRES "Fail to configure when PostgreSQL's server programs are missing")
 
 get_filename_component(VMAP_SHARED_DIR "${VMAP_SHARED_DIR}" ABSOLUTE)
 if(EXISTS "${VMAP_SHARED_DIR}/data" AND EXISTS "${VMAP_SHARED_DIR}/models")

@@ -14,6 +14,7 @@
 #include <vmap/io/calibration.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/postgres.hpp>
+#include <vmap/memory/fleet.hpp>
 #include <vmap/memory/replace.hpp>
 #include <vmap/memory/sequence.hpp>
 #include <vmap/runtime/exports.hpp>
@@ -251,6 +252,37 @@ void bind(py::module_& m) {
                std::to_string(e.link.inliers) + " inliers, confidence " + std::to_string(e.link.confidence) + ">";
       });
 
+  py::class_<FleetLoop>(m, "FleetLoop",
+                        "A loop between two robots of a fleet's memory: key image `from_key` of robot `from_robot` "
+                        "shows the place of key image `to_key` of robot `to_robot`.")
+      .def_readonly("from_robot", &FleetLoop::from_robot, "the robot that found it")
+      .def_readonly("from_key", &FleetLoop::from_key, "its key image")
+      .def_readonly("to_robot", &FleetLoop::to_robot, "the other robot")
+      .def_readonly("to_key", &FleetLoop::to_key, "the other robot's key image")
+      .def_readonly("link", &FleetLoop::link, "the verified match (PlaceLink)")
+      .def("__repr__", [](const FleetLoop& e) {
+        return "<vmap.FleetLoop " + e.from_robot + " " + std::to_string(e.from_key) + " -> " + e.to_robot + " " +
+               std::to_string(e.to_key) + ", " + std::to_string(e.link.inliers) + " inliers, confidence " +
+               std::to_string(e.link.confidence) + ">";
+      });
+
+  py::class_<FleetRobotSummary>(m, "FleetRobot", "What a robot of a fleet's memory holds (vmap.fleet_robots).")
+      .def_readonly("robot", &FleetRobotSummary::robot, "its name")
+      .def_readonly("frames", &FleetRobotSummary::frames, "frames pushed")
+      .def_readonly("key_images", &FleetRobotSummary::key_images, "key images")
+      .def_readonly("sessions", &FleetRobotSummary::sessions, "sessions (runs)")
+      .def_readonly("loops", &FleetRobotSummary::loops, "loop edges within its own memory")
+      .def_readonly("fleet_loops", &FleetRobotSummary::fleet_loops, "loop edges to other robots' key images");
+
+  m.def("fleet_robots", [](const std::string& uri) {
+    py::gil_scoped_release unlocked;
+    return fleet_summary(uri);
+  }, py::arg("uri"), "Each robot of the fleet's memory at `uri` (a postgresql:// URI), in the order they joined.");
+  m.def("fleet_loops", [](const std::string& uri) {
+    py::gil_scoped_release unlocked;
+    return fleet_loops(uri);
+  }, py::arg("uri"), "Every loop edge between two robots of the fleet's memory at `uri`.");
+
   py::class_<RelativePose>(m, "RelativePose", "The query's camera relative to a key image's: X_key = R X_query + t, |t| = 1.")
       .def_property_readonly("rotation", [](const RelativePose& p) { return matx_array(p.rotation); }, "3 x 3 R")
       .def_property_readonly("translation", [](const RelativePose& p) {
@@ -323,6 +355,8 @@ void bind(py::module_& m) {
                              "the frame that became a key image (j-1 or j), or None")
       .def_readonly("new_key", &MemoryStep::new_key, "index of the key image added, or None")
       .def_readonly("loops", &MemoryStep::loops, "loop edges found in this step")
+      .def_readonly("fleet_loops", &MemoryStep::fleet_loops,
+                    "a fleet's robot: loops to other robots' key images found when this step was synced")
       .def("__repr__", [](const MemoryStep& s) {
         return "<vmap.MemoryStep frame " + std::to_string(s.frame.frame_index) +
                (s.new_key ? ", key image " + std::to_string(*s.new_key) : std::string(", no key image")) + ", " +

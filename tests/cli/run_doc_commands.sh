@@ -19,6 +19,10 @@
 # run (1, or 3 to 8 by the error's kind: README.md, "Exit codes") and vmap's one-line
 # error, not crash. A `vmap sweep` identical to one that already passed is not run again:
 # it only reads, so the same line gives the same result (the pages quote one sweep often).
+# Commands on a fleet's memory name its server "$VMAP_FLEET": with VMAP_PG_BIN (the folder
+# of PostgreSQL's server programs) set, a server of the test's own is started on
+# loopback for them (as `nobody` when run as root) and stopped at the end; without it
+# they are skipped.
 set -uo pipefail
 vmap_bin=$1 src=$2 scratch=$3 shared=${4:-}
 list_only=${5:-}
@@ -75,6 +79,24 @@ if [ -f "$shared/data/tum_fr1_rpy/groundtruth.txt" ]; then
   } >mav0/state_groundtruth_estimate0/data.csv
 fi
 
+fleet_started=0
+if [ -n "${VMAP_PG_BIN:-}" ] && [ -x "$VMAP_PG_BIN/pg_ctl" ]; then
+  pg_dir=$(mktemp -d /tmp/vmap-doc-pg-XXXXXX)
+  as_server=()
+  if [ "$(id -u)" -eq 0 ]; then chown nobody:nogroup "$pg_dir"; as_server=(setpriv --reuid=nobody --regid=nogroup --clear-groups); fi
+  pg_port=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+  if "${as_server[@]}" "$VMAP_PG_BIN/initdb" -D "$pg_dir/data" -U vmap --auth=trust --no-sync -E UTF8 --locale=C >"$scratch/pg.log" 2>&1 &&
+     "${as_server[@]}" "$VMAP_PG_BIN/pg_ctl" -D "$pg_dir/data" -l "$pg_dir/log" -w \
+       -o "-p $pg_port -k $pg_dir -c listen_addresses=127.0.0.1" start >>"$scratch/pg.log" 2>&1; then
+    export VMAP_FLEET="postgresql://vmap@127.0.0.1:$pg_port/postgres"
+    fleet_started=1
+    trap '"${as_server[@]}" "$VMAP_PG_BIN/pg_ctl" -D "$pg_dir/data" -m immediate -w stop >/dev/null 2>&1; rm -rf "$pg_dir"' EXIT
+  else
+    echo "FAIL: the fleet's server did not start:"; sed 's/^/    /' "$scratch/pg.log" | tail -5
+    exit 1
+  fi
+fi
+
 passed=0 failed=0 skipped=0
 declare -A swept=()
 for entry in "${commands[@]}"; do
@@ -99,6 +121,11 @@ for entry in "${commands[@]}"; do
     fi
   elif [[ "$cmd" == FAILS:* ]]; then
     cmd=${cmd#FAILS:} expect_fail=1
+  fi
+  if [[ "$cmd" == *'$VMAP_FLEET'* ]] && [ "$fleet_started" = 0 ]; then
+    echo "skip ($file, needs a PostgreSQL server: VMAP_PG_BIN): vmap $cmd"
+    skipped=$((skipped + 1))
+    continue
   fi
   if { [[ "$cmd" == *../shared/* ]] && [ ! -d ../shared ]; } ||
      { [[ "$cmd" == *state_groundtruth_estimate0* ]] && [ ! -f mav0/state_groundtruth_estimate0/data.csv ]; }; then

@@ -49,6 +49,48 @@ def shared():
 
 
 @pytest.fixture(scope="session")
+def fleet_server(tmp_path_factory):
+    """A PostgreSQL server of the tests' own on loopback (VMAP_PG_BIN: its programs; run as
+    `nobody` under root), stopped at the end: a function giving the URI of a new database.
+    Skipped without the programs, unless VMAP_REQUIRE_POSTGRES is on (CI)."""
+    import shutil
+    import socket
+    import subprocess
+    import tempfile
+
+    bin_dir = os.environ.get("VMAP_PG_BIN", "")
+    if not bin_dir or not os.access(os.path.join(bin_dir, "pg_ctl"), os.X_OK):
+        if _on("VMAP_REQUIRE_POSTGRES"):
+            pytest.fail("VMAP_REQUIRE_POSTGRES is on but VMAP_PG_BIN names no PostgreSQL server programs")
+        pytest.skip("no PostgreSQL server programs (VMAP_PG_BIN): the fleet's tests are skipped")
+    folder = tempfile.mkdtemp(prefix="vmap-py-pg-")
+    as_server = []
+    if os.geteuid() == 0:
+        shutil.chown(folder, "nobody", "nogroup")
+        as_server = ["setpriv", "--reuid=nobody", "--regid=nogroup", "--clear-groups"]
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    data = os.path.join(folder, "data")
+    run = lambda *args: subprocess.run(as_server + list(args), check=True, capture_output=True)
+    run(os.path.join(bin_dir, "initdb"), "-D", data, "-U", "vmap", "--auth=trust", "--no-sync", "-E", "UTF8", "--locale=C")
+    run(os.path.join(bin_dir, "pg_ctl"), "-D", data, "-l", os.path.join(folder, "log"), "-w", "-o",
+        f"-p {port} -k {folder} -c listen_addresses=127.0.0.1", "start")
+    made = []
+
+    def database(name):
+        if name not in made:
+            run(os.path.join(bin_dir, "createdb"), "-h", "127.0.0.1", "-p", str(port), "-U", "vmap", name)
+            made.append(name)
+        return f"postgresql://vmap@127.0.0.1:{port}/{name}"
+
+    yield database
+    subprocess.run(as_server + [os.path.join(bin_dir, "pg_ctl"), "-D", data, "-m", "immediate", "-w", "stop"],
+                   capture_output=True)
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture(scope="session")
 def vmap_cli():
     """The built `vmap` command line (VMAP_CLI), to compare the module's results with it."""
     path = os.environ.get("VMAP_CLI", "")

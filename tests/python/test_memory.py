@@ -324,3 +324,36 @@ def test_camera_memory_gives_the_command_lines_relative_poses(tmp_path, shared, 
         assert got.relative_pose.rotation_degrees < 10
         assert got.relative_pose.points_in_front == answer["relative_pose"]["points_in_front"]
     assert posed >= 5
+
+
+def test_fleet_robots_share_a_memory_on_postgresql(fleet_server, sample_frames, sample_list, vmap_cli, tmp_path):
+    """Two robots write one fleet's memory with one vocabulary; the second finds the first's
+    key images, and the fleet lists both robots and the loops between them."""
+    uri = fleet_server("py_fleet")
+    voc = tmp_path / "voc.bin"
+    subprocess.run([vmap_cli, "vocabulary", sample_list, "--words", "512", "--depth", "3", "--out", str(voc)],
+                   check=True, capture_output=True)
+    found = []
+    for robot in ("a", "b"):
+        memory = vmap.VisualMemory.create(uri, robot=robot, vocabulary=str(voc))
+        assert memory.robot == robot
+        assert memory.path == uri
+        for img, t, name in sample_frames:
+            found += memory.push(img, timestamp=t, name=name).fleet_loops
+        memory.close()
+    robots = vmap.fleet_robots(uri)
+    assert [r.robot for r in robots] == ["a", "b"]
+    assert robots[0].key_images == robots[1].key_images > 5
+    loops = vmap.fleet_loops(uri)
+    # (those of the key images close() synced last are in the fleet only)
+    assert 0 < len(found) <= len(loops)
+    assert all(l.from_robot == "b" and l.to_robot == "a" for l in found)
+    assert robots[1].fleet_loops == len(loops)
+    again = vmap.VisualMemory.open(uri, robot="a", read_only=True)
+    assert again.key_images == robots[0].key_images
+    with pytest.raises(vmap.InvalidArgumentError, match="robot='NAME'"):
+        vmap.VisualMemory.open(uri)
+    with pytest.raises(vmap.NotFoundError, match="robot 'zed'"):
+        vmap.VisualMemory.open(uri, robot="zed")
+    with pytest.raises(vmap.UnavailableError):
+        vmap.VisualMemory.open("postgresql://vmap@127.0.0.1:1/x?connect_timeout=2", robot="a")

@@ -264,6 +264,26 @@ class Statement {
       : session_(c.session_), sql_(detail::numbered(sql, params_)), doing_(doing) {
     values_.resize(static_cast<std::size_t>(params_));
   }
+  Statement(Statement&& o) noexcept
+      : session_(std::move(o.session_)),
+        params_(o.params_),
+        sql_(std::move(o.sql_)),
+        doing_(std::move(o.doing_)),
+        name_(std::move(o.name_)),
+        values_(std::move(o.values_)),
+        prepared_types_(std::move(o.prepared_types_)),
+        prepared_(std::exchange(o.prepared_, 0)),
+        result_(std::move(o.result_)),
+        row_(o.row_) {}
+  Statement& operator=(Statement&&) = delete;
+  Statement(const Statement&) = delete;
+  Statement& operator=(const Statement&) = delete;
+  /// Frees the statement on the server (a long-lived connection prepares many).
+  ~Statement() {
+    if (!session_ || prepared_ != session_->generation + 1 || session_->broken()) return;
+    const std::string sql = "DEALLOCATE " + name_;
+    PQclear(PQexec(session_->conn, sql.c_str()));
+  }
 
   Statement& bind(int i, std::int64_t v) {
     std::string b;

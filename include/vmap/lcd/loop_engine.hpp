@@ -429,7 +429,7 @@ class LoopEngine {
     if (decision) detail::check_place_decision_options(*decision, "LoopEngine::decide");
     PlaceDecision d;
     d.candidates = ranked.size();
-    decide_among(d, q, ranked, lookup, dec);
+    decide_among(d, q, ranked, lookup, dec, false);
     return d;
   }
 
@@ -583,12 +583,14 @@ class LoopEngine {
     return c.lowest < bar;
   }
 
+  /// `frames`: the ids are this engine's frames (their views and distances in the stream
+  /// tell one place); otherwise only a verification of two candidates does.
   template <FeatureLookup L>
   void decide_among(PlaceDecision& d, const Features& q, const std::vector<std::pair<std::size_t, double>>& to_verify,
-                    const L& lookup, const PlaceDecisionOptions& dec) const {
+                    const L& lookup, const PlaceDecisionOptions& dec, bool frames = true) const {
     std::vector<Verified> verified = verify(d, q, to_verify, lookup, dec);
     const auto td = std::chrono::steady_clock::now();
-    choose(d, verified, lookup, false, !to_verify.empty(), dec);
+    choose(d, verified, lookup, false, !to_verify.empty(), dec, frames);
     d.decide_ms = ms_since(td);
   }
 
@@ -658,13 +660,20 @@ class LoopEngine {
   /// view), or, when `b` competes with `a` (it could make the decision ambiguous), the
   /// decision itself accepts the pair `a`, `b` (one verification, no vocabulary). A
   /// place seen on two earlier laps is so one place, not two.
+  /// `frames` false: the candidates are no frames of this engine (another robot's key
+  /// images, LoopEngine::decide), so only the verification of the pair tells. A frame
+  /// the engine never added (localization before any vocabulary, every key image
+  /// verified by an engine that holds none) is a view of its own.
   template <FeatureLookup L>
   [[nodiscard]] bool one_place(const Verified& a, const Verified& b, bool competes, const L& lookup,
-                               const PlaceDecisionOptions& dec) const {
-    const std::size_t gap = a.frame > b.frame ? a.frame - b.frame : b.frame - a.frame;
-    if (gap <= std::max(options_.window, options_.temporal_tolerance)) return true;
-    const std::size_t va = views_[a.frame], vb = views_[b.frame];
-    if ((va > vb ? va - vb : vb - va) <= 1) return true;
+                               const PlaceDecisionOptions& dec, bool frames = true) const {
+    if (frames) {
+      const std::size_t gap = a.frame > b.frame ? a.frame - b.frame : b.frame - a.frame;
+      if (gap <= std::max(options_.window, options_.temporal_tolerance)) return true;
+      const auto view = [&](std::size_t j) { return j < views_.size() ? std::size_t{views_[j]} : j; };
+      const std::size_t va = view(a.frame), vb = view(b.frame);
+      if ((va > vb ? va - vb : vb - va) <= 1) return true;
+    }
     if (!competes) return false;
     const Features fa = lookup(a.frame);  // a copy: the next lookup may replace it
     const Features& fb = lookup(b.frame);
@@ -677,7 +686,7 @@ class LoopEngine {
   /// The decision from the verified candidates (best confidence first).
   template <FeatureLookup L>
   void choose(PlaceDecision& d, std::vector<Verified>& verified, const L& lookup, bool stayed, bool any_verified,
-              const PlaceDecisionOptions& dec) const {
+              const PlaceDecisionOptions& dec, bool frames = true) const {
     std::stable_sort(verified.begin(), verified.end(),
                      [](const Verified& a, const Verified& b) { return a.confidence > b.confidence; });
     const double need = dec.min_confidence;
@@ -710,7 +719,7 @@ class LoopEngine {
     for (std::size_t i = 1; i < verified.size(); ++i) {
       const Verified& o = verified[i];
       const bool competes = o.confidence >= need && o.confidence >= dec.ambiguity_ratio * b.confidence;
-      if (!one_place(b, o, competes, lookup, dec)) {
+      if (!one_place(b, o, competes, lookup, dec, frames)) {
         d.second = o.frame;
         d.second_confidence = o.confidence;
         break;

@@ -13,7 +13,8 @@
 // same transaction as the key image's bag of words; a robot never loads the fleet's
 // postings. A query ranks the other robots' key images by DBoW2's L1 score (T-RO 2012,
 // eq. 2: for L1-normalised weights, sum over the shared words of min(v_i, w_i)), computed
-// by the server over the postings of the query's words, among robots whose vocabulary is
+// by the server over the postings of the query's 64 heaviest words (an index that holds
+// the postings whole answers it), among robots whose vocabulary is
 // the query's (by the CRC-32 of its record: bags of words of two vocabularies do not
 // compare). The features of the best `top_k` candidates, and only those, cross the
 // network; they are verified with the robot's own matcher and estimator, and the place
@@ -51,6 +52,9 @@
 
 namespace vmap {
 
+/// The words of a query that the fleet's inverted file ranks by (FleetIndex::candidates).
+inline constexpr std::size_t fleet_query_words = 64;
+
 /// A key image of another robot that the fleet's inverted file ranked for a query.
 struct FleetCandidate {
   std::string robot;
@@ -82,9 +86,28 @@ class FleetIndex {
   /// The other robots' key images whose bags of words share words with `bow` (of the
   /// vocabulary whose record has CRC-32 `vocabulary`), the `top_k` best by L1 score,
   /// best first (ties by robot and key image, so the order is the same at every run).
-  [[nodiscard]] std::vector<FleetCandidate> candidates(const BowVector& bow, std::size_t top_k, std::int64_t vocabulary) {
+  /// The score is summed over the query's `max_words` heaviest words (0: all): the
+  /// server's work is the postings of the words asked, so the heaviest, which carry most
+  /// of the score, keep a query's cost bounded (results/fleet.md measures it).
+  [[nodiscard]] std::vector<FleetCandidate> candidates(const BowVector& bow, std::size_t top_k, std::int64_t vocabulary,
+                                                       std::size_t max_words = fleet_query_words) {
     revive();
-    const auto [words, weights] = detail::l1_postings(bow);
+    auto [words, weights] = detail::l1_postings(bow);
+    if (max_words > 0 && words.size() > max_words) {
+      std::vector<std::size_t> order(words.size());
+      for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+      std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return weights[a] > weights[b]; });
+      order.resize(max_words);
+      std::sort(order.begin(), order.end());
+      std::vector<std::int64_t> w;
+      std::vector<double> x;
+      for (const std::size_t i : order) {
+        w.push_back(words[i]);
+        x.push_back(weights[i]);
+      }
+      words = std::move(w);
+      weights = std::move(x);
+    }
     auto q = db_.prepare(
         "SELECT r.name, p.key, sum(least(q.x, p.weight)) AS s "
         "FROM unnest(CAST(? AS integer[]), CAST(? AS double precision[])) AS q(w, x) "
@@ -285,21 +308,8 @@ template <class Memory>
   loop.to_key = ranked[best].key;
   for (const PlaceCandidate& c : d.considered)
     if (c.stage == CandidateStage::chosen) {
-      PlaceLink& l = loop.link;
-      l.key = ranked[best].key;
-      l.bow_score = std::clamp(c.bow_score, 0.0, 1.0);
-      l.status = c.status;
-      l.model = c.model;
-      l.model_kind = engine->model();
-      l.matches = c.matches;
-      l.inliers = c.inliers;
-      l.confidence = c.confidence;
-      Verification v;
-      v.status = c.status;
-      v.model = c.model;
-      v.inliers = c.inliers;
-      v.matches = c.matches;
-      l.similarity = memory.selector().front_end().similarity()(query, features[best], v);
+      loop.link = memory.link_to(c, query, features[best]);
+      loop.link.key = ranked[best].key;
     }
   fleet.record(loop);
   return loop;

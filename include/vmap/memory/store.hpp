@@ -1,8 +1,12 @@
 #pragma once
 
-// A visual memory kept in an SQLite file (io/sqlite.hpp), written key image by key image:
-// the embedded back-end of the memory's records (memory/records.hpp; the other is the
-// single file of memory/vmem.hpp).
+// A visual memory kept in an SQLite file (io/sqlite.hpp), or as one robot's memory in a
+// fleet's memory on a PostgreSQL server (io/postgres.hpp, memory/detail/fleet_schema.hpp:
+// give a postgresql:// URI and the robot's name instead of a path), written key image by
+// key image: the back-ends of the memory's records that grow (memory/records.hpp; the
+// other is the single file of memory/vmem.hpp). Both hold the same tables, rows and
+// bytes, read and written by the code below through one interface
+// (memory/detail/store_db.hpp); what differs on a server is said where it differs.
 //
 //   auto store = vmap::MemoryStore::create("run.vmdb");
 //   vmap::OrbVisualMemory memory;
@@ -44,8 +48,12 @@
 // older key images' records without their features.
 //
 // One writer at a time (open(..., write) of a memory another program writes is refused
-// with a message naming the file); any number of readers (open(..., read)) load the
-// last committed sync while the writer goes on. An existing memory is replaced by a new
+// with a message naming the file; on a server, the robot's advisory lock); any number of
+// readers (open(..., read)) load the last committed sync while the writer goes on. On a
+// server, a sync whose connection broke (the server restarted) fails as `unavailable`;
+// the next sync connects again and writes the rows again, those a lost COMMIT answer
+// may have stored kept as they are; each sync also writes the bags of words into the
+// fleet's inverted file (memory/fleet.hpp). An existing memory is replaced by a new
 // store through MemoryReplacement (memory/replace.hpp): the new store is built beside it
 // under another name and renamed over it when closed, so readers see the old memory
 // until then, and a failed or killed run leaves the old memory as it was.
@@ -298,7 +306,8 @@ class MemoryStoreConnection {
   std::function<void()> revive;
   /// On a server: the robot's number, whose bags of words each sync also writes into the
   /// fleet's inverted file (memory/fleet.hpp), tagged with the CRC-32 of the vocabulary's
-  /// record (set from the store, then by each sync that writes the vocabulary).
+  /// record (set from the store, then by MemoryStore::sync before it hands over rows
+  /// that write the vocabulary: the writer thread only reads it).
   std::int64_t fleet_robot = 0;
   std::int64_t vocabulary_crc = 0;
 
@@ -425,8 +434,6 @@ class MemoryStoreConnection {
       insert_link_->bind(1, l.key).bind(2, l.matches).bind(3, l.inliers).bind(4, l.similarity).bind_blob(5, l.record).bind(6, l.crc);
       insert_link_->run();
     }
-    for (const auto& [name, value] : rows.meta)
-      if (std::string_view(name) == "vocabulary") vocabulary_crc = row_crc(value);
     for (const auto& b : rows.bows) {
       update_bow_->bind_blob(1, b.record).bind(2, b.crc).bind(3, b.key);
       update_bow_->run();
@@ -576,11 +583,8 @@ class MemoryStore {
   /// Whether it is kept on a PostgreSQL server (a fleet's memory) rather than in a file.
   [[nodiscard]] bool on_server() const noexcept { return db().postgres(); }
   /// On a server: the CRC-32 of the vocabulary record the fleet's inverted file tags this
-  /// robot's bags of words with (memory/fleet.hpp); flushes first.
-  [[nodiscard]] std::int64_t vocabulary_crc() {
-    flush();
-    return connection_->vocabulary_crc;
-  }
+  /// robot's bags of words with (memory/fleet.hpp), as of the last sync handed over.
+  [[nodiscard]] std::int64_t vocabulary_crc() const noexcept { return connection_->vocabulary_crc; }
   /// The schema version of the file (memory_store_version once a writer opened it).
   [[nodiscard]] std::int64_t version() const noexcept { return version_; }
   /// Key images in the store, once every sync handed over is committed (flush() first,
@@ -594,6 +598,10 @@ class MemoryStore {
     flush();
     return synced_;
   }
+  /// Bags of words committed before the sync in flight (all of them after flush()):
+  /// what other programs reading the store can see of this memory's place database.
+  [[nodiscard]] std::size_t committed_bags() const noexcept { return committed_.bows; }
+
   /// Loop edges in the store; flushes first.
   [[nodiscard]] std::size_t loops() {
     flush();
@@ -813,7 +821,12 @@ class MemoryStore {
     check_holds(memory);
     memory.check_pixels_read(memory.options().images, "MemoryStore::sync");
     const MemoryRecords r = memory.records(held_, false);
-    connection_->hand_over(detail::store_rows(r));
+    detail::MemoryStoreRows rows = detail::store_rows(r);
+    // The writer thread is idle (flush() above): it reads the vocabulary's CRC only while
+    // it writes the rows handed over next.
+    for (const auto& [name, value] : rows.meta)
+      if (std::string_view(name) == "vocabulary") connection_->vocabulary_crc = detail::row_crc(value);
+    connection_->hand_over(std::move(rows));
     held_ = {r.key_count(), r.first_loop + r.loops.size(), r.first_bow + r.bows.size(),
              r.first_session + r.sessions.size(),
              r.vocabulary ? std::optional<bool>(!r.vocabulary->empty()) : held_.vocabulary_written,

@@ -73,7 +73,8 @@ struct MemoryStep {
   std::optional<std::uint32_t> new_key;  ///< index of the key image added, if any
   std::vector<LoopEdge> loops;           ///< loop edges found in this step
   /// A fleet's robot (AnyMemory on a server): loops to other robots' key images found for
-  /// the key images this push synced.
+  /// key images whose sync committed since the last push (those close() syncs last are
+  /// in the fleet only: fleet_loops(uri)).
   std::vector<FleetLoop> fleet_loops;
 };
 

@@ -265,6 +265,11 @@ class VisualMemory {
   /// The loop engine once loop detection runs (a vocabulary and, with detections, a
   /// schema); nullptr before.
   [[nodiscard]] const Engine* loop_engine() const noexcept { return engine_ ? &*engine_ : nullptr; }
+  /// A verified candidate of a place decision as a PlaceLink (its key is c.frame): the one
+  /// conversion of the loop edges, the localization answers and the loops between robots
+  /// (memory/fleet.hpp). Its similarity is eq. 5 (the memory's similarity policy) between
+  /// the query and the candidate's features `candidate`.
+  [[nodiscard]] PlaceLink link_to(const PlaceCandidate& c, const Features& query, const Features& candidate);
   /// Whether the camera never left its place: more frames than the loop window were
   /// pushed into the current session and its chain holds one key image (the selector
   /// never saw the view change; the revisit rule's chain, lcd/loop_engine.hpp). No
@@ -482,9 +487,7 @@ class VisualMemory {
   /// The model the memory's verifications fit (the engine's inference from its estimator).
   [[nodiscard]] static constexpr PlaceModel model_kind() noexcept { return place_model_of<E>(); }
 
-  /// A verified candidate of a place decision as a PlaceLink: the one conversion of the
-  /// loop edges and the localization answers. Its similarity is eq. 5 (the memory's
-  /// similarity policy) between the query and the candidate's features.
+  /// link_to() for a candidate that is one of this memory's key images.
   PlaceLink link_of(const PlaceCandidate& c, const Features& query);
 
   void after_push(MemoryStep& step, std::size_t index, const OdometryPose& pose,

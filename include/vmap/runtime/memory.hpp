@@ -276,9 +276,10 @@ class AnyMemory {
   AnyMemory();
 
   void writable(const char* what) const;
-  /// A fleet's robot: looks for the key images checked since the last call among the
-  /// other robots' (after their sync's commit), keeping the loops found for push().
-  void link_fleet();
+  /// A fleet's robot: looks for the key images checked and committed since the last call
+  /// among the other robots' (`all`: after waiting for the sync in flight), keeping the
+  /// loops found for push().
+  void link_fleet(bool all = false);
 
   [[nodiscard]] std::string where() const { return path_.empty() ? std::string() : " '" + path_.string() + "'"; }
 

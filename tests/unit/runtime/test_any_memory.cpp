@@ -170,3 +170,18 @@ TEST_CASE("AnyMemory exports: key images and loop edges with their times to the 
   std::getline(keys, first);
   CHECK(first == "0 1305031229.528748.jpg 1403636579.763555584");
 }
+
+TEST_CASE("AnyMemory: a query before any vocabulary is learned, with candidates far apart that compete, is answered") {
+  // Every key image is verified by an engine that holds no frame (no vocabulary yet):
+  // telling whether two verified candidates are one place must not read the views of
+  // frames that engine never added (it read past an empty list and crashed).
+  auto memory = vmap::AnyMemory::in_ram(vmap::PolicyStack{});
+  for (std::size_t i = 0; i < 40; ++i) (void)memory.push(sample_frames()[i]);
+  REQUIRE(memory.checked_key_images() == 0);
+  REQUIRE(memory.key_images() > 10);
+  const vmap::MemoryLocalization a = memory.localize(sample_frames()[37].image);
+  CHECK(a.ok());
+  REQUIRE(a.best());
+  CHECK(memory.map().keys[a.best()->key].frame_index <= 37);
+  CHECK(a.verified_candidates >= 2);
+}

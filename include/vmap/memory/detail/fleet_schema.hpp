@@ -157,7 +157,7 @@ inline void ensure_fleet(StoreDb& db, std::int64_t version) {
             " created timestamptz NOT NULL DEFAULT now(), linked bigint NOT NULL DEFAULT 0);"
             "CREATE TABLE vmap.postings(robot integer NOT NULL, key bigint NOT NULL, word integer NOT NULL,"
             " weight double precision NOT NULL, vocabulary bigint NOT NULL, PRIMARY KEY(robot, key, word));"
-            "CREATE INDEX postings_word ON vmap.postings(word, vocabulary);"
+            "CREATE INDEX postings_word ON vmap.postings(word, vocabulary) INCLUDE (robot, key, weight);"
             "CREATE TABLE vmap.fleet_loops(a_robot integer NOT NULL, a_key bigint NOT NULL, b_robot integer NOT NULL,"
             " b_key bigint NOT NULL, from_robot integer NOT NULL, inliers bigint NOT NULL,"
             " confidence double precision NOT NULL, record bytea NOT NULL, crc bigint NOT NULL,"

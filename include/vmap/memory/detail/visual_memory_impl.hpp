@@ -381,6 +381,11 @@ MemoryStep VisualMemory<D, M, E, S>::push_frame(const Frame& frame, const Odomet
 
 template <Descriptor D, Matcher M, Estimator E, Similarity S>
 PlaceLink VisualMemory<D, M, E, S>::link_of(const PlaceCandidate& c, const Features& query) {
+    return link_to(c, query, feature_ref(c.frame));
+  }
+
+template <Descriptor D, Matcher M, Estimator E, Similarity S>
+PlaceLink VisualMemory<D, M, E, S>::link_to(const PlaceCandidate& c, const Features& query, const Features& candidate) {
     PlaceLink l;
     l.key = static_cast<std::uint32_t>(c.frame);
     l.bow_score = std::clamp(c.bow_score, 0.0, 1.0);
@@ -395,7 +400,7 @@ PlaceLink VisualMemory<D, M, E, S>::link_of(const PlaceCandidate& c, const Featu
     v.model = c.model;
     v.inliers = c.inliers;
     v.matches = c.matches;
-    l.similarity = selector_.front_end().similarity()(query, feature_ref(c.frame), v);
+    l.similarity = selector_.front_end().similarity()(query, candidate, v);
     return l;
   }
 

@@ -303,14 +303,18 @@ VMAP_INLINE void AnyMemory::sync() {
   link_fleet();
 }
 
-VMAP_INLINE void AnyMemory::link_fleet() {
-  if (!fleet_ || impl_->checked_key_images() <= fleet_linked_) return;
+VMAP_INLINE void AnyMemory::link_fleet(bool all) {
+  if (!fleet_ || !impl_->store()) return;
   // The other robots see this robot's bags of words once committed; its own query after
-  // that commit makes every pair of key images of two robots meet at least once.
+  // that commit makes every pair of key images of two robots meet at least once. The
+  // key images the sync in flight holds wait for the next call (the commit runs on
+  // meanwhile), or for close().
   MemoryStore& store = *impl_->store();
-  store.flush();
-  std::vector<FleetLoop> found = impl_->link_fleet(*fleet_, fleet_linked_, store.vocabulary_crc());
-  fleet_linked_ = impl_->checked_key_images();
+  if (all) store.flush();
+  const std::size_t committed = std::min(store.committed_bags(), impl_->checked_key_images());
+  if (committed <= fleet_linked_) return;
+  std::vector<FleetLoop> found = impl_->link_fleet(*fleet_, fleet_linked_, committed, store.vocabulary_crc());
+  fleet_linked_ = committed;
   fleet_->set_linked(fleet_linked_);
   for (auto& l : found) fleet_found_.push_back(std::move(l));
 }
@@ -323,6 +327,7 @@ VMAP_INLINE void AnyMemory::close() {
   if (closed_) return;
   if (auto* s = impl_->store(); s && writes_) {
     sync();
+    link_fleet(true);
     s->checkpoint();
   }
   impl_->drop_store();

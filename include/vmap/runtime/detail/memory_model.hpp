@@ -78,9 +78,10 @@ class MemoryConcept {
   [[nodiscard]] virtual std::size_t working_memory() const noexcept = 0;
   [[nodiscard]] virtual Features key_features(std::uint32_t key) const = 0;
   [[nodiscard]] virtual std::vector<GraphNeighbour> neighbours(std::uint32_t key) const = 0;
-  /// Looks for the checked key images from `from` on among the fleet's other robots
+  /// Looks for the checked key images [from, to) among the fleet's other robots
   /// (link_across_fleet): the inter-robot loops found.
-  virtual std::vector<FleetLoop> link_fleet(FleetIndex& fleet, std::size_t from, std::int64_t vocabulary) = 0;
+  virtual std::vector<FleetLoop> link_fleet(FleetIndex& fleet, std::size_t from, std::size_t to,
+                                            std::int64_t vocabulary) = 0;
 };
 
 template <class Memory>
@@ -133,9 +134,10 @@ class MemoryModel final : public MemoryConcept {
   std::size_t working_memory() const noexcept override { return memory_.working_memory(); }
   Features key_features(std::uint32_t key) const override { return memory_.key_features(key); }
   std::vector<GraphNeighbour> neighbours(std::uint32_t key) const override { return memory_.neighbours(key); }
-  std::vector<FleetLoop> link_fleet(FleetIndex& fleet, std::size_t from, std::int64_t vocabulary) override {
+  std::vector<FleetLoop> link_fleet(FleetIndex& fleet, std::size_t from, std::size_t to,
+                                    std::int64_t vocabulary) override {
     std::vector<FleetLoop> found;
-    for (std::size_t k = from; k < memory_.database().size(); ++k)
+    for (std::size_t k = from; k < to; ++k)
       if (auto loop = link_across_fleet(memory_, static_cast<std::uint32_t>(k), fleet, vocabulary))
         found.push_back(std::move(*loop));
     return found;
