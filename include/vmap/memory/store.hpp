@@ -399,10 +399,15 @@ class MemoryStoreConnection {
       } catch (const std::exception& e) {
         // The kind of what failed (a full disk is io) reaches the caller with the note.
         const auto* vmap_error = dynamic_cast<const Error*>(&e);
+        // On a server whose answer to COMMIT was lost the sync may have been stored: the
+        // next sync's rows then keep the ones there (prepare_statements).
         error = std::make_exception_ptr(Error(vmap_error ? vmap_error->kind() : ErrorKind::io,
                                               std::string(e.what()) +
-                                                  " (an earlier sync, committed in the store's writer thread: it "
-                                                  "stored nothing; the next sync writes its rows again)"));
+                                                  (db.postgres() ? " (an earlier sync, sent by the store's writer thread: "
+                                                                   "the next sync writes its rows again)"
+                                                                 : " (an earlier sync, committed in the store's writer "
+                                                                   "thread: it stored nothing; the next sync writes its "
+                                                                   "rows again)")));
       } catch (...) {
         error = std::make_exception_ptr(Error(ErrorKind::io,
                                               db.what() + " write the memory: an unknown error (an earlier sync, "
