@@ -92,7 +92,9 @@ class FleetIndex {
   [[nodiscard]] std::vector<FleetCandidate> candidates(const BowVector& bow, std::size_t top_k, std::int64_t vocabulary,
                                                        std::size_t max_words = fleet_query_words) {
     revive();
-    auto [words, weights] = detail::l1_postings(bow);
+    auto postings = detail::l1_postings(bow);
+    std::vector<std::int64_t>& words = postings.first;
+    std::vector<double>& weights = postings.second;
     if (max_words > 0 && words.size() > max_words) {
       std::vector<std::size_t> order(words.size());
       for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
