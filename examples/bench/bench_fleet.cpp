@@ -9,14 +9,14 @@
 //   2. latency per key image (push, sync and the loop query with verification of the
 //      top k: everything AnyMemory::push does) with 0, 1k, 10k and 100k key images of
 //      another robot in the database, against the same robot's run into an SQLite store;
-//   3. scale on one machine: 1, 2, 4 and 8 robots mapping at the same time.
+//   3. scale on one machine: 1, 2, 4 and 8 robot processes mapping at the same time.
 //
 //   bench_fleet --shared ../shared --uri postgresql://vmap@127.0.0.1:5432/postgres
 //               [--part same|latency|scale|all] [--sizes 1000,10000,100000]
 //
 // Each run uses a fresh database per section on the server given (created and dropped:
-// the user needs CREATEDB). Robots are threads of this program, each with its own
-// connections, as separate robot processes would be.
+// the user needs CREATEDB). In sections 1 and 2 robots are threads of this program, each
+// with its own connections; in section 3 each robot is a process.
 #include "common/cli_support.hpp"
 
 #include <vmap/io/frame_source.hpp>
@@ -32,6 +32,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cstdlib>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -323,46 +324,60 @@ void latency_section(const std::string& server, const fs::path& shared, const fs
   }
 }
 
-void scale_section(const std::string& server, const fs::path& shared, const fs::path& work) {
-  std::printf("\n## 3. Robots mapping at the same time on one machine (%u cores)\n\n", std::thread::hardware_concurrency());
+constexpr std::size_t scale_frames = 80;  ///< frames each robot of the scale section pushes
+
+/// One robot process of the scale section (`--robot-run`): robot `name` pushes
+/// scale_frames frames of tum_fr1_rpy from `first` into `uri`, with the vocabulary file
+/// `vocabulary`; prints the time of each push that made a key image, one per line.
+int robot_process(const std::string& uri, const fs::path& shared, const std::string& name, std::size_t first,
+                  const std::string& vocabulary) {
+  // Only its own frames are read (decoding the whole sequence in every process would
+  // count in the rate).
+  auto src = vmap::FrameSource::open(shared / "data/tum_fr1_rpy/rgb.txt",
+                                     {.start = first, .end = first + scale_frames, .grey = true});
+  std::vector<vmap::Frame> frames;
+  while (auto f = src.next()) frames.push_back(std::move(*f));
+  auto m = vmap::AnyMemory::create(uri, vmap::PolicyStack{}, {}, vmap::AnyVocabulary::load(vocabulary), {.robot = name});
+  const Latency l = run_robot(m, frames, 0, frames.size());
+  for (const double ms : l.key_ms) std::printf("%.3f\n", ms);
+  return 0;
+}
+
+void scale_section(const std::string& server, const fs::path& shared, const fs::path& work, const std::string& self) {
+  std::printf("\n## 3. Robot processes mapping at the same time on one machine (%u cores)\n\n",
+              std::thread::hardware_concurrency());
   const auto frames = read_grey(shared / "data/tum_fr1_rpy/rgb.txt");
-  const vmap::AnyVocabulary vocabulary = learn_vocabulary(frames);
-  const vmap::PolicyStack stack;
-  const std::size_t each = 80;
+  const fs::path vocabulary = work / "scale_vocabulary.bin";
+  fs::remove(vocabulary);
+  learn_vocabulary(frames).save(vocabulary);
   std::printf("| robots | key images | seconds | key images / s (all robots) | p50 ms | p99 ms | loops between robots "
               "|\n|---|---|---|---|---|---|---|\n");
   for (const std::size_t n : {1, 2, 4, 8}) {
     const std::string uri = fresh_database(server, "bench_scale_" + std::to_string(n));
-    std::vector<Latency> got(n);
-    std::vector<std::string> errors(n);
-    std::vector<std::thread> robots;
+    // Each robot a process of its own (this program with --robot-run), all started at once.
+    std::vector<FILE*> robots;
     const auto t0 = Clock::now();
-    for (std::size_t r = 0; r < n; ++r)
-      robots.emplace_back([&, r] {
-        try {
-          auto m = vmap::AnyMemory::create(uri, stack, {}, vocabulary, {.robot = "r" + std::to_string(r)});
-          const std::size_t first = (r * 83) % (frames.size() - each);
-          got[r] = run_robot(m, frames, first, first + each);
-        } catch (const std::exception& e) {
-          errors[r] = e.what();
-        }
-      });
-    for (auto& t : robots) t.join();
-    const double seconds = ms_since(t0) / 1000.0;
-    for (const auto& e : errors)
-      if (!e.empty()) throw std::runtime_error(e);
-    std::vector<double> all;
-    std::size_t keys = 0, loops = 0;
-    for (const auto& l : got) {
-      all.insert(all.end(), l.key_ms.begin(), l.key_ms.end());
-      keys += l.keys;
-      loops += l.fleet_loops;
+    for (std::size_t r = 0; r < n; ++r) {
+      const std::size_t first = (r * 83) % (frames.size() - scale_frames);
+      const std::string cmd = "'" + self + "' --uri '" + server + "' --shared '" + shared.string() + "' --robot-run r" +
+                              std::to_string(r) + " --first " + std::to_string(first) + " --vocabulary-file '" +
+                              vocabulary.string() + "' --robot-uri '" + uri + "'";
+      FILE* p = popen(cmd.c_str(), "r");
+      if (!p) throw std::runtime_error("cannot start a robot process");
+      robots.push_back(p);
     }
-    std::printf("| %zu | %zu | %.1f | %.1f | %.1f | %.1f | %zu |\n", n, keys, seconds, static_cast<double>(keys) / seconds,
-                percentile(all, 0.5), percentile(all, 0.99), vmap::fleet_loops(uri).size());
+    std::vector<double> all;
+    for (FILE* p : robots) {
+      char line[64];
+      while (std::fgets(line, sizeof line, p)) all.push_back(std::strtod(line, nullptr));
+      if (pclose(p) != 0) throw std::runtime_error("a robot process failed");
+    }
+    const double seconds = ms_since(t0) / 1000.0;
+    std::printf("| %zu | %zu | %.1f | %.1f | %.1f | %.1f | %zu |\n", n, all.size(), seconds,
+                static_cast<double>(all.size()) / seconds, percentile(all, 0.5), percentile(all, 0.99),
+                vmap::fleet_loops(uri).size());
     std::fflush(stdout);
   }
-  (void)work;
 }
 
 }  // namespace
@@ -378,13 +393,21 @@ int main(int argc, char** argv) {
   app.add_option("--work", work, "Folder for the SQLite memories");
   app.add_option("--depth", vocabulary_depth, "Vocabulary depth: 10^depth words, learned from the sequence")
       ->check(CLI::Range(2, 6));
+  // One robot process of the scale section (started by this program).
+  std::string robot_run, robot_uri, vocabulary_file;
+  std::size_t first = 0;
+  app.add_option("--robot-run", robot_run, "(internal) map as this robot, then print each key image's time");
+  app.add_option("--robot-uri", robot_uri, "(internal) the fleet the robot maps into");
+  app.add_option("--first", first, "(internal) the robot's first frame");
+  app.add_option("--vocabulary-file", vocabulary_file, "(internal) the fleet's vocabulary");
   CLI11_PARSE(app, argc, argv);
   try {
+    if (!robot_run.empty()) return robot_process(robot_uri, shared, robot_run, first, vocabulary_file);
     fs::create_directories(work);
     std::printf("# bench_fleet (%s, vocabulary of 10^%d words)\n", vmap::pg::redacted(uri).c_str(), vocabulary_depth);
     if (part == "same" || part == "all") same_section(uri, shared, work);
     if (part == "latency" || part == "all") latency_section(uri, shared, work, sizes);
-    if (part == "scale" || part == "all") scale_section(uri, shared, work);
+    if (part == "scale" || part == "all") scale_section(uri, shared, work, fs::canonical("/proc/self/exe").string());
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_fleet: %s\n", e.what());
     return 1;
