@@ -206,13 +206,24 @@ class Connection {
   /// cannot be reached, or refuses the connection, is ErrorKind::unavailable.
   Connection(const std::string& uri, std::string what) : session_(std::make_shared<detail::Session>()) {
     session_->what = std::move(what);
+    // A connection string libpq cannot parse (a bad port, an unknown option) is the
+    // caller's mistake, not an unreachable server.
+    char* parse_error = nullptr;
+    PQconninfoOption* options = PQconninfoParse(uri.c_str(), &parse_error);
+    if (!options) {
+      std::string why = parse_error ? parse_error : "it cannot be parsed";
+      PQfreemem(parse_error);
+      while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
+      session_->fail("connect", why, ErrorKind::invalid_argument);
+    }
+    PQconninfoFree(options);
     session_->conn = PQconnectdb(uri.c_str());
     if (!session_->conn) session_->fail("connect", "out of memory", ErrorKind::io);
     if (PQstatus(session_->conn) != CONNECTION_OK) {
+      // libpq checks the options' values (a port that is no number, an unknown sslmode)
+      // when it connects; its messages for them begin with "invalid".
       const std::string why = session_->message();
-      // A URI libpq cannot parse is the caller's mistake, not an unreachable server.
-      const bool malformed = why.find("invalid") != std::string::npos && why.find("URI") != std::string::npos;
-      session_->fail("connect", why, malformed ? ErrorKind::invalid_argument : ErrorKind::unavailable);
+      session_->fail("connect", why, why.starts_with("invalid ") ? ErrorKind::invalid_argument : ErrorKind::unavailable);
     }
     quiet();
   }

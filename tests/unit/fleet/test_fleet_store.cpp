@@ -160,6 +160,10 @@ TEST_CASE("fleet store: no password in messages; a server that cannot be reached
   CHECK(e.kind == vmap::ErrorKind::unavailable);
   CHECK(e.message.find("s3cret") == std::string::npos);
   CHECK(e.message.find("robot 'a' of memory 'postgresql://fleet@127.0.0.1:1/vmap?connect_timeout=2'") != std::string::npos);
+  // A connection string libpq cannot parse is the caller's mistake.
+  const auto bad = error_seen([] { (void)vmap::MemoryStore::open("postgresql://h:notaport/db", vmap::sqlite::Access::read, "a"); });
+  CHECK(bad.kind == vmap::ErrorKind::invalid_argument);
+  CHECK(bad.message.find("notaport") != std::string::npos);
 }
 
 TEST_CASE("fleet store: a database another program wrote is refused, naming what is wrong") {
