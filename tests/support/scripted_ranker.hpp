@@ -29,10 +29,11 @@ class ScriptedRanker {
   }
   [[nodiscard]] std::vector<vmap::PlaceMatch<std::size_t>> rank(Bow query, std::size_t top_k,
                                                                  const std::vector<std::size_t>* only,
-                                                                 std::size_t before = static_cast<std::size_t>(-1)) const {
+                                                                 std::size_t before = static_cast<std::size_t>(-1),
+                                                                 std::size_t from = 0) const {
     std::vector<vmap::PlaceMatch<std::size_t>> out;
     for (std::size_t id : only ? *only : indexed_)
-      if (only || id < before) out.push_back({id, score_(query, id)});
+      if (only || (id < before && id >= from)) out.push_back({id, score_(query, id)});
     std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.score > b.score; });
     if (out.size() > top_k) out.resize(top_k);
     return out;

@@ -3,7 +3,9 @@
 #include <opencv2/core.hpp>
 
 #include <cstddef>
+#include <cstring>
 #include <string>
+#include <tuple>
 #include <vector>
 
 namespace vmap {
@@ -44,5 +46,31 @@ struct DescriptorLayout {
 
 /// Putative correspondences: queryIdx indexes the first Features, trainIdx the second.
 using Matches = std::vector<cv::DMatch>;
+
+namespace detail {
+
+/// An order of features by their content (descriptor count and shape, the descriptors'
+/// bytes, the keypoints' positions): which of two images a verification takes as its
+/// query when its answer must be the pair's, not the asker's (VisualMemory::link_pair).
+/// Equal content compares equal, and then either order gives the same answer.
+[[nodiscard]] inline bool features_before(const Features& a, const Features& b) {
+  const cv::Mat& x = a.descriptors;
+  const cv::Mat& y = b.descriptors;
+  const auto shape = [](const Features& f) {
+    return std::tuple(f.keypoints.size(), f.descriptors.rows, f.descriptors.cols, f.descriptors.type());
+  };
+  if (shape(a) != shape(b)) return shape(a) < shape(b);
+  const std::size_t row = static_cast<std::size_t>(x.cols) * x.elemSize();
+  for (int r = 0; r < x.rows; ++r)
+    if (const int c = std::memcmp(x.ptr(r), y.ptr(r), row); c != 0) return c < 0;
+  for (std::size_t i = 0; i < a.keypoints.size(); ++i) {
+    const cv::Point2f p = a.keypoints[i].pt, q = b.keypoints[i].pt;
+    if (p.x != q.x) return p.x < q.x;
+    if (p.y != q.y) return p.y < q.y;
+  }
+  return false;
+}
+
+}  // namespace detail
 
 }  // namespace vmap

@@ -334,6 +334,7 @@ class LoopEngine {
     std::optional<typename Rank::Bow> bow;
     if (ranker_.ready()) bow = ranker_.describe(f);
     const std::size_t older = candidates_below(q);
+    const std::size_t first = std::min(session_start_, older);  // candidates are frames [first, older)
     // Frames that just left the window become tree candidates.
     if (uses_labels(options_.index))
       while (tree_next_ < older) tree_.insert(labels_[tree_next_], tree_next_), ++tree_next_;
@@ -345,7 +346,7 @@ class LoopEngine {
         d.candidates = to_verify.size();
         break;
       case CandidateIndex::brute_force:
-        for (std::size_t j = 0; j < older; ++j) to_verify.emplace_back(j, 0.0);
+        for (std::size_t j = first; j < older; ++j) to_verify.emplace_back(j, 0.0);
         d.candidates = to_verify.size();
         break;
       case CandidateIndex::tree_ranked:
@@ -355,11 +356,11 @@ class LoopEngine {
           leaf = tree_.candidates(labels, options_.min_candidates);
           d.candidates = leaf.size();
         } else {
-          d.candidates = older;
+          d.candidates = older - first;
         }
         if (d.candidates == 0) break;
         const std::vector<PlaceMatch<std::size_t>> ranked = ranker_.rank(
-            *bow, options_.top_k, options_.index == CandidateIndex::tree_ranked ? &leaf : nullptr, older);
+            *bow, options_.top_k, options_.index == CandidateIndex::tree_ranked ? &leaf : nullptr, older, first);
         d.not_in_top_k = d.candidates - std::min(d.candidates, ranked.size());
         for (const PlaceMatch<std::size_t>& r : ranked) {
           if (r.score < options_.min_bow_score) {
@@ -420,8 +421,8 @@ class LoopEngine {
   /// Where image features `q` were taken among the candidates `ranked` (an id the lookup
   /// knows and its bag-of-words score, best first), ranked elsewhere: each is verified
   /// and the place decided as localize() decides (a single image: no revisit rule, no
-  /// temporal consistency). What a fleet's memory uses for the key images of other
-  /// robots, which its own inverted file ranked (memory/fleet.hpp).
+  /// temporal consistency). The place rule between runs decides each pair with it, a
+  /// single candidate at a time (VisualMemory::link_pair).
   template <FeatureLookup L>
   PlaceDecision decide(const Features& q, const std::vector<std::pair<std::size_t, double>>& ranked, const L& lookup,
                        const PlaceDecisionOptions* decision = nullptr) const {
@@ -458,14 +459,23 @@ class LoopEngine {
     not_revisit_ = not_revisit;
     set_consistency(state.consistency);
     session_start_ = session_start;
+    tree_next_ = session_start;
     if (uses_labels(options_.index) && frames_ > 0)
       while (tree_next_ < candidates_below(frames_ - 1)) tree_.insert(labels_[tree_next_], tree_next_), ++tree_next_;
   }
 
   /// The next frame starts a session (another run of the robot, memory/visual_memory.hpp):
-  /// every frame before it is a candidate of the session's frames whatever the window,
-  /// and a revisit (the camera left them: it was another run). Idempotent.
-  void begin_session() { session_start_ = frames_; }
+  /// from it on, a query's candidates are the frames of its own session, as if the engine
+  /// started with it (the tree holds them only). What joins two sessions is the place
+  /// rule between them, which the owner applies (VisualMemory::link_pair), since a
+  /// session's frames have no order in time with another's. Idempotent.
+  void begin_session() {
+    if (session_start_ == frames_) return;
+    session_start_ = frames_;
+    tree_.clear();
+    tree_next_ = frames_;
+    consistency_ = TemporalConsistency<std::size_t>(consistency_.options());
+  }
   /// The first frame of the current session (0 for one session).
   [[nodiscard]] std::size_t session_start() const noexcept { return session_start_; }
 
@@ -533,10 +543,10 @@ class LoopEngine {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }
 
-  /// Frames j < candidates_below(q) are candidates of query q: older than the window, or
-  /// of an earlier session.
+  /// Frames session_start_ <= j < candidates_below(q) are candidates of query q: of its
+  /// session, older than the window.
   [[nodiscard]] std::size_t candidates_below(std::size_t q) const noexcept {
-    return std::max(q > options_.window ? q - options_.window : 0, std::min(session_start_, q));
+    return q > options_.window ? q - options_.window : 0;
   }
 
   /// What the revisit rule has checked of the view starts after j: every one before
@@ -551,13 +561,12 @@ class LoopEngine {
 
   /// The revisit rule for candidate j of query q, whose eq. 5 similarity to j is
   /// `query_similarity`: some view start between them saw j less than left_ratio times
-  /// that. A frame of an earlier session was left by definition. The view start halfway
+  /// that. The view start halfway
   /// between them is verified first: where the camera went away and came back, it is
   /// the one least likely to see j, so a revisit costs one verification; otherwise every
   /// view start is checked in order.
   template <FeatureLookup L>
   bool left_place(std::size_t j, std::size_t q, double query_similarity, const L& lookup) {
-    if (j < session_start_) return true;
     if (left_.size() < frames_) left_.resize(frames_);
     LeftCache& c = left_[j];
     if (c.until < j + 1) c.until = j + 1;
@@ -660,8 +669,8 @@ class LoopEngine {
   /// view), or, when `b` competes with `a` (it could make the decision ambiguous), the
   /// decision itself accepts the pair `a`, `b` (one verification, no vocabulary). A
   /// place seen on two earlier laps is so one place, not two.
-  /// `frames` false: the candidates are no frames of this engine (another robot's key
-  /// images, LoopEngine::decide), so only the verification of the pair tells. A frame
+  /// `frames` false: the candidates are no frames of this engine (LoopEngine::decide),
+  /// so only the verification of the pair tells. A frame
   /// the engine never added (localization before any vocabulary, every key image
   /// verified by an engine that holds none) is a view of its own.
   template <FeatureLookup L>

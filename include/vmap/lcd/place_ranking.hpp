@@ -37,9 +37,9 @@ concept PlaceRanking = std::move_constructible<R> &&
       { cr.ready() } -> std::convertible_to<bool>;                      // can describe and rank
       { cr.describe(f) } -> std::same_as<typename R::Bow>;              // the frame's bag of words
       { r.add(id, bow) };                                               // indexes a frame
-      // Best first among the indexed frames with id < before (only == nullptr) or among
-      // `*only`; the id is the frame's index.
-      { cr.rank(bow, k, only, id) } -> std::same_as<std::vector<PlaceMatch<std::size_t>>>;
+      // Best first among the indexed frames with from <= id < before (only == nullptr)
+      // or among `*only`; the id is the frame's index.
+      { cr.rank(bow, k, only, id, id) } -> std::same_as<std::vector<PlaceMatch<std::size_t>>>;
       { cr.similarity(bow, id) } -> std::convertible_to<double>;        // score against an indexed frame
       { cr.similarity(id, id) } -> std::convertible_to<double>;         // score of two indexed frames
       { cr.memory_bytes() } -> std::convertible_to<std::size_t>;        // the index's memory
@@ -93,16 +93,18 @@ class BasicPlaceRanker {
   void add(std::size_t frame, const Bow& bow) { database_.add(static_cast<Id>(frame), bow); }
 
   /// The `top_k` best-scoring indexed frames, best first: among `*only` when given, else
-  /// among those with an id < `before`.
+  /// among those with `from` <= id < `before`.
   [[nodiscard]] std::vector<PlaceMatch<std::size_t>> rank(const Bow& bow, std::size_t top_k,
                                                           const std::vector<std::size_t>* only,
-                                                          std::size_t before = static_cast<std::size_t>(-1)) const {
+                                                          std::size_t before = static_cast<std::size_t>(-1),
+                                                          std::size_t from = 0) const {
     QueryFilter<Id> filter;
     if (only) {
       filter.only.emplace();
       for (std::size_t id : *only) filter.only->push_back(static_cast<Id>(id));
-    } else if (before != static_cast<std::size_t>(-1)) {
-      filter.before = static_cast<Id>(before);
+    } else {
+      if (before != static_cast<std::size_t>(-1)) filter.before = static_cast<Id>(before);
+      if (from > 0) filter.from = static_cast<Id>(from);
     }
     std::vector<PlaceMatch<std::size_t>> out;
     for (const auto& m : database_.query(bow, top_k, filter)) out.push_back({static_cast<std::size_t>(m.id), m.score});

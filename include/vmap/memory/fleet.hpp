@@ -11,20 +11,22 @@
 // The place database of the whole fleet is one inverted file in the database
 // (vmap.postings: word, robot, key image, weight), written by each robot's store in the
 // same transaction as the key image's bag of words; a robot never loads the fleet's
-// postings. A query ranks the other robots' key images by DBoW2's L1 score (T-RO 2012,
-// eq. 2: for L1-normalised weights, sum over the shared words of min(v_i, w_i)), computed
-// by the server over the postings of the query's 64 heaviest words (an index that holds
-// the postings whole answers it), among robots whose vocabulary is
-// the query's (by the CRC-32 of its record: bags of words of two vocabularies do not
-// compare). The features of the best `top_k` candidates, and only those, cross the
-// network; they are verified with the robot's own matcher and estimator, and the place
-// is decided as localization decides it (LoopEngine::decide: evidence, confidence,
-// ambiguity; no revisit rule between robots). An accepted place is an inter-robot loop
-// edge (vmap.fleet_loops), recorded once per pair of key images whichever robot found it.
+// postings. It holds each key image's heavy words (place/heavy_words.hpp), and a query
+// asks the server for the other robots' key images whose heavy score against it reaches
+// run_link_min_score (the server sums integers over the query's 64 heavy words), among
+// robots whose vocabulary is the query's (by the CRC-32 of its record: bags of words of
+// two vocabularies do not compare). The features of those candidates, and only those,
+// cross the network; each pair is verified and decided by the place rule between runs
+// (VisualMemory::link_pair), the rule that joins the sessions of one memory. An accepted
+// pair is an inter-robot loop edge (vmap.fleet_loops), recorded once whichever robot
+// found it.
 //
 // Every pair of key images of two robots is considered at least once: a robot queries
 // after its own postings are committed, so of two key images written at the same time
-// the later query sees the other.
+// the later query sees the other. Since the candidates are a pair's own (its heavy
+// score) and so is the decision, the loops between robots are those between the same
+// runs added to one memory as sessions, whatever the order the robots mapped in, as long
+// as no query has more than run_link_candidates candidates (bench_fleet counts them).
 
 #include <vmap/core/error.hpp>
 #include <vmap/core/features.hpp>
@@ -34,9 +36,11 @@
 #include <vmap/memory/detail/fleet_schema.hpp>
 #include <vmap/memory/detail/record_codecs.hpp>
 #include <vmap/memory/detail/store_db.hpp>
+#include <vmap/memory/options.hpp>
 #include <vmap/memory/store.hpp>
 #include <vmap/memory/types.hpp>
 #include <vmap/place/bow.hpp>
+#include <vmap/place/heavy_words.hpp>
 
 #include <cstddef>
 #include <cstdint>
@@ -52,19 +56,12 @@
 
 namespace vmap {
 
-/// The words of a query that the fleet's inverted file ranks by (FleetIndex::candidates).
-inline constexpr std::size_t fleet_query_words = 64;
-
 /// A key image of another robot that the fleet's inverted file ranked for a query.
 struct FleetCandidate {
   std::string robot;
   std::uint32_t key = 0;
-  double score = 0.0;  ///< DBoW2's L1 score against the query, in [0, 1]
+  double score = 0.0;  ///< the heavy score against the query (place/heavy_words.hpp), in [0, 1]
 };
-
-namespace detail {
-
-}  // namespace detail
 
 /// A robot's connection to the fleet's shared tables: the inverted file, the other robots'
 /// key images and the inter-robot loop edges (see the top of this file). Its own
@@ -83,55 +80,52 @@ class FleetIndex {
 
   [[nodiscard]] const std::string& robot() const noexcept { return robot_; }
 
-  /// The other robots' key images whose bags of words share words with `bow` (of the
-  /// vocabulary whose record has CRC-32 `vocabulary`), the `top_k` best by L1 score,
-  /// best first (ties by robot and key image, so the order is the same at every run).
-  /// The score is summed over the query's `max_words` heaviest words (0: all): the
-  /// server's work is the postings of the words asked, so the heaviest, which carry most
-  /// of the score, keep a query's cost bounded (results/fleet.md measures it).
-  [[nodiscard]] std::vector<FleetCandidate> candidates(const BowVector& bow, std::size_t top_k, std::int64_t vocabulary,
-                                                       std::size_t max_words = fleet_query_words) {
+  /// The other robots' key images whose heavy score against `bow` (of the vocabulary
+  /// whose record has CRC-32 `vocabulary`) is at least run_link_min_score, the best
+  /// run_link_candidates of them, best first (ties by robot and key image, so the order
+  /// is the same at every run); `more` tells whether others reached the score too.
+  [[nodiscard]] std::vector<FleetCandidate> candidates(const BowVector& bow, std::int64_t vocabulary,
+                                                       bool* more = nullptr) {
     revive();
-    auto postings = detail::l1_postings(bow);
-    std::vector<std::int64_t>& words = postings.first;
-    std::vector<double>& weights = postings.second;
-    if (max_words > 0 && words.size() > max_words) {
-      std::vector<std::size_t> order(words.size());
-      for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
-      std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return weights[a] > weights[b]; });
-      order.resize(max_words);
-      std::sort(order.begin(), order.end());
-      std::vector<std::int64_t> w;
-      std::vector<double> x;
-      for (const std::size_t i : order) {
-        w.push_back(words[i]);
-        x.push_back(weights[i]);
-      }
-      words = std::move(w);
-      weights = std::move(x);
-    }
-    auto q = db_.prepare(
-        "SELECT r.name, p.key, sum(least(q.x, p.weight)) AS s "
-        "FROM unnest(CAST(? AS integer[]), CAST(? AS double precision[])) AS q(w, x) "
-        "JOIN vmap.postings p ON p.word = q.w AND p.vocabulary = ? "
-        "JOIN vmap.robots r ON r.id = p.robot "
-        "WHERE p.robot <> ? GROUP BY r.name, p.robot, p.key ORDER BY s DESC, p.robot, p.key LIMIT ?",
-        "rank the fleet's key images");
+    const auto [words, weights] = detail::heavy_postings(bow);
+    if (!rank_)
+      rank_.emplace(db_.prepare(
+          "SELECT r.name, p.key, CAST(sum(least(q.x, p.weight)) AS bigint) AS s "
+          "FROM unnest(CAST(? AS integer[]), CAST(? AS bigint[])) AS q(w, x) "
+          "JOIN vmap.postings p ON p.word = q.w AND p.vocabulary = ? "
+          "JOIN vmap.robots r ON r.id = p.robot "
+          "WHERE p.robot <> ? GROUP BY r.name, p.robot, p.key HAVING sum(least(q.x, p.weight)) >= ? "
+          "ORDER BY s DESC, p.robot, p.key LIMIT ?",
+          "rank the fleet's key images"));
+    detail::StoreQuery& q = *rank_;
+    q.reset();
     q.bind_text(1, detail::pg_array(words)).bind_text(2, detail::pg_array(weights)).bind(3, vocabulary).bind(4, id_);
-    q.bind(5, static_cast<std::int64_t>(top_k));
+    q.bind(5, static_cast<std::int64_t>(heavy_units(run_link_min_score)));
+    q.bind(6, static_cast<std::int64_t>(run_link_candidates + 1));
     std::vector<FleetCandidate> out;
-    while (q.step())
-      out.push_back({q.text(0), detail::checked_key(q.integer(1), db_), std::clamp(q.real(2), 0.0, 1.0)});
+    while (q.step()) {
+      const std::int64_t units = q.integer(2);
+      out.push_back({q.text(0), detail::checked_key(q.integer(1), db_), heavy_score(static_cast<std::uint64_t>(std::max<std::int64_t>(units, 0)))});
+    }
+    q.reset();
+    if (more) *more = out.size() > run_link_candidates;
+    if (out.size() > run_link_candidates) out.resize(run_link_candidates);
     return out;
   }
 
   /// The features of another robot's key image, read from its memory (its checksum checked).
   [[nodiscard]] Features features(const FleetCandidate& c) {
     revive();
-    const auto id = detail::fleet_robot(db_, c.robot);
-    if (!id) db_.fail("has no robot '" + c.robot + "' any more", ErrorKind::not_found);
-    auto q = db_.prepare("SELECT record, detections, crc FROM " + detail::robot_schema(*id) + ".key_images WHERE id = ?",
-                         "read another robot's key image");
+    const std::int64_t id = robot_id(c.robot);
+    auto it = read_key_.find(id);
+    if (it == read_key_.end())
+      it = read_key_
+               .emplace(id, db_.prepare("SELECT record, detections, crc FROM " + detail::robot_schema(id) +
+                                            ".key_images WHERE id = ?",
+                                        "read another robot's key image"))
+               .first;
+    StoreQuery& q = it->second;
+    q.reset();
     q.bind(1, static_cast<std::int64_t>(c.key));
     const std::string who = db_.what() + ": robot '" + c.robot + "' key image " + std::to_string(c.key);
     if (!q.step()) detail::fail(ErrorKind::corrupt, who + " is missing");
@@ -143,6 +137,7 @@ class FleetIndex {
     std::uint64_t pixels = 0;
     Features f = detail::read_key_record(r, 5, {limits, pixels, nullptr, true}).key.features;
     r.expect_end("the key image");
+    q.reset();
     return f;
   }
 
@@ -150,21 +145,20 @@ class FleetIndex {
   /// recorded already is kept as it is).
   void record(const FleetLoop& e) {
     revive();
-    const auto other = detail::fleet_robot(db_, e.to_robot);
-    if (!other) db_.fail("has no robot '" + e.to_robot + "' any more", ErrorKind::not_found);
+    const std::int64_t other = robot_id(e.to_robot);
     // The record is a loop edge's without its two key images, which the columns hold
     // (with their robots): the link (format.hpp) and the confidence.
     detail::BinaryWriter w;
     detail::memory_write_link(w, e.link);
     w.f64(e.link.confidence);
     const std::string record = std::move(w).take();
-    const bool first = id_ < *other || (id_ == *other && e.from_key < e.to_key);
-    auto q = db_.prepare(
-        "INSERT INTO vmap.fleet_loops(a_robot, a_key, b_robot, b_key, from_robot, inliers, confidence, record, crc) "
-        "VALUES(?,?,?,?,?,?,?,?,?) ON CONFLICT DO NOTHING",
-        "record a loop between robots");
-    q.bind(1, first ? id_ : *other).bind(2, static_cast<std::int64_t>(first ? e.from_key : e.to_key));
-    q.bind(3, first ? *other : id_).bind(4, static_cast<std::int64_t>(first ? e.to_key : e.from_key));
+    const bool first = id_ < other || (id_ == other && e.from_key < e.to_key);
+    StoreQuery& q = statement(record_,
+                              "INSERT INTO vmap.fleet_loops(a_robot, a_key, b_robot, b_key, from_robot, inliers, "
+                              "confidence, record, crc) VALUES(?,?,?,?,?,?,?,?,?) ON CONFLICT DO NOTHING",
+                              "record a loop between robots");
+    q.bind(1, first ? id_ : other).bind(2, static_cast<std::int64_t>(first ? e.from_key : e.to_key));
+    q.bind(3, first ? other : id_).bind(4, static_cast<std::int64_t>(first ? e.to_key : e.from_key));
     q.bind(5, id_).bind(6, static_cast<std::int64_t>(e.link.inliers)).bind(7, e.link.confidence);
     q.bind_blob(8, record).bind(9, detail::row_crc(record));
     q.run();
@@ -174,26 +168,52 @@ class FleetIndex {
   /// next search starts there; a resumed robot goes on from it).
   [[nodiscard]] std::size_t linked() {
     revive();
-    auto q = db_.prepare("SELECT linked FROM vmap.robots WHERE id = ?", "read how far the robot was linked");
+    StoreQuery& q = statement(linked_, "SELECT linked FROM vmap.robots WHERE id = ?", "read how far the robot was linked");
     q.bind(1, id_);
     if (!q.step()) db_.fail("does not exist: the fleet has no such robot", ErrorKind::not_found);
-    return static_cast<std::size_t>(std::max<std::int64_t>(q.integer(0), 0));
+    const auto n = static_cast<std::size_t>(std::max<std::int64_t>(q.integer(0), 0));
+    q.reset();
+    return n;
   }
   void set_linked(std::size_t keys) {
     revive();
-    auto q = db_.prepare("UPDATE vmap.robots SET linked = ? WHERE id = ?", "record how far the robot was linked");
+    StoreQuery& q =
+        statement(set_linked_, "UPDATE vmap.robots SET linked = ? WHERE id = ?", "record how far the robot was linked");
     q.bind(1, static_cast<std::int64_t>(keys)).bind(2, id_);
     q.run();
   }
 
  private:
+  using StoreQuery = detail::StoreQuery;
+
   void revive() {
     if (db_.server().broken()) db_.server().reconnect();
+  }
+
+  /// The statement kept in `slot`, prepared at its first use (the server keeps it for the
+  /// connection's life, so a query costs one round trip).
+  StoreQuery& statement(std::optional<StoreQuery>& slot, const std::string& sql, const char* what) {
+    if (!slot) slot.emplace(db_.prepare(sql, what));
+    slot->reset();
+    return *slot;
+  }
+
+  /// Robot `name`'s number (kept: robots are never renamed, and one that is removed
+  /// held nothing another robot could have found).
+  std::int64_t robot_id(const std::string& name) {
+    if (const auto it = ids_.find(name); it != ids_.end()) return it->second;
+    const auto id = detail::fleet_robot(db_, name);
+    if (!id) db_.fail("has no robot '" + name + "' any more", ErrorKind::not_found);
+    ids_.emplace(name, *id);
+    return *id;
   }
 
   std::string robot_;
   detail::StoreDb db_;
   std::int64_t id_ = 0;
+  std::optional<StoreQuery> rank_, record_, linked_, set_linked_;
+  std::map<std::int64_t, StoreQuery> read_key_;  ///< by robot
+  std::map<std::string, std::int64_t> ids_;
 };
 
 /// What a robot of a fleet's memory holds (fleet_summary).
@@ -279,42 +299,34 @@ struct FleetRobotSummary {
 }
 
 /// Looks for key image `key` of `memory` (a robot of the fleet; its bag of words is in
-/// its place database and committed) among the other robots' key images: ranks them in
-/// the fleet's inverted file, verifies the memory's `top_k` best (default: its options'
-/// localize_top_k) with its own matcher and estimator, decides with its place decision,
-/// and records an accepted place as an inter-robot loop edge. Returns it, or nothing.
+/// its place database and committed) among the other robots' key images: the candidates
+/// of the fleet's inverted file, each verified and decided by the place rule between runs
+/// (VisualMemory::link_pair) with the memory's own matcher and estimator; each accepted
+/// pair is recorded as an inter-robot loop edge. Returns them, best candidate first;
+/// `more` (when given) tells whether more candidates reached the score than were verified.
 template <class Memory>
-[[nodiscard]] std::optional<FleetLoop> link_across_fleet(Memory& memory, std::uint32_t key, FleetIndex& fleet,
-                                                         std::int64_t vocabulary, std::size_t top_k = 0) {
-  const auto* engine = memory.loop_engine();
+[[nodiscard]] std::vector<FleetLoop> link_across_fleet(Memory& memory, std::uint32_t key, FleetIndex& fleet,
+                                                       std::int64_t vocabulary, bool* more = nullptr) {
+  std::vector<FleetLoop> out;
   const BowVector* bow = memory.database().bow(key);
-  if (!engine || !bow) return std::nullopt;
-  const std::vector<FleetCandidate> ranked =
-      fleet.candidates(*bow, top_k > 0 ? top_k : memory.options().localize_top_k, vocabulary);
-  if (ranked.empty()) return std::nullopt;
-  std::vector<Features> features;
-  std::vector<std::pair<std::size_t, double>> to_verify;
-  for (std::size_t i = 0; i < ranked.size(); ++i) {
-    features.push_back(fleet.features(ranked[i]));
-    to_verify.emplace_back(i, ranked[i].score);
-  }
+  if (!memory.loop_engine() || !bow) return out;
+  const std::vector<FleetCandidate> ranked = fleet.candidates(*bow, vocabulary, more);
+  if (ranked.empty()) return out;
   const Features query = memory.key_features(key);
-  const auto lookup = [&](std::size_t i) -> const Features& { return features[i]; };
-  const PlaceDecision d = engine->decide(query, to_verify, lookup);
-  if (!d.accepted() || !d.best) return std::nullopt;
-  const std::size_t best = *d.best;
-  FleetLoop loop;
-  loop.from_robot = fleet.robot();
-  loop.from_key = key;
-  loop.to_robot = ranked[best].robot;
-  loop.to_key = ranked[best].key;
-  for (const PlaceCandidate& c : d.considered)
-    if (c.stage == CandidateStage::chosen) {
-      loop.link = memory.link_to(c, query, features[best]);
-      loop.link.key = ranked[best].key;
-    }
-  fleet.record(loop);
-  return loop;
+  for (const FleetCandidate& c : ranked) {
+    std::optional<PlaceLink> link = memory.link_pair(query, fleet.features(c), c.score);
+    if (!link) continue;
+    FleetLoop loop;
+    loop.from_robot = fleet.robot();
+    loop.from_key = key;
+    loop.to_robot = c.robot;
+    loop.to_key = c.key;
+    loop.link = *link;
+    loop.link.key = c.key;
+    fleet.record(loop);
+    out.push_back(std::move(loop));
+  }
+  return out;
 }
 
 }  // namespace vmap

@@ -45,6 +45,23 @@ struct MemoryGcsOptions {
   GcsOptions gcs{};                 ///< the network's options (max_cells 100, seed 1)
 };
 
+/// The place rule between runs (sessions of one memory, robots of a fleet's:
+/// VisualMemory::link_pair): a key image's candidates in the other runs are those whose
+/// heavy score against it (place/heavy_words.hpp) is at least this; each is then
+/// verified, and the verification decides (examples/results/fleet.md measures the rule).
+inline constexpr double run_link_min_score = 0.02;
+/// ... and the best this many of them are verified. The rule is the pair's own (the same
+/// pairs whatever the order runs are mapped in) while fewer reach the score; the
+/// benchmark counts the queries that had more.
+inline constexpr std::size_t run_link_candidates = 16;
+/// ... and a verified pair is a loop when the place decision accepts it with at least
+/// this confidence (or the memory's own min_confidence, if higher). A pair between runs
+/// stands alone: no temporal consistency and no revisit rule back it, and every pair is
+/// kept, not only a query's best, so it needs more evidence than a loop within a run.
+/// On rtabmap_loop as two sessions, 8 of the 151 pairs accepted at 0.5 were no revisit
+/// and none of the 84 at 0.9 (examples/results/memory.md, "Sessions across runs").
+inline constexpr double run_link_min_confidence = 0.9;
+
 struct MemoryOptions {
   /// The key-image selector's options (tau, eq. 6 / Algorithm 1 rule, fast path).
   /// `keep_images` is set from `images`.

@@ -350,7 +350,7 @@ class MemoryStoreConnection {
     if (fleet_robot > 0)
       insert_postings_.emplace(db.prepare(
           "INSERT INTO vmap.postings(robot, key, word, weight, vocabulary) SELECT ?, ?, w, x, ? "
-          "FROM unnest(CAST(? AS integer[]), CAST(? AS double precision[])) AS t(w, x) ON CONFLICT DO NOTHING",
+          "FROM unnest(CAST(? AS integer[]), CAST(? AS bigint[])) AS t(w, x) ON CONFLICT DO NOTHING",
           "write the bag of words into the fleet's inverted file"));
   }
 
@@ -443,7 +443,7 @@ class MemoryStoreConnection {
       update_bow_->bind_blob(1, b.record).bind(2, b.crc).bind(3, b.key);
       update_bow_->run();
       if (insert_postings_) {
-        const auto [words, weights] = l1_postings(b.bow);
+        const auto [words, weights] = heavy_postings(b.bow);
         insert_postings_->bind(1, fleet_robot).bind(2, b.key).bind(3, vocabulary_crc);
         insert_postings_->bind_text(4, pg_array(words)).bind_text(5, pg_array(weights));
         insert_postings_->run();

@@ -25,8 +25,10 @@
 // position estimate of Algorithm 5.
 //
 // Sessions: a memory holds several runs of the robot (start_session(); merge() appends
-// another memory's runs), each its own chain of key images; loops are searched across
-// every session, and localize() searches them all.
+// another memory's runs), each its own chain of key images with its own loops; the
+// place rule between runs (link_pair: candidates by heavy score, place/heavy_words.hpp,
+// each pair verified on its own) joins a session's key images to the earlier sessions',
+// and localize() searches them all.
 //
 // The state is a set of records (memory/records.hpp): records() gives them, from_records()
 // rebuilds the memory, and the back-ends keep them: a .vmem file (save(), load();
@@ -73,6 +75,7 @@
 #include <vmap/memory/types.hpp>
 #include <vmap/memory/vmem.hpp>
 #include <vmap/place/database.hpp>
+#include <vmap/place/heavy_words.hpp>
 #include <vmap/place/vocabulary.hpp>
 #include <vmap/som/gcs.hpp>
 #include <vmap/som/histogram.hpp>
@@ -211,9 +214,12 @@ class VisualMemory {
   /// Starts a session (another run of the robot, e.g. tomorrow's): the next frame
   /// pushed becomes a key image as the first frame of a memory does, not linked to the
   /// last key image (map().pairs holds a link of no matches there). The loop engine
-  /// searches every earlier session's key images whatever its window, and takes them
-  /// as revisits (the camera left them: it was another run), so an accepted loop joins
-  /// the sessions. A no-op before the first frame and right after another start_session.
+  /// searches the session's own key images, as if the memory started with it; what joins
+  /// it to the earlier sessions is the place rule between runs (link_pair): each of its
+  /// key images against the earlier sessions' whose heavy score reaches
+  /// run_link_min_score, each pair verified and decided on its own, so the loops between
+  /// two runs do not depend on which came first (nor, in a fleet's memory, on the order
+  /// robots map in). A no-op before the first frame and right after another start_session.
   void start_session() {
     if (frames() == 0 || sessions_.back().first_frame == frames()) return;
     sessions_.push_back({key_images(), frames()});
@@ -270,6 +276,15 @@ class VisualMemory {
   /// (memory/fleet.hpp). Its similarity is eq. 5 (the memory's similarity policy) between
   /// the query and the candidate's features `candidate`.
   [[nodiscard]] PlaceLink link_to(const PlaceCandidate& c, const Features& query, const Features& candidate);
+  /// The place rule between two runs (sessions of this memory, robots of a fleet's):
+  /// key image features `query` of one against `candidate`, a key image of another whose
+  /// heavy score against it (place/heavy_words.hpp) is `score`. The two are verified in
+  /// the pair's own order (detail::features_before), not the asker's, and decided as
+  /// localization decides a single candidate, at a confidence of run_link_min_confidence
+  /// at least, so the answer is the pair's whichever of the two asks: the link from
+  /// `query` to `candidate` (its key left 0) or nothing.
+  /// Nothing before loop detection runs (loop_engine()).
+  [[nodiscard]] std::optional<PlaceLink> link_pair(const Features& query, const Features& candidate, double score);
   /// Whether the camera never left its place: more frames than the loop window were
   /// pushed into the current session and its chain holds one key image (the selector
   /// never saw the view change; the revisit rule's chain, lcd/loop_engine.hpp). No
@@ -498,6 +513,12 @@ class VisualMemory {
   /// schema after the sample), then catches up with the earlier ones in order.
   void on_new_key(std::uint32_t key, std::vector<LoopEdge>& found);
 
+  /// The loops of key image k (features `query`, in the place database) to the key images
+  /// of the sessions before its own, by the place rule between runs (link_pair): the
+  /// candidates are those whose heavy score reaches run_link_min_score, the best
+  /// run_link_candidates of them.
+  void link_sessions(std::uint32_t k, const Features& query, std::vector<LoopEdge>& found);
+
   /// The session of key image k (any k: no check against the key images).
   [[nodiscard]] std::size_t session_of_key(std::size_t k) const noexcept {
     const auto it = std::upper_bound(sessions_.begin(), sessions_.end(), k,
@@ -569,6 +590,7 @@ class VisualMemory {
   std::optional<std::pair<std::size_t, Features>> read_;  ///< the last released key image read (feature_ref)
   bool pixels_unread_ = false;  ///< loaded without decoding the key images' pixels
   std::vector<MemorySession> sessions_{MemorySession{}};  ///< never empty: the first starts at 0
+  HeavyIndex heavy_;  ///< heavy words of the key images before the current session's (link_sessions; built when needed)
 };
 
 }  // namespace vmap

@@ -51,6 +51,8 @@ struct QueryFilter {
   /// Only ids < this are candidates: the most recent frames (from `before` on) are
   /// trivially similar to the query. Unset: no bound.
   std::optional<Id> before{};
+  /// Only ids >= this are candidates (the frames of the current session). Unset: no bound.
+  std::optional<Id> from{};
 };
 
 /// Inverted-file place database.
@@ -140,7 +142,9 @@ class PlaceDatabase {
     // vector scores 1 against itself up to 1e-16 and not 1e-8 (1 - sqrt(1 - dot)
     // would turn 1e-8 into 1e-4).
     const double qnorm = scoring_ == BowScoring::l1 ? 1.0 : BowVector{qn}.l2_norm();
-    auto excluded = [&](const Id& id) { return filter.before && !(id < *filter.before); };
+    auto excluded = [&](const Id& id) {
+      return (filter.before && !(id < *filter.before)) || (filter.from && id < *filter.from);
+    };
     auto keep = [&](std::uint32_t slot, double shared) {
       const Slot& s = slots_[slot];
       if (shared > 0.0 && !excluded(s.id))

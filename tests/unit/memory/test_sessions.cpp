@@ -16,9 +16,11 @@
 #include <algorithm>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <string_view>
+#include <tuple>
 #include <vector>
 
 namespace {
@@ -113,9 +115,9 @@ TEST_CASE("sessions: each run is its own chain of key images; loops join them") 
     CHECK(e.link.key < e.from);
     if (e.from >= m1 && e.link.key < m1) {
       ++across;
-      // A revisit of the same frames: the first session's key image lies within the
-      // frames both runs saw (20-39) or close to them.
-      CHECK(mem.map().keys[e.link.key].frame_index + 10 >= 20);
+      // The place rule between runs: a verified, confident pair.
+      CHECK(e.link.inliers >= o.loops.decision.min_inliers);
+      CHECK(e.link.confidence >= o.loops.decision.min_confidence);
     }
   }
   CHECK(across >= 3);
@@ -141,6 +143,49 @@ TEST_CASE("sessions: each run is its own chain of key images; loops join them") 
   twice.start_session();
   CHECK(twice.sessions().size() == 2);
   CHECK(vmap::test::error_of([&] { (void)twice.session_of(1); }).find("session_of: key 1 of 1") != std::string::npos);
+}
+
+TEST_CASE("sessions: the loops between two runs are the pairs' own, whichever run comes first; a run's own loops are its alone") {
+  const auto o = small_memory_options();
+  static const vmap::AnyVocabulary vocabulary = [] {
+    std::vector<cv::Mat> sets;
+    vmap::OrbDescriptor orb;
+    for (std::size_t i = 0; i < sample_frames().size(); i += 4) sets.push_back(orb.extract(sample_frames()[i].image).descriptors);
+    return vmap::AnyVocabulary::learn(sets, {.branching = 8, .depth = 3, .seed = 3});
+  }();
+  const auto build = [&](const std::vector<vmap::Frame>& a, const std::vector<vmap::Frame>& b) {
+    vmap::OrbVisualMemory m(vmap::OrbDescriptor{}, vmap::BruteForceMatcher{}, memory_estimator(), vmap::InlierRatio{}, o,
+                            vocabulary);
+    for (const auto& f : a) m.push(f);
+    if (!b.empty()) m.start_session();
+    for (const auto& f : b) m.push(f);
+    return m;
+  };
+  const auto ab = build(run1(), run2());
+  const auto ba = build(run2(), run1());
+  // Each pair between the runs by (frame of run 1's key image, frame of run 2's), with
+  // its inliers: the verification is the pair's too.
+  const auto across = [](const vmap::OrbVisualMemory& m, std::size_t run1_session) {
+    std::map<std::pair<std::size_t, std::size_t>, int> out;
+    for (const auto& e : m.loops()) {
+      const std::size_t sf = m.session_of(e.from), sk = m.session_of(e.link.key);
+      if (sf == sk) continue;
+      const std::size_t f = m.map().keys[e.from].frame_index, k = m.map().keys[e.link.key].frame_index;
+      CHECK(out.emplace(sf == run1_session ? std::pair(f, k) : std::pair(k, f), e.link.inliers).second);
+    }
+    return out;
+  };
+  const auto by_ab = across(ab, 0), by_ba = across(ba, 1);
+  CHECK(by_ab.size() >= 3);
+  CHECK(by_ab == by_ba);
+  // The second session's own loops are those of its run in a memory of its own.
+  const auto alone = build(run2(), {});
+  const std::size_t m1 = ab.sessions()[1].first_key;
+  std::vector<std::tuple<std::size_t, std::size_t, int>> own, by_alone;
+  for (const auto& e : ab.loops())
+    if (e.from >= m1 && e.link.key >= m1) own.emplace_back(e.from - m1, e.link.key - m1, e.link.inliers);
+  for (const auto& e : alone.loops()) by_alone.emplace_back(e.from, e.link.key, e.link.inliers);
+  CHECK(own == by_alone);
 }
 
 TEST_CASE("sessions: saved, loaded and resumed at any frame, a memory goes on as the uninterrupted one") {

@@ -64,7 +64,7 @@ TEST_CASE("the inverted file returns exactly the brute-force top k") {
     }
 }
 
-TEST_CASE("filters: only a candidate set, and excluding recent ids") {
+TEST_CASE("filters: only a candidate set, and a range of ids") {
   auto r = random_db(300, 60, vmap::BowScoring::l1, 3);
   std::mt19937 rng(5);
   for (int qi = 0; qi < 10; ++qi) {
@@ -74,6 +74,13 @@ TEST_CASE("filters: only a candidate set, and excluding recent ids") {
     for (std::size_t i = 0; i < 150; ++i) early[i] = true;
     vmap::test::check_same_ranking(r.db.query(q, 10, {.before = 150U}),
                                    vmap::test::brute_force_top(r.bows, r.present, q, 10, vmap::BowScoring::l1, &early));
+    // from and before: only ids 100 <= id < 150 (the frames of a session older than its window)
+    std::vector<bool> session(300, false);
+    for (std::size_t i = 100; i < 150; ++i) session[i] = true;
+    const auto in_session = r.db.query(q, 10, {.before = 150U, .from = 100U});
+    vmap::test::check_same_ranking(in_session,
+                                   vmap::test::brute_force_top(r.bows, r.present, q, 10, vmap::BowScoring::l1, &session));
+    for (const auto& m : in_session) CHECK((m.id >= 100 && m.id < 150));
     // only: a small set (scored directly) and a large one (through the inverted file),
     // with an unknown id and a repeated one that must not matter
     for (std::size_t k : {3U, 250U}) {

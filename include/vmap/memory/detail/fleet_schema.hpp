@@ -8,6 +8,7 @@
 //   schema vmap          info(name, value)       application id "VMAP" and the schema version
 //                        robots(id, name, created, linked)
 //                        postings(word, robot, key, weight, vocabulary): the fleet's inverted file
+//                        of heavy words (place/heavy_words.hpp)
 //                        fleet_loops(a_robot, a_key, b_robot, b_key, from_robot, ...): loops
 //                        between robots (memory/fleet.hpp)
 //   schema vmap_robot_N  meta, key_images, links, loops, notes, sessions: robot N's
@@ -26,6 +27,7 @@
 #include <vmap/core/error.hpp>
 #include <vmap/memory/detail/store_db.hpp>
 #include <vmap/place/bow.hpp>
+#include <vmap/place/heavy_words.hpp>
 
 #include <cstdint>
 #include <cstdio>
@@ -40,8 +42,10 @@ namespace vmap::detail {
 /// The advisory lock's first key, and vmap.info's application id: "VMAP".
 inline constexpr std::int64_t fleet_application_id = 0x564D4150;
 /// The fleet's schema version (vmap.info 'version'); each robot's tables are a memory
-/// store's of version memory_store_version.
-inline constexpr std::int64_t fleet_version = 1;
+/// store's of version memory_store_version. Version 1 (a build of 2026-11-28) held every
+/// word of a key image as a floating-point weight; version 2 holds its heavy words, in
+/// fixed point.
+inline constexpr std::int64_t fleet_version = 2;
 /// Longest robot name (bytes).
 inline constexpr std::size_t fleet_max_robot_name = 128;
 
@@ -68,13 +72,12 @@ template <class T>
   return static_cast<std::uint32_t>(v);
 }
 
-/// `bow`'s words and weights normalised to an L1 norm of 1 (the postings' weights).
-inline std::pair<std::vector<std::int64_t>, std::vector<double>> l1_postings(const BowVector& bow) {
-  const double norm = bow.l1_norm();
-  std::pair<std::vector<std::int64_t>, std::vector<double>> out;
-  for (const BowEntry& e : bow) {
-    out.first.push_back(e.word);
-    out.second.push_back(norm > 0 ? static_cast<double>(e.weight) / norm : 0.0);
+/// `bow`'s heavy words and their weights (place/heavy_words.hpp): a key image's postings.
+inline std::pair<std::vector<std::int64_t>, std::vector<std::int64_t>> heavy_postings(const BowVector& bow) {
+  std::pair<std::vector<std::int64_t>, std::vector<std::int64_t>> out;
+  for (const HeavyWord& w : heavy_words(bow)) {
+    out.first.push_back(w.word);
+    out.second.push_back(static_cast<std::int64_t>(w.weight));
   }
   return out;
 }
@@ -136,8 +139,9 @@ inline void check_robot_name(std::string_view name, const std::string& who) {
     db.fail("is not a vmap memory: its schema 'vmap' was made by another program (no vmap application id)",
             ErrorKind::corrupt);
   if (!stored || *stored < 1) db.fail("is corrupt: its fleet schema has no version", ErrorKind::corrupt);
-  if (*stored > version)
-    db.fail("has fleet schema version " + std::to_string(*stored) + "; this build reads version " + std::to_string(version),
+  if (*stored != version)
+    db.fail("has fleet schema version " + std::to_string(*stored) + "; this build reads version " + std::to_string(version) +
+                " only",
             ErrorKind::unsupported_version);
   return true;
 }
@@ -156,7 +160,7 @@ inline void ensure_fleet(StoreDb& db, std::int64_t version) {
             "CREATE TABLE vmap.robots(id bigserial PRIMARY KEY, name text UNIQUE NOT NULL,"
             " created timestamptz NOT NULL DEFAULT now(), linked bigint NOT NULL DEFAULT 0);"
             "CREATE TABLE vmap.postings(robot integer NOT NULL, key bigint NOT NULL, word integer NOT NULL,"
-            " weight double precision NOT NULL, vocabulary bigint NOT NULL, PRIMARY KEY(robot, key, word));"
+            " weight bigint NOT NULL, vocabulary bigint NOT NULL, PRIMARY KEY(robot, key, word));"
             "CREATE INDEX postings_word ON vmap.postings(word, vocabulary) INCLUDE (robot, key, weight);"
             "CREATE TABLE vmap.fleet_loops(a_robot integer NOT NULL, a_key bigint NOT NULL, b_robot integer NOT NULL,"
             " b_key bigint NOT NULL, from_robot integer NOT NULL, inliers bigint NOT NULL,"

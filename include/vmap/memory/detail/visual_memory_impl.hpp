@@ -295,6 +295,7 @@ void VisualMemory<D, M, E, S>::rollback(PushCheckpoint c) {
     poses_.resize(c.keys);
     labels_.key_detections.resize(c.keys);
     loops_.resize(c.loops);
+    heavy_.clear();  // rebuilt from the place database when next needed
     previous_pose_ = std::move(c.previous_pose);
     labels_.previous_detections = std::move(c.previous_detections);
     last_index_ = c.last_index;
@@ -345,13 +346,60 @@ void VisualMemory<D, M, E, S>::on_new_key(std::uint32_t key, std::vector<LoopEdg
       std::optional<Features> read;
       const Features& query = holds_features(k) ? keys[k].features : read.emplace(key_features(static_cast<std::uint32_t>(k)));
       const PlaceDecision d = engine_->add(query, label_vector(k), lookup);
-      if (!d.accepted()) continue;
-      for (const PlaceCandidate& c : d.considered)
-        if (c.stage == CandidateStage::chosen) {
-          loops_.push_back({static_cast<std::uint32_t>(k), link_of(c, query)});
-          found.push_back(loops_.back());
-        }
+      if (d.accepted())
+        for (const PlaceCandidate& c : d.considered)
+          if (c.stage == CandidateStage::chosen) {
+            loops_.push_back({static_cast<std::uint32_t>(k), link_of(c, query)});
+            found.push_back(loops_.back());
+          }
+      if (session_of_key(k) > 0) link_sessions(static_cast<std::uint32_t>(k), query, found);
     }
+  }
+
+template <Descriptor D, Matcher M, Estimator E, Similarity S>
+void VisualMemory<D, M, E, S>::link_sessions(std::uint32_t k, const Features& query, std::vector<LoopEdge>& found) {
+    const BowVector* bow = database().bow(k);
+    if (!bow) return;
+    const auto first = static_cast<std::uint32_t>(sessions_[session_of_key(k)].first_key);
+    // The heavy words of every key image of the earlier sessions, indexed in order as
+    // sessions need them (a key image the place database lacks has none).
+    while (heavy_.next() < first) {
+      const std::uint32_t id = heavy_.next();
+      const BowVector* b = database().bow(id);
+      heavy_.add(id, b ? heavy_words(*b) : std::vector<HeavyWord>{});
+    }
+    std::vector<HeavyIndex::Hit> hits = heavy_.query(heavy_words(*bow), first, heavy_units(run_link_min_score));
+    if (hits.size() > run_link_candidates) hits.resize(run_link_candidates);
+    for (const HeavyIndex::Hit& h : hits) {
+      std::optional<PlaceLink> link = link_pair(query, feature_ref(h.id), heavy_score(h.units));
+      if (!link) continue;
+      link->key = h.id;
+      loops_.push_back({k, *link});
+      found.push_back(loops_.back());
+    }
+  }
+
+template <Descriptor D, Matcher M, Estimator E, Similarity S>
+std::optional<PlaceLink> VisualMemory<D, M, E, S>::link_pair(const Features& query, const Features& candidate,
+                                                             double score) {
+    if (!engine_) return std::nullopt;
+    const bool flip = detail::features_before(candidate, query);
+    const Features& a = flip ? candidate : query;
+    const Features& b = flip ? query : candidate;
+    const auto lookup = [&b](std::size_t) -> const Features& { return b; };
+    PlaceDecisionOptions decision = options_.loops.decision;
+    decision.min_confidence = std::max(decision.min_confidence, run_link_min_confidence);
+    const PlaceDecision d = engine_->decide(a, {{0, score}}, lookup, &decision);
+    if (!d.accepted()) return std::nullopt;
+    for (const PlaceCandidate& c : d.considered)
+      if (c.stage == CandidateStage::chosen) {
+        PlaceLink l = link_to(c, a, b);
+        // Verified as (candidate, query): x_candidate^T F x_query = 0, so the link from the
+        // query holds F^T (E^T alike).
+        if (flip) l.model = l.model.t();
+        return l;
+      }
+    return std::nullopt;
   }
 
 template <Descriptor D, Matcher M, Estimator E, Similarity S>

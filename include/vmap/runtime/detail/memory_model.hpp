@@ -138,8 +138,8 @@ class MemoryModel final : public MemoryConcept {
                                     std::int64_t vocabulary) override {
     std::vector<FleetLoop> found;
     for (std::size_t k = from; k < to; ++k)
-      if (auto loop = link_across_fleet(memory_, static_cast<std::uint32_t>(k), fleet, vocabulary))
-        found.push_back(std::move(*loop));
+      for (FleetLoop& loop : link_across_fleet(memory_, static_cast<std::uint32_t>(k), fleet, vocabulary))
+        found.push_back(std::move(loop));
     return found;
   }
 
