@@ -347,12 +347,20 @@ Latency run_robot(vmap::AnyMemory& memory, const std::vector<vmap::Frame>& frame
 }
 
 /// `r` (the whole records of a memory of one session) repeated `copies` times, each copy a
-/// session of its own: synthetic earlier runs, real key images repeated.
+/// session of its own: synthetic earlier runs, real key images repeated. The copies after
+/// the first run_link_candidates keep their bags of words but not their features: a
+/// query's candidates are the best heavy scores, ties to the lowest key image, so a
+/// copy's features are read only when fewer copies before it tie with it, and no query
+/// verifies more than run_link_candidates. This keeps 100,000 key images within a .vmem
+/// file's 2 GB and the machine's RAM.
 vmap::MemoryRecords repeated(const vmap::MemoryRecords& r, std::size_t copies) {
   vmap::MemoryRecords out = r;
   const std::size_t m = r.keys.size();
+  std::vector<vmap::KeyImageRecord> bare = r.keys;
+  for (auto& k : bare) k.key.features = vmap::Features{};
   for (std::size_t c = 1; c < copies; ++c) {
-    out.keys.insert(out.keys.end(), r.keys.begin(), r.keys.end());
+    const auto& keys = c < vmap::run_link_candidates ? r.keys : bare;
+    out.keys.insert(out.keys.end(), keys.begin(), keys.end());
     out.links.push_back(vmap::KeyPair{});  // no link across sessions
     out.links.insert(out.links.end(), r.links.begin(), r.links.end());
     for (vmap::LoopEdge e : r.loops) {

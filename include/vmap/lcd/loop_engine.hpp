@@ -561,10 +561,9 @@ class LoopEngine {
 
   /// The revisit rule for candidate j of query q, whose eq. 5 similarity to j is
   /// `query_similarity`: some view start between them saw j less than left_ratio times
-  /// that. The view start halfway
-  /// between them is verified first: where the camera went away and came back, it is
-  /// the one least likely to see j, so a revisit costs one verification; otherwise every
-  /// view start is checked in order.
+  /// that. The view start halfway between them is verified first: where the camera went
+  /// away and came back, it is the one least likely to see j, so a revisit costs one
+  /// verification; otherwise every view start is checked in order.
   template <FeatureLookup L>
   bool left_place(std::size_t j, std::size_t q, double query_similarity, const L& lookup) {
     if (left_.size() < frames_) left_.resize(frames_);
@@ -670,9 +669,9 @@ class LoopEngine {
   /// decision itself accepts the pair `a`, `b` (one verification, no vocabulary). A
   /// place seen on two earlier laps is so one place, not two.
   /// `frames` false: the candidates are no frames of this engine (LoopEngine::decide),
-  /// so only the verification of the pair tells. A frame
-  /// the engine never added (localization before any vocabulary, every key image
-  /// verified by an engine that holds none) is a view of its own.
+  /// so only the verification of the pair tells. A frame the engine never added
+  /// (localization before any vocabulary, every key image verified by an engine that
+  /// holds none) is a view of its own.
   template <FeatureLookup L>
   [[nodiscard]] bool one_place(const Verified& a, const Verified& b, bool competes, const L& lookup,
                                const PlaceDecisionOptions& dec, bool frames = true) const {

@@ -38,10 +38,11 @@
 //
 // What it costs (bench_memory, bench_store; examples/memory.md): per key image its
 // features (28 B a keypoint and the descriptor: about 60 KB for ORB 1000), about 8 B per
-// distinct word in the place database, about 100 B per link and loop edge, and the
-// pixels when kept. Frames that are not key images leave nothing but eq. 6's I_{j-1}.
-// With a working memory (bound_features, as a store's) only the N most recent key
-// images keep their features in RAM.
+// distinct word in the place database, about 100 B per link and loop edge, the heavy
+// words of the earlier sessions' key images once a second session starts (1 KB each:
+// link_sessions), and the pixels when kept. Frames that are not key images leave
+// nothing but eq. 6's I_{j-1}. With a working memory (bound_features, as a store's)
+// only the N most recent key images keep their features in RAM.
 //
 // Threading: push() and localize() modify scratch state of the descriptor and must not
 // run concurrently on one object; const members only read, except that with a working
