@@ -83,9 +83,8 @@ class FleetIndex {
   /// The other robots' key images whose heavy score against `bow` (of the vocabulary
   /// whose record has CRC-32 `vocabulary`) is at least run_link_min_score, the best
   /// run_link_candidates of them, best first (ties by robot and key image, so the order
-  /// is the same at every run); `more` tells whether others reached the score too.
-  [[nodiscard]] std::vector<FleetCandidate> candidates(const BowVector& bow, std::int64_t vocabulary,
-                                                       bool* more = nullptr) {
+  /// is the same at every run).
+  [[nodiscard]] std::vector<FleetCandidate> candidates(const BowVector& bow, std::int64_t vocabulary) {
     revive();
     const auto [words, weights] = detail::heavy_postings(bow);
     if (!rank_)
@@ -101,15 +100,13 @@ class FleetIndex {
     q.reset();
     q.bind_text(1, detail::pg_array(words)).bind_text(2, detail::pg_array(weights)).bind(3, vocabulary).bind(4, id_);
     q.bind(5, static_cast<std::int64_t>(heavy_units(run_link_min_score)));
-    q.bind(6, static_cast<std::int64_t>(run_link_candidates + 1));
+    q.bind(6, static_cast<std::int64_t>(run_link_candidates));
     std::vector<FleetCandidate> out;
     while (q.step()) {
       const std::int64_t units = q.integer(2);
       out.push_back({q.text(0), detail::checked_key(q.integer(1), db_), heavy_score(static_cast<std::uint64_t>(std::max<std::int64_t>(units, 0)))});
     }
     q.reset();
-    if (more) *more = out.size() > run_link_candidates;
-    if (out.size() > run_link_candidates) out.resize(run_link_candidates);
     return out;
   }
 
@@ -302,15 +299,14 @@ struct FleetRobotSummary {
 /// its place database and committed) among the other robots' key images: the candidates
 /// of the fleet's inverted file, each verified and decided by the place rule between runs
 /// (VisualMemory::link_pair) with the memory's own matcher and estimator; each accepted
-/// pair is recorded as an inter-robot loop edge. Returns them, best candidate first;
-/// `more` (when given) tells whether more candidates reached the score than were verified.
+/// pair is recorded as an inter-robot loop edge. Returns them, best candidate first.
 template <class Memory>
 [[nodiscard]] std::vector<FleetLoop> link_across_fleet(Memory& memory, std::uint32_t key, FleetIndex& fleet,
-                                                       std::int64_t vocabulary, bool* more = nullptr) {
+                                                       std::int64_t vocabulary) {
   std::vector<FleetLoop> out;
   const BowVector* bow = memory.database().bow(key);
   if (!memory.loop_engine() || !bow) return out;
-  const std::vector<FleetCandidate> ranked = fleet.candidates(*bow, vocabulary, more);
+  const std::vector<FleetCandidate> ranked = fleet.candidates(*bow, vocabulary);
   if (ranked.empty()) return out;
   const Features query = memory.key_features(key);
   for (const FleetCandidate& c : ranked) {

@@ -31,7 +31,6 @@
 
 #include <cstdint>
 #include <cstdio>
-#include <type_traits>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -49,16 +48,12 @@ inline constexpr std::int64_t fleet_version = 2;
 /// Longest robot name (bytes).
 inline constexpr std::size_t fleet_max_robot_name = 128;
 
-/// An array parameter as PostgreSQL's text form ("{1,2,3}"), cast by the statement.
-template <class T>
-[[nodiscard]] std::string pg_array(const std::vector<T>& values) {
+/// An integer array parameter as PostgreSQL's text form ("{1,2,3}"), cast by the statement.
+[[nodiscard]] inline std::string pg_array(const std::vector<std::int64_t>& values) {
   std::string out = "{";
   char buf[32];
   for (std::size_t i = 0; i < values.size(); ++i) {
-    if constexpr (std::is_floating_point_v<T>)
-      std::snprintf(buf, sizeof buf, "%.17g", static_cast<double>(values[i]));
-    else
-      std::snprintf(buf, sizeof buf, "%lld", static_cast<long long>(values[i]));
+    std::snprintf(buf, sizeof buf, "%lld", static_cast<long long>(values[i]));
     if (i > 0) out += ',';
     out += buf;
   }
