@@ -21,6 +21,7 @@
 #include <vmap/runtime/memory.hpp>
 #include <vmap/runtime/recorder.hpp>
 #include <vmap/runtime/stack.hpp>
+#include <vmap/runtime/view.hpp>
 
 #include <atomic>
 #include <chrono>
@@ -202,6 +203,45 @@ PlaceDecisionOptions decision_with(const AnyMemory& mem, std::optional<double> m
 /// "list[i]": an item of a list argument, as errors name it.
 std::string item_name(const char* list, std::size_t i) { return std::string(list) + "[" + std::to_string(i) + "]"; }
 
+/// The options of a page (runtime/view.hpp) from view()'s keywords: `answers` is a list of
+/// Localization, or of (query name, Localization) pairs.
+ViewOptions view_options(const py::object& answers, int image_side, bool matches, const std::optional<std::string>& title) {
+  ViewOptions o;
+  o.image_side = image_side;
+  o.matches = matches;
+  o.title = title.value_or("");
+  if (answers.is_none()) return o;
+  std::size_t i = 0;
+  for (const py::handle item : answers) {
+    if (py::isinstance<MemoryLocalization>(item)) {
+      o.answers.push_back(view_answer("query " + std::to_string(i), item.cast<MemoryLocalization>()));
+    } else if (py::isinstance<py::tuple>(item) && py::len(item) == 2 && py::isinstance<MemoryLocalization>(item[py::int_(1)])) {
+      o.answers.push_back(view_answer(py::str(item[py::int_(0)]), item[py::int_(1)].cast<MemoryLocalization>()));
+    } else {
+      fail("view: " + item_name("answers", i) + " is neither a Localization nor a (name, Localization) pair");
+    }
+    ++i;
+  }
+  return o;
+}
+
+py::dict view_result(const ViewResult& r) {
+  py::dict d;
+  d["index"] = r.index.string();
+  d["key_images"] = r.key_images;
+  d["loops"] = r.loops;
+  d["runs"] = r.runs;
+  d["images"] = r.images;
+  d["images_from"] = r.images_from;
+  d["matched_loops"] = r.matched_loops;
+  d["answers"] = r.answers;
+  d["placed"] = r.placed;
+  d["posed"] = r.posed;
+  d["bytes"] = r.bytes;
+  d["seconds"] = r.seconds;
+  return d;
+}
+
 std::string text_of(const PlaceEvidence& e) {
   char buf[160];
   std::snprintf(buf, sizeof buf, "%d/%d inliers, significance %.1f, spread %.2f, BoW %.3f, %s", e.inliers, e.matches,
@@ -274,6 +314,22 @@ void bind(py::module_& m) {
       .def_readonly("loops", &FleetRobotSummary::loops, "loop edges within its own memory")
       .def_readonly("fleet_loops", &FleetRobotSummary::fleet_loops, "loop edges to other robots' key images");
 
+  m.def(
+      "view",
+      [](const std::string& source, const std::string& folder, const std::optional<std::string>& robot, int image_side,
+         bool matches, const std::optional<std::string>& title) {
+        const ViewOptions o = view_options(py::none(), image_side, matches, title);
+        const ViewResult r = [&] {
+          py::gil_scoped_release unlocked;
+          return view_source(source, folder, o, robot.value_or(""));
+        }();
+        return view_result(r);
+      },
+      py::arg("source"), py::arg("folder"), py::kw_only(), py::arg("robot") = py::none(),
+      py::arg("image_side") = ViewOptions{}.image_side, py::arg("matches") = true, py::arg("title") = py::none(),
+      "Writes the page of `source` into `folder` (folder/index.html), as `vmap view` does: a memory store or .vmem\n"
+      "file, a fleet's memory (a postgresql:// URI: every robot, or `robot` alone), or a visual map (map.vmap).\n"
+      "Returns what was written (a dict: index, key_images, loops, images, ...).");
   m.def("fleet_robots", [](const std::string& uri) {
     py::gil_scoped_release unlocked;
     return fleet_summary(uri);
@@ -594,6 +650,20 @@ void bind(py::module_& m) {
           py::arg("folder"),
           "Writes key_images.txt, loops.txt and, with poses, key_images.tum and loops.g2o into `folder`\n"
           "(each atomically, times exact to the nanosecond); returns the names written.")
+      .def(
+          "view",
+          [](PyMemory& self, const std::string& folder, const py::object& answers, int image_side, bool matches,
+             const std::optional<std::string>& title) {
+            const ViewOptions o = view_options(answers, image_side, matches, title);
+            return view_result(self.locked([&](AnyMemory& mem) { return write_view(mem, folder, o); }));
+          },
+          py::arg("folder"), py::kw_only(), py::arg("answers") = py::none(),
+          py::arg("image_side") = ViewOptions{}.image_side, py::arg("matches") = true, py::arg("title") = py::none(),
+          "Writes a page that shows the memory into `folder` (folder/index.html, opened from the file system in a\n"
+          "browser): the map (from above with poses, else a time line), each key image with its loops and their\n"
+          "matches, the loops, eq. 5's similarity against tau and eq. 7's quality. answers: localize()'s answers\n"
+          "(Localization, or (name, Localization) pairs), placed on their key images. `folder` is written whole\n"
+          "(new, empty or an earlier page). Returns what was written (a dict: index, key_images, loops, images, ...).")
       .def_property_readonly("path", [](PyMemory& self) -> py::object {
         const std::string p = self.locked([](AnyMemory& mem) { return mem.path().string(); });
         return p.empty() ? py::object(py::none()) : py::object(py::str(p));

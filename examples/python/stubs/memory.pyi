@@ -89,6 +89,15 @@ class FleetRobot:
     @property
     def fleet_loops(self) -> int: ...
 
+def view(
+    source: str,
+    folder: str,
+    *,
+    robot: Optional[str] = None,
+    image_side: int = 480,
+    matches: bool = True,
+    title: Optional[str] = None,
+) -> dict[str, Any]: ...
 def fleet_robots(uri: str) -> list[FleetRobot]: ...
 def fleet_loops(uri: str) -> list[FleetLoop]: ...
 
@@ -285,6 +294,15 @@ class VisualMemory:
     def start_session(self) -> None: ...
     def save(self, path: str, *, images: Optional[Literal["none", "png", "jpeg"]] = None) -> None: ...
     def export(self, folder: str) -> list[str]: ...
+    def view(
+        self,
+        folder: str,
+        *,
+        answers: Optional[Sequence[Localization | tuple[str, Localization]]] = None,
+        image_side: int = 480,
+        matches: bool = True,
+        title: Optional[str] = None,
+    ) -> dict[str, Any]: ...
     @property
     def path(self) -> Optional[str]: ...
     @property
