@@ -40,7 +40,7 @@ extract() {
       if (line ~ /#[ \t]*by hand/) mark = "HAND:"
       else if (line ~ /#[ \t]*fails/) mark = "FAILS:"
       if (line ~ /^[ \t]*build\/[a-z]+\/examples\// && line !~ /^[ \t]*build\/release\//) { print FILENAME "\tWRONGDIR:" line; next }
-      if (line !~ /^[ \t]*(vmap|build\/release\/examples\/vmap) (bag|build|sweep|match|detect|loops|localize|vocabulary|memory) /) next
+      if (line !~ /^[ \t]*(vmap|build\/release\/examples\/vmap) (bag|build|sweep|match|detect|loops|localize|vocabulary|memory|view) /) next
       if (line ~ /\[|INPUT|IMAGE\.\.\./) next
       sub(/[ \t]+#.*$/, "", line)
       gsub(/[ \t]+/, " ", line)
