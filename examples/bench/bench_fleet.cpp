@@ -19,6 +19,7 @@
 // the user needs CREATEDB). Robots are processes (this program started again with
 // --robot-run), each with its own connections.
 #include "common/cli_support.hpp"
+#include "common/synthetic_memory.hpp"
 
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/poses.hpp>
@@ -346,35 +347,6 @@ Latency run_robot(vmap::AnyMemory& memory, const std::vector<vmap::Frame>& frame
   return l;
 }
 
-/// `r` (the whole records of a memory of one session) repeated `copies` times, each copy a
-/// session of its own: synthetic earlier runs, real key images repeated. The copies after
-/// the first run_link_candidates keep their bags of words but not their features: a
-/// query's candidates are the best heavy scores, ties to the lowest key image, so a
-/// copy's features are read only when fewer copies before it tie with it, and no query
-/// verifies more than run_link_candidates. This keeps 100,000 key images within a .vmem
-/// file's 2 GB and the machine's RAM.
-vmap::MemoryRecords repeated(const vmap::MemoryRecords& r, std::size_t copies) {
-  vmap::MemoryRecords out = r;
-  const std::size_t m = r.keys.size();
-  std::vector<vmap::KeyImageRecord> bare = r.keys;
-  for (auto& k : bare) k.key.features = vmap::Features{};
-  for (std::size_t c = 1; c < copies; ++c) {
-    const auto& keys = c < vmap::run_link_candidates ? r.keys : bare;
-    out.keys.insert(out.keys.end(), keys.begin(), keys.end());
-    out.links.push_back(vmap::KeyPair{});  // no link across sessions
-    out.links.insert(out.links.end(), r.links.begin(), r.links.end());
-    for (vmap::LoopEdge e : r.loops) {
-      e.from = static_cast<std::uint32_t>(e.from + c * m);
-      e.link.key = static_cast<std::uint32_t>(e.link.key + c * m);
-      out.loops.push_back(e);
-    }
-    out.bows.insert(out.bows.end(), r.bows.begin(), r.bows.end());
-    out.sessions.push_back({c * m, c * r.frames});
-  }
-  out.frames = copies * r.frames;
-  return out;
-}
-
 void latency_section(const std::string& server, const fs::path& shared, const fs::path& work,
                      const std::vector<std::size_t>& sizes) {
   std::printf("\n## 2. Latency per key image (push + sync + the loop queries with verification of the candidates)\n\n");
@@ -413,7 +385,7 @@ void latency_section(const std::string& server, const fs::path& shared, const fs
         const fs::path vmem = work / "latency_runs.vmem";
         {
           std::ofstream out(vmem, std::ios::binary | std::ios::trunc);
-          const std::string bytes = vmap::detail::vmem_file_bytes(repeated(seed, copies), seed.options.images);
+          const std::string bytes = vmap::detail::vmem_file_bytes(vmap::examples::repeated_records(seed, copies), seed.options.images);
           out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
         }
         auto runs = vmap::AnyMemory::copy_into_store(vmap::AnyMemory::open(vmem), file);
