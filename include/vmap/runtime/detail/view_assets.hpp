@@ -220,48 +220,84 @@ inline constexpr std::string_view view_script = R"vmap((function () {
 
   let pending = false;
   function redraw() { if (!pending) { pending = true; requestAnimationFrame(() => { pending = false; draw(); }); } }
-
-  function draw() {
-    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
-    ctx.fillStyle = 'rgb(' + background.join(',') + ')';
-    ctx.fillRect(0, 0, cssW, cssH);
+  // The map's own drawing (the runs' chains, the loop edges, the marks) is kept in a canvas
+  // of its own, drawn again only when the view moves; a selection and the answers are drawn
+  // over a copy of it. Marks and lines that fall on the same pixels are drawn once (a large
+  // memory has many key images per pixel): `marks` counts the key images with a mark on the
+  // canvas and `lines` the loop edges drawn, alone or on a line they share.
+  const layer = document.createElement('canvas'), lctx = layer.getContext('2d');
+  let layerDirty = true, stamp = new Int32Array(0);
+  function moved() { layerDirty = true; redraw(); }
+  function drawLayer() {
+    const c = lctx;
+    layer.width = canvas.width; layer.height = canvas.height;
+    c.setTransform(dpr, 0, 0, dpr, 0, 0);
+    c.fillStyle = 'rgb(' + background.join(',') + ')';
+    c.fillRect(0, 0, cssW, cssH);
     const base = cssH * 0.82;
-    // The chain of each run: consecutive key images.
-    ctx.lineWidth = 1;
+    c.lineWidth = 1;
     for (let r = 0; r < R.length; r++) {
       if (R[r].count < 2) continue;
-      ctx.strokeStyle = colourOf(r); ctx.globalAlpha = 0.35;
-      ctx.beginPath();
-      ctx.moveTo(sx(R[r].first), sy(R[r].first));
-      for (let k = R[r].first + 1; k < R[r].first + R[r].count; k++) ctx.lineTo(sx(k), sy(k));
-      ctx.stroke();
+      c.strokeStyle = colourOf(r); c.globalAlpha = 0.35;
+      c.beginPath();
+      let px = NaN, py = NaN;
+      for (let k = R[r].first; k < R[r].first + R[r].count; k++) {
+        const x = Math.round(sx(k)), y = Math.round(sy(k));
+        if (x === px && y === py) continue;
+        if (k === R[r].first) c.moveTo(x, y); else c.lineTo(x, y);
+        px = x; py = y;
+      }
+      c.stroke();
     }
-    ctx.globalAlpha = 0.55; ctx.strokeStyle = '#c0392b'; ctx.lineWidth = 1.2;
-    ctx.beginPath();
+    c.globalAlpha = 0.55; c.strokeStyle = '#c0392b'; c.lineWidth = 1.2;
+    c.beginPath();
     let lines = 0;
+    const seen = new Set();
     for (let i = 0; i < nl; i++) {
       const a = L.from[i], b = L.to[i];
-      const xa = sx(a), xb = sx(b);
+      const xa = Math.round(sx(a)), xb = Math.round(sx(b)), ya = Math.round(sy(a)), yb = Math.round(sy(b));
+      lines++;
+      const id = xa + ',' + ya + ',' + xb + ',' + yb;
+      if (seen.has(id)) continue;
+      seen.add(id);
       if (mode === 'map') {
-        ctx.moveTo(xa, sy(a)); ctx.lineTo(xb, sy(b));
+        c.moveTo(xa, ya); c.lineTo(xb, yb);
       } else {
         const cx = (xa + xb) / 2, rx = Math.max(Math.abs(xb - xa) / 2, 0.5), ry = Math.min(rx, base - 8);
-        ctx.moveTo(Math.max(xa, xb), base);
-        ctx.ellipse(cx, base, rx, ry, 0, 0, Math.PI, true);
+        c.moveTo(Math.max(xa, xb), base);
+        c.ellipse(cx, base, rx, ry, 0, 0, Math.PI, true);
       }
-      lines++;
     }
-    ctx.stroke();
-    ctx.globalAlpha = 1;
+    c.stroke();
+    c.globalAlpha = 1;
     // One mark per key image, one colour per run.
     const r0 = n > 20000 ? 1.5 : n > 2000 ? 2 : 3;
+    const W = Math.ceil(cssW) + 1, H = Math.ceil(cssH) + 1;
+    if (stamp.length !== W * H) stamp = new Int32Array(W * H);
+    stamp.fill(0);
     let marks = 0;
     for (let r = 0; r < R.length; r++) {
-      ctx.fillStyle = colourOf(r);
-      ctx.beginPath();
-      for (let k = R[r].first; k < R[r].first + R[r].count; k++) { ctx.rect(sx(k) - r0, sy(k) - r0, 2 * r0, 2 * r0); marks++; }
-      ctx.fill();
+      c.fillStyle = colourOf(r);
+      c.beginPath();
+      for (let k = R[r].first; k < R[r].first + R[r].count; k++) {
+        const x = Math.round(sx(k)), y = Math.round(sy(k));
+        if (x < 0 || y < 0 || x >= W || y >= H) continue;
+        marks++;
+        if (stamp[y * W + x] === r + 1) continue;
+        stamp[y * W + x] = r + 1;
+        c.rect(x - r0, y - r0, 2 * r0, 2 * r0);
+      }
+      c.fill();
     }
+    hook.marks = marks; hook.lines = lines;
+    layerDirty = false;
+  }
+
+  function draw() {
+    if (layerDirty) drawLayer();
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.drawImage(layer, 0, 0);
+    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
     // Answers: a ring on each accepted query's key image, its metric pose where answered.
     let answerMarks = 0;
     ctx.lineWidth = 2; ctx.strokeStyle = '#111';
@@ -282,7 +318,7 @@ inline constexpr std::string_view view_script = R"vmap((function () {
       ctx.lineWidth = 3; ctx.strokeStyle = '#000';
       ctx.beginPath(); ctx.arc(sx(k), sy(k), 9, 0, 2 * Math.PI); ctx.stroke();
     }
-    hook.marks = marks; hook.lines = lines; hook.answerMarks = answerMarks;
+    hook.answerMarks = answerMarks;
   }
 
   function pick(mx, my) {
@@ -305,7 +341,7 @@ inline constexpr std::string_view view_script = R"vmap((function () {
     if (Math.abs(dx) + Math.abs(dy) > 3) drag.moved = true;
     if (!drag.moved) return;
     ox = drag.ox + dx; if (mode === 'map') oy = drag.oy + dy;
-    redraw();
+    moved();
   });
   canvas.addEventListener('pointerup', (e) => {
     const d = drag; drag = null;
@@ -317,7 +353,7 @@ inline constexpr std::string_view view_script = R"vmap((function () {
     ox = e.offsetX - (e.offsetX - ox) * f;
     if (mode === 'map') oy = e.offsetY - (e.offsetY - oy) * f;
     scale *= f;
-    redraw();
+    moved();
   }, { passive: false });
 
   function setMode(m) {
@@ -328,14 +364,14 @@ inline constexpr std::string_view view_script = R"vmap((function () {
     $('map-hint').textContent = m === 'map'
       ? 'Seen from above: up is ' + D.up + ', right is +' + D.plane[0] + ', top is +' + D.plane[1] + '. Drag to move, wheel to zoom.'
       : 'The key images in order (the runs one after the other), loop edges as arcs. Drag to move, wheel to zoom.';
-    layout(); fit(); draw();
+    layout(); fit(); layerDirty = true; draw();
   }
   hook.setMode = setMode;
   $('mode-map').hidden = !D.posed;
   $('mode-line').hidden = !D.posed;
   $('mode-map').addEventListener('click', () => setMode('map'));
   $('mode-line').addEventListener('click', () => setMode('line'));
-  $('fit').addEventListener('click', () => { fit(); draw(); });
+  $('fit').addEventListener('click', () => { fit(); layerDirty = true; draw(); });
   hook.screenOf = (k) => ({ x: sx(k), y: sy(k) });
   hook.mapPixels = () => {
     const d = ctx.getImageData(0, 0, canvas.width, canvas.height).data;
@@ -493,45 +529,72 @@ inline constexpr std::string_view view_script = R"vmap((function () {
   $('more').addEventListener('click', () => { shown += 1000; renderLoops(); });
 
   // ---- the similarity along the run (eq. 5) and the quality (eq. 7) --------------------
+  // The chart is kept in a canvas of its own too (drawn again when the window changes), the
+  // selection drawn over it; a run's key images that share a pixel column are drawn as one
+  // vertical stroke from their lowest to their highest similarity.
   const chart = $('chart'), cctx = chart.getContext('2d');
-  function drawChart() {
-    const r = window.devicePixelRatio || 1, W = chart.clientWidth, H = chart.clientHeight;
-    chart.width = Math.max(1, Math.round(W * r)); chart.height = Math.max(1, Math.round(H * r));
-    cctx.setTransform(r, 0, 0, r, 0, 0);
-    cctx.fillStyle = '#fff'; cctx.fillRect(0, 0, W, H);
-    const left = 34, right = 8, top = 8, bottom = 18, pw = W - left - right, ph = H - top - bottom;
-    const x = (k) => left + (n > 1 ? k / (n - 1) : 0.5) * pw, y = (s) => top + (1 - s) * ph;
-    cctx.strokeStyle = '#ccc'; cctx.fillStyle = '#666'; cctx.font = '11px sans-serif';
-    for (const s of [0, 0.5, 1]) { cctx.beginPath(); cctx.moveTo(left, y(s)); cctx.lineTo(left + pw, y(s)); cctx.stroke(); cctx.fillText(s.toFixed(1), 4, y(s) + 4); }
-    cctx.fillText('key image', left + pw - 50, H - 4);
+  const chartLayer = document.createElement('canvas'), clctx = chartLayer.getContext('2d');
+  let chartDirty = true;
+  const plot = { left: 34, right: 8, top: 8, bottom: 18, W: 0, H: 0, r: 1 };
+  const chartX = (k) => plot.left + (n > 1 ? k / (n - 1) : 0.5) * (plot.W - plot.left - plot.right);
+  const chartY = (v) => plot.top + (1 - v) * (plot.H - plot.top - plot.bottom);
+  function drawChartLayer() {
+    plot.r = window.devicePixelRatio || 1; plot.W = chart.clientWidth; plot.H = chart.clientHeight;
+    chart.width = chartLayer.width = Math.max(1, Math.round(plot.W * plot.r));
+    chart.height = chartLayer.height = Math.max(1, Math.round(plot.H * plot.r));
+    const c = clctx, x = chartX, y = chartY, W = plot.W, H = plot.H;
+    c.setTransform(plot.r, 0, 0, plot.r, 0, 0);
+    c.fillStyle = '#fff'; c.fillRect(0, 0, W, H);
+    c.strokeStyle = '#ccc'; c.fillStyle = '#666'; c.font = '11px sans-serif';
+    for (const v of [0, 0.5, 1]) { c.beginPath(); c.moveTo(plot.left, y(v)); c.lineTo(W - plot.right, y(v)); c.stroke(); c.fillText(v.toFixed(1), 4, y(v) + 4); }
+    c.fillText('key image', W - plot.right - 50, H - 4);
     R.forEach((run, i) => {
       const a = run.first, b = run.first + run.count - 1;
-      if (i > 0) { cctx.strokeStyle = '#bbb'; cctx.beginPath(); cctx.moveTo(x(a) - 0.5, top); cctx.lineTo(x(a) - 0.5, top + ph); cctx.stroke(); }
+      if (b < a) return;
+      if (i > 0 && R.length <= 200) { c.strokeStyle = '#bbb'; c.beginPath(); c.moveTo(x(a) - 0.5, plot.top); c.lineTo(x(a) - 0.5, H - plot.bottom); c.stroke(); }
       if (run.tau !== null) {
-        cctx.strokeStyle = '#c0392b'; cctx.setLineDash([5, 4]);
-        cctx.beginPath(); cctx.moveTo(x(a), y(run.tau)); cctx.lineTo(x(b), y(run.tau)); cctx.stroke(); cctx.setLineDash([]);
+        c.strokeStyle = '#c0392b'; c.setLineDash([5, 4]);
+        c.beginPath(); c.moveTo(x(a), y(run.tau)); c.lineTo(Math.max(x(b), x(a) + 1), y(run.tau)); c.stroke(); c.setLineDash([]);
       }
-      cctx.strokeStyle = colourOf(i); cctx.beginPath();
-      let on = false;
+      c.strokeStyle = colourOf(i); c.beginPath();
+      let on = false, column = NaN, low = 0, high = 0;
+      const flush = () => { if (on) { c.lineTo(column, y(low)); c.lineTo(column, y(high)); } };
       for (let k = a; k <= b; k++) {
-        if (K.link[k] < 0) { on = false; continue; }
-        if (!on) { cctx.moveTo(x(k), y(K.similarity[k])); on = true; } else cctx.lineTo(x(k), y(K.similarity[k]));
+        if (K.link[k] < 0) { flush(); on = false; column = NaN; continue; }
+        const px = Math.round(x(k)), v = K.similarity[k];
+        if (px === column) { low = Math.min(low, v); high = Math.max(high, v); continue; }
+        flush();
+        if (!on) { c.moveTo(px, y(v)); on = true; }
+        column = px; low = high = v;
       }
-      cctx.stroke();
+      flush();
+      c.stroke();
     });
-    if (hook.selected !== null) {
-      cctx.strokeStyle = '#000'; cctx.beginPath(); cctx.moveTo(x(hook.selected), top); cctx.lineTo(x(hook.selected), top + ph); cctx.stroke();
-    }
-    chart.onclick = (e) => {
-      if (n === 0) return;
-      const k = Math.round((e.offsetX - left) / pw * (n - 1));
-      select(Math.min(n - 1, Math.max(0, k)));
-    };
+    chartDirty = false;
   }
-  for (const [i, run] of R.entries()) {
+  function drawChart() {
+    if (chartDirty) drawChartLayer();
+    cctx.setTransform(1, 0, 0, 1, 0, 0);
+    cctx.drawImage(chartLayer, 0, 0);
+    if (hook.selected !== null) {
+      cctx.setTransform(plot.r, 0, 0, plot.r, 0, 0);
+      cctx.strokeStyle = '#000'; cctx.beginPath();
+      cctx.moveTo(chartX(hook.selected), plot.top); cctx.lineTo(chartX(hook.selected), plot.H - plot.bottom); cctx.stroke();
+    }
+  }
+  chart.addEventListener('click', (e) => {
+    if (n === 0) return;
+    const k = Math.round((e.offsetX - plot.left) / (plot.W - plot.left - plot.right) * (n - 1));
+    select(Math.min(n - 1, Math.max(0, k)));
+  });
+  R.slice(0, 40).forEach((run, i) => {
     const s = el('span', { class: 'swatch' });
     s.style.background = colourOf(i);
     $('quality').append(el('span', null, [s, run.name + ': Q = ' + fixed(run.quality, 3) + ' (' + run.count + ' key images of ' + run.frames + ' frames, mean S ' + fixed(run.mean_similarity, 3) + ' over ' + run.links + ' links' + (run.tau !== null ? ', tau ' + run.tau : ', tau not recorded') + ')' + (run.input ? ', from ' + run.input : '')]));
+  });
+  if (R.length > 40) {
+    const q = R.map((run) => run.quality);
+    $('quality').append(el('span', { text: 'and ' + (R.length - 40) + ' more ' + D.run_kind + 's: Q from ' + fixed(q.reduce((a, b) => Math.min(a, b)), 3) + ' to ' + fixed(q.reduce((a, b) => Math.max(a, b)), 3) }));
   }
 
   // ---- the queries --------------------------------------------------------------------
@@ -555,7 +618,7 @@ inline constexpr std::string_view view_script = R"vmap((function () {
   setMode(mode);
   renderLoops();
   drawChart();
-  window.addEventListener('resize', () => { size(); fit(); draw(); drawChart(); });
+  window.addEventListener('resize', () => { size(); fit(); layerDirty = true; chartDirty = true; draw(); drawChart(); });
   hook.ready = true;
 })();
 )vmap";
