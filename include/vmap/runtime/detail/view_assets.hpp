@@ -186,7 +186,8 @@ inline constexpr std::string_view view_script = R"vmap((function () {
 
   function layout() {
     if (mode === 'map') {
-      for (let k = 0; k < n; k++) { wx[k] = K.u[k]; wy[k] = K.v[k]; }
+      const P = K.position, a = D.plane[0], b = D.plane[1];
+      for (let k = 0; k < n; k++) { wx[k] = P[3 * k + a]; wy[k] = P[3 * k + b]; }
     } else {
       for (let k = 0; k < n; k++) { wx[k] = k + K.run[k] * gap; wy[k] = 0; }
     }
@@ -362,7 +363,7 @@ inline constexpr std::string_view view_script = R"vmap((function () {
     $('mode-map').classList.toggle('on', m === 'map');
     $('mode-line').classList.toggle('on', m === 'line');
     $('map-hint').textContent = m === 'map'
-      ? 'Seen from above: up is ' + D.up + ', right is +' + D.plane[0] + ', top is +' + D.plane[1] + '. Drag to move, wheel to zoom.'
+      ? 'Seen from above: up is ' + D.up + ', right is +' + 'xyz'[D.plane[0]] + ', top is +' + 'xyz'[D.plane[1]] + '. Drag to move, wheel to zoom.'
       : 'The key images in order (the runs one after the other), loop edges as arcs. Drag to move, wheel to zoom.';
     layout(); fit(); layerDirty = true; draw();
   }
@@ -455,7 +456,7 @@ inline constexpr std::string_view view_script = R"vmap((function () {
       ['name', K.name[k]], ['frame', String(K.frame[k])], ['time', fixed(K.time[k], 6) + ' s'],
       [D.run_kind, runName(r) + (D.run_kind === 'robot' ? ', session ' + K.session[k] : '')]
     ];
-    if (D.posed) rows.push(['position', K.position[k].map((x) => fixed(x, 3)).join(', ') + ' m']);
+    if (D.posed) rows.push(['position', [0, 1, 2].map((i) => fixed(K.position[3 * k + i], 3)).join(', ') + ' m']);
     rows.push(['to the key image before', K.link[k] >= 0 ? K.link[k] + ' inliers, S = ' + fixed(K.similarity[k], 3) : 'none (first of its ' + D.run_kind + ')']);
     const next = k + 1 < n && K.run[k + 1] === r ? k + 1 : -1;
     rows.push(['to the key image after', next >= 0 && K.link[next] >= 0 ? K.link[next] + ' inliers, S = ' + fixed(K.similarity[next], 3) : 'none']);
