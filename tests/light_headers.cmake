@@ -59,7 +59,7 @@ message(STATUS "<vmap/io/frame_source.hpp>: the readers only header-only")
 
 # The run-time layer's memory, and the value headers, against the headers that make them.
 set(_heavy "memory/visual_memory.hpp" "keyframe/selector.hpp" "place/vocabulary_tree.hpp" "som/gcs.hpp"
-           "memory/store.hpp" "sqlite3.h" "libpq-fe.h" "features/orb.hpp" "geometry/fundamental.hpp")
+           "memory/store.hpp" "sqlite3.h" "libpq-fe.h" "features/orb.hpp" "geometry/fundamental.hpp" "geometry/pnp.hpp")
 set(_flags "-I${INCLUDE_DIR}" "-isystem${OPENCV_INCLUDE_DIR}" "-isystem${EIGEN_INCLUDE_DIR}" "-isystem${PG_INCLUDE_DIR}")
 foreach(h vmap/runtime/memory.hpp vmap/memory/types.hpp vmap/runtime/policy_stack.hpp)
   string(MAKE_C_IDENTIFIER "${h}" _id)

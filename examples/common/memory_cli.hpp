@@ -12,6 +12,8 @@
 #include "common/policies.hpp"
 
 #include <vmap/core/error.hpp>
+#include <vmap/io/atomic_file.hpp>
+#include <vmap/io/exports.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/image.hpp>
 #include <vmap/io/postgres.hpp>
@@ -29,6 +31,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -424,7 +427,23 @@ struct MemoryQuery {
   MemoryLocalization answer;
   double ms = 0.0;
   std::size_t robot = 0;  ///< a fleet's: the robot whose memory answered (FleetMemory::robots)
+  /// The query's time: a frame's (Frame::timestamp, time_ns), an image named by its time
+  /// in seconds (TUM's 1305031230.697932.png) that time, any other image its position
+  /// among the queries.
+  double time = 0.0;
+  std::int64_t time_ns = 0;
 };
+
+/// The time of a query image given alone: its name's, when the name (without extension)
+/// is a decimal number of seconds, else `index`.
+inline std::pair<double, std::int64_t> query_image_time(const std::string& path, std::size_t index) {
+  const std::string stem = std::filesystem::path(path).stem().string();
+  double v = 0.0;
+  const auto [ptr, ec] = std::from_chars(stem.data(), stem.data() + stem.size(), v, std::chars_format::fixed);
+  if (!stem.empty() && ec == std::errc() && ptr == stem.data() + stem.size() && std::isfinite(v) && v >= 0)
+    return {v, nanoseconds_from_decimal(stem).value_or(nanoseconds_from_seconds(v))};
+  return {static_cast<double>(index), nanoseconds_from_seconds(static_cast<double>(index))};
+}
 
 /// The query images of `inputs`: each an image file, or a sequence (a folder, a list, a
 /// video, a bag: named "BAG:topic@stamp") whose frames are queries in order. Read in
@@ -435,11 +454,13 @@ struct MemoryQuery {
 inline std::vector<MemoryQuery> localize_queries(const std::function<MemoryQuery(const cv::Mat&)>& localize,
                                                  const std::vector<std::string>& inputs) {
   std::vector<MemoryQuery> out;
-  const auto answer = [&](const std::string& name, const cv::Mat& img) {
+  const auto answer = [&](const std::string& name, const cv::Mat& img, std::pair<double, std::int64_t> time) {
     const auto t0 = std::chrono::steady_clock::now();
     MemoryQuery q = localize(img);
     q.image = name;
     q.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    q.time = time.first;
+    q.time_ns = time.second;
     out.push_back(std::move(q));
   };
   for (const auto& input : inputs) {
@@ -458,7 +479,7 @@ inline std::vector<MemoryQuery> localize_queries(const std::function<MemoryQuery
       } catch (const vmap::Error& e) {
         vmap::detail::fail(e.kind(), "query " + std::string(e.what()));  // "query image 'x': reason"
       }
-      answer(input, img);
+      answer(input, img, query_image_time(input, out.size()));
       continue;
     }
     FrameSourceOptions so;
@@ -468,7 +489,7 @@ inline std::vector<MemoryQuery> localize_queries(const std::function<MemoryQuery
     };
     auto src = open_frames(input, so);
     const std::string prefix = is_bag(input) ? input + ":" : std::string();
-    while (auto f = src.next()) answer(prefix + f->name, f->image);
+    while (auto f = src.next()) answer(prefix + f->name, f->image, {f->timestamp, f->time_ns});
   }
   return out;
 }
@@ -492,6 +513,32 @@ inline nlohmann::json relative_pose_json(const std::optional<RelativePose>& p) {
           {"points_in_front", p->points_in_front}};
 }
 
+/// A query's metric pose (geometry/metric_pose.hpp): camera-to-world in the memory's
+/// frame, the quaternion in TUM's order (qx, qy, qz, qw); null without one.
+inline nlohmann::json metric_pose_json(const std::optional<MetricPose>& p) {
+  if (!p) return nullptr;
+  const cv::Vec3d t = p->position();
+  const auto q = quaternion_from_rotation(p->rotation());
+  const cv::Vec3d sigma = p->position_sigma();
+  nlohmann::json cov = nlohmann::json::array();
+  for (int i = 0; i < 6; ++i) {
+    nlohmann::json row = nlohmann::json::array();
+    for (int j = 0; j < 6; ++j) row.push_back(p->covariance(i, j));
+    cov.push_back(std::move(row));
+  }
+  return {{"position", {t[0], t[1], t[2]}},
+          {"quaternion", {q[0], q[1], q[2], q[3]}},
+          {"key", p->key},
+          {"points", p->points},
+          {"inliers", p->inliers},
+          {"reprojection_px", p->reprojection_px},
+          {"position_sigma", {sigma[0], sigma[1], sigma[2]}},
+          {"rotation_sigma_deg", p->rotation_sigma_deg()},
+          {"covariance", cov},
+          {"rotation_disagreement_deg", p->rotation_disagreement_deg ? nlohmann::json(*p->rotation_disagreement_deg)
+                                                                      : nlohmann::json(nullptr)}};
+}
+
 /// Every answer: per query its decision (status, reason, confidence, evidence), time and
 /// every verified key image (the decision's first, then by confidence).
 inline nlohmann::json localizations_json(const AnyMemory& mem, const std::vector<MemoryQuery>& queries) {
@@ -506,6 +553,8 @@ inline nlohmann::json localizations_json(const AnyMemory& mem, const std::vector
                      {"evidence", evidence_json(q.answer.evidence)},
                      {"verified_candidates", q.answer.verified_candidates},
                      {"ms", q.ms},
+                     {"time", q.time},
+                     {"time_ns", q.time_ns},
                      {"matches", nlohmann::json::array()}};
     j["key"] = q.answer.best() ? nlohmann::json(q.answer.best()->key) : nlohmann::json(nullptr);
     // The GCS position (Algorithm 5), present when the memory holds a trained GCS; null otherwise.
@@ -513,6 +562,11 @@ inline nlohmann::json localizations_json(const AnyMemory& mem, const std::vector
     // The query's camera relative to the best key image's (X_key = R X_query + t, |t| = 1),
     // present when the memory has a camera (--camera) and the F-matrix was verified.
     j["relative_pose"] = relative_pose_json(q.answer.relative_pose);
+    // The query's camera-to-world pose in the memory's frame (a memory with SE(3) poses
+    // and a camera), or null and why not.
+    j["pose"] = metric_pose_json(q.answer.pose);
+    j["pose_reason"] = q.answer.pose_reason;
+    j["pose_reason_code"] = std::string(to_string(q.answer.pose_reason_code));
     // What the neighbours in the sequence added (--sequence N > 1); null for images alone.
     j["sequence"] = nullptr;
     if (const auto& s = q.answer.sequence)
@@ -550,6 +604,18 @@ inline void print_localizations(const AnyMemory& mem, const std::vector<MemoryQu
       std::printf("  relative to the key image: rotation %.2f deg, translation direction (%.3f, %.3f, %.3f)\n",
                   p.rotation_degrees(), p.translation[0], p.translation[1], p.translation[2]);
     }
+    if (const auto& p = q.answer.pose) {
+      const cv::Vec3d t = p->position();
+      const auto r = quaternion_from_rotation(p->rotation());
+      std::printf("  pose: position (%.3f, %.3f, %.3f), quaternion (%.4f, %.4f, %.4f, %.4f), %d of %d points, %.2f px, "
+                  "sigma %.3f in position, %.2f deg in rotation\n",
+                  t[0], t[1], t[2], r[0], r[1], r[2], r[3], p->inliers, p->points, p->reprojection_px,
+                  p->position_sigma_max(), p->rotation_sigma_deg());
+    } else if (q.answer.best() && std::holds_alternative<cv::Affine3d>(mem.poses()[q.answer.best()->key]) &&
+               q.answer.pose_reason_code != PoseReason::no_camera) {
+      std::printf("  no pose: %s (%s)\n", std::string(to_string(q.answer.pose_reason_code)).c_str(),
+                  q.answer.pose_reason.c_str());
+    }
     if (q.answer.position) {
       const Pose2& p = q.answer.position->pose;
       std::printf("  GCS position (%.3f, %.3f, %.3f rad)\n", p.x(), p.y(), p.theta());
@@ -561,9 +627,12 @@ inline void print_localizations(const AnyMemory& mem, const std::vector<MemoryQu
 /// images of a fleet's memory (FleetMemory), answered by the robot whose memory is the
 /// most confident; the answers as localize_from_memory gives them, with the robot.
 inline int localize_in_fleet(const std::string& uri, const std::vector<std::string>& queries, bool json,
-                             std::optional<double> min_confidence, const SequenceArgs& sequence) {
+                             std::optional<double> min_confidence, const SequenceArgs& sequence,
+                             const std::string& trajectory) {
   if (sequence.window > 1 || sequence.max_speed)
     usage_error("--sequence: a sequence is placed along one robot's key images: give --robot NAME");
+  if (!trajectory.empty())
+    usage_error("--trajectory: each robot's poses are in its own frame, so a trajectory is one robot's: give --robot NAME");
   auto fleet = FleetMemory::open(uri);
   auto answers = localize_queries(
       [&](const cv::Mat& img) {
@@ -592,17 +661,44 @@ inline int localize_in_fleet(const std::string& uri, const std::vector<std::stri
   return 0;
 }
 
+/// The answered metric poses of `answers` as a TUM trajectory (the queries' times), written
+/// atomically to `file`; how many.
+inline std::size_t write_trajectory(const std::filesystem::path& file, const std::vector<MemoryQuery>& answers) {
+  std::vector<CameraPose> poses;
+  std::vector<std::int64_t> times;
+  for (const auto& q : answers)
+    if (const auto& p = q.answer.pose) {
+      poses.push_back({q.time, p->position(), p->rotation()});
+      times.push_back(q.time_ns);
+    }
+  write_file_atomically(file, tum_trajectory_text(poses, &times));
+  return poses.size();
+}
+
 /// `vmap localize --memory M QUERY...` and `vmap memory localize M QUERY...`: the answers
 /// as lines, or with `json` one object whose `queries` list every answer. A QUERY is an
-/// image, or a folder, list or video of query images.
+/// image, or a folder, list or video of query images. `trajectory`: a file for the
+/// answered metric poses (TUM format), or empty.
 inline int localize_from_memory(const std::filesystem::path& file, const std::string& option,
                                 const std::vector<std::string>& queries, bool json,
                                 std::optional<double> min_confidence = std::nullopt, const SequenceArgs& sequence = {},
-                                const std::string& robot = {}) {
+                                const std::string& robot = {}, const std::string& trajectory = {}) {
   current_inputs() = {file.string()};
+  if (!trajectory.empty()) {
+    std::vector<std::filesystem::path> inputs{file};
+    for (const auto& q : queries) inputs.emplace_back(q);
+    check_output_file(trajectory, "--trajectory", inputs);
+  }
   if (pg::is_uri(file.native()) && robot.empty())
-    return localize_in_fleet(file.native(), queries, json, min_confidence, sequence);
+    return localize_in_fleet(file.native(), queries, json, min_confidence, sequence, trajectory);
   auto mem = open_memory_input(file, option, false, robot);
+  // Said once: a memory with SE(3) poses but no camera answers no metric pose.
+  if (!mem.stack().camera && std::any_of(mem.poses().begin(), mem.poses().end(), [](const OdometryPose& p) {
+        return std::holds_alternative<cv::Affine3d>(p);
+      }))
+    std::fprintf(stderr, "vmap: the memory '%s' has poses but no camera: a query's metric pose needs the camera's "
+                 "calibration; build the memory with --camera FILE as well as --poses FILE\n",
+                 path_string(file).c_str());
   PlaceDecisionOptions decision = mem.options().loops.decision;
   if (min_confidence) decision.min_confidence = *min_confidence;
   auto answers = localize_queries([&](const cv::Mat& img) { return MemoryQuery{{}, mem.localize(img, &decision)}; },
@@ -616,12 +712,18 @@ inline int localize_from_memory(const std::filesystem::path& file, const std::st
                                      decision);
     for (std::size_t i = 0; i < answers.size(); ++i) answers[i].answer = std::move(singles[i]);
   }
+  std::optional<std::size_t> written;
+  if (!trajectory.empty()) written = write_trajectory(trajectory, answers);
   if (!json) {
     print_localizations(mem, answers);
+    if (written) std::printf("trajectory: %zu poses written to %s\n", *written, trajectory.c_str());
     return 0;
   }
-  std::size_t localized = 0;
-  for (const auto& q : answers) localized += q.answer.ok() ? 1 : 0;
+  std::size_t localized = 0, posed = 0;
+  for (const auto& q : answers) {
+    localized += q.answer.ok() ? 1 : 0;
+    posed += q.answer.pose ? 1 : 0;
+  }
   print_json({{"command", "localize"},
               {"memory", path_string(file)},
               {"stack", stack_json(mem.stack())},
@@ -631,7 +733,10 @@ inline int localize_from_memory(const std::filesystem::path& file, const std::st
               {"chance_inlier_rate", decision.chance_inlier_rate},
               {"sequence", sequence.window},
               {"queries", localizations_json(mem, answers)},
-              {"localized", localized}});
+              {"localized", localized},
+              {"posed", posed},
+              {"trajectory", written ? nlohmann::json{{"file", path_string(trajectory)}, {"poses", *written}}
+                                     : nlohmann::json(nullptr)}});
   return 0;
 }
 

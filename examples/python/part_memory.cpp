@@ -395,6 +395,31 @@ void bind(py::module_& m) {
       .def_readonly("verified_candidates", &MemoryLocalization::verified_candidates, "key images the estimator ran on")
       .def_readonly("relative_pose", &MemoryLocalization::relative_pose,
                     "the query's pose relative to the best key image when the memory has a camera, else None")
+      .def_property_readonly(
+          "pose",
+          [](const MemoryLocalization& l) -> py::object {
+            if (!l.pose) return py::none();
+            return to_array(cv::Mat(cv::Matx44d(l.pose->camera_to_world.matrix), true));
+          },
+          "the query's camera-to-world pose in the memory's frame (4 x 4 [R | t; 0 0 0 1]) when the place was\n"
+          "accepted, the memory has SE(3) poses and a camera, and the geometry holds; else None (pose_reason says why)")
+      .def_property_readonly(
+          "pose_covariance",
+          [](const MemoryLocalization& l) -> py::object {
+            if (!l.pose) return py::none();
+            return to_array(cv::Mat(l.pose->covariance, true));
+          },
+          "the pose's 6 x 6 covariance (position x y z, then a world-frame rotation vector), or None")
+      .def_property_readonly(
+          "pose_inliers", [](const MemoryLocalization& l) -> std::optional<int> {
+            if (!l.pose) return std::nullopt;
+            return l.pose->inliers;
+          },
+          "the PnP's inliers behind the pose, or None")
+      .def_readonly("pose_reason", &MemoryLocalization::pose_reason, "why there is a pose or none, in words")
+      .def_property_readonly(
+          "pose_reason_code", [](const MemoryLocalization& l) { return std::string(to_string(l.pose_reason_code)); },
+          "one name per case (vmap::PoseReason: 'posed', 'no camera', 'no baseline', 'too few points', ...)")
       .def("__bool__", &MemoryLocalization::ok)
       .def("__repr__", [](const MemoryLocalization& l) {
         return "<vmap.Localization " + std::string(to_string(l.status)) +

@@ -2,7 +2,8 @@
 // (Trujillo-Romero 2024, examples/methods.md, sec. 3). Either the virtual-room experiment
 // (--room) or a real sequence with a pose file (--train ... --poses ...). With --memory M
 // IMAGE... it answers instead from a saved visual memory (`vmap build --memory`): the key
-// image(s) each query image matches (common/memory_cli.hpp).
+// image(s) each query image matches and, for a memory with poses and a camera, the query's
+// metric pose (common/memory_cli.hpp).
 #include "common/bag_options.hpp"
 #include "common/cli_support.hpp"
 #include "common/error_stats.hpp"
@@ -59,6 +60,7 @@ struct Settings {
   std::string robot;  // --robot NAME: the robot of a fleet's memory (a postgresql:// URI)
   std::optional<double> min_confidence;  // --min-confidence: with --memory, the place decision's threshold
   ex::SequenceArgs sequence;             // --sequence, --max-speed: with --memory
+  std::string trajectory;                // --trajectory FILE: with --memory, the answered poses (TUM)
   std::vector<std::string> images;  // its query images
 };
 
@@ -366,7 +368,7 @@ void check_settings(const Settings& s, const CLI::App& app) {
     for (const char* o : {"--posters", "--margin", "--laps", "--images-per-lap", "--tests", "--pan"})
       if (given(o)) ex::usage_error(std::string(o) + " is an option of --room");
   }
-  for (const char* o : {"--min-confidence", "--sequence", "--max-speed"})
+  for (const char* o : {"--min-confidence", "--sequence", "--max-speed", "--trajectory"})
     if (given(o)) ex::usage_error(std::string(o) + " is an option of --memory");
   if (!s.room) {
     if (s.poses.empty()) ex::usage_error("--train needs --poses");
@@ -422,16 +424,19 @@ std::function<int()> setup(CLI::App& app) {
                  "memory's, 0.5); below it the answer is \"unknown place\"")
       ->check(ex::real_in(0.0, 1.0));
   ex::add_sequence_options(app, s->sequence);
+  app.add_option("--trajectory", s->trajectory,
+                 "With --memory: write the queries' metric poses (a memory built with --poses and --camera) to FILE "
+                 "as a TUM trajectory, with the queries' times");
   ex::add_robot_option(app, s->robot);
   return [s, &app] {
     if (!s->memory.empty()) {
       ex::refuse_other_options(app,
                                {"--memory", "--robot", "IMAGE", "--json", "--min-confidence", "--sequence", "--max-speed",
-                                "--topic", "--record-time"},
+                                "--topic", "--record-time", "--trajectory"},
                                "--memory");
       if (s->images.empty()) ex::usage_error("--memory needs query images: vmap localize --memory M IMAGE...");
       return ex::localize_from_memory(vmap::memory_path(s->memory), "--memory", s->images, s->json, s->min_confidence,
-                                      s->sequence, s->robot);
+                                      s->sequence, s->robot, s->trajectory);
     }
     if (!s->images.empty())
       ex::usage_error("query images on the command line need --memory M (the GCS modes take --query or --every-other)");

@@ -15,6 +15,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -275,15 +276,26 @@ int export_files(const MemoryArgs& a) {
                                                                                 : std::vector<std::filesystem::path>{file},
                        vmap::memory_export_files());
   auto mem = ex::open_memory_input(file, "memory", false, a.robot);
-  const auto written = vmap::export_memory(mem, out.path());
+  vmap::G2oExportCounts g2o;
+  const auto written = vmap::export_memory(mem, out.path(), true, {}, &g2o);
   out.commit();
+  const bool graph = std::find(written.begin(), written.end(), "loops.g2o") != written.end();
   if (a.json) {
     ex::print_json({{"memory", ex::path_string(file)}, {"out", a.export_out}, {"files", written},
-                    {"key_images", mem.key_images()}, {"loops", mem.loops().size()}});
+                    {"key_images", mem.key_images()}, {"loops", mem.loops().size()},
+                    {"g2o", graph ? nlohmann::json{{"vertices", g2o.vertices},
+                                                   {"odometry_edges", g2o.odometry_edges},
+                                                   {"loop_edges", g2o.loop_edges},
+                                                   {"loops_without_metric_pose", g2o.loops_unmeasured}}
+                                  : nlohmann::json(nullptr)}});
     return 0;
   }
   std::printf("%zu key images, %zu loop edges: wrote %s\n", mem.key_images(), mem.loops().size(),
               ex::written_files(a.export_out, written).c_str());
+  if (graph)
+    std::printf("loops.g2o: %zu vertices, %zu odometry edges, %zu loop edges with a metric pose (%zu without one: "
+                "no camera, or the geometry did not hold)\n",
+                g2o.vertices, g2o.odometry_edges, g2o.loop_edges, g2o.loops_unmeasured);
   return 0;
 }
 

@@ -981,6 +981,111 @@ TEST_SUITE("data") {
     usage_error({"build", sample, "--poses", gt}, "--poses needs --memory");
   }
 
+  TEST_CASE("cli: localize --memory answers the query's metric pose (JSON, text, --trajectory); without a camera it says so once") {
+    // The sample without every 5th frame, with the motion capture's poses and the camera.
+    const std::string gt = vmap::test::data_path("tum_fr1_rpy/groundtruth.txt").string();
+    const fs::path dir = work_dir() / "metric_pose";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const std::string mem = (dir / "m.vmdb").string();
+    const std::string sequence = (dir / "held.txt").string();
+    {
+      // The kept frames as a TUM rgb.txt (their times, for the poses), the held-out ones
+      // as a list of images (the queries).
+      std::ifstream in(fs::path(VMAP_TEST_SOURCE_DIR) / sample);
+      std::ofstream kept(dir / "kept_rgb.txt"), held(sequence);
+      const std::string folder = (fs::path(VMAP_TEST_SOURCE_DIR) / "examples/data/tum_fr1_rpy_60").string();
+      std::size_t i = 0;
+      for (std::string line; std::getline(in, line);) {
+        if (line.empty() || line[0] == '#') continue;
+        const std::string image = folder + "/" + line.substr(line.find(' ') + 1);
+        if (i++ % 5 == 2)
+          held << image << "\n";
+        else
+          kept << line.substr(0, line.find(' ')) << " " << image << "\n";
+      }
+    }
+    const Run b = run_vmap({"build", (dir / "kept_rgb.txt").string(), "--memory", mem, "--poses", gt, "--camera",
+                            "examples/data/tum_fr1_camera.yaml"});
+    INFO(b.err);
+    REQUIRE(b.code == 0);
+    std::vector<std::string> queries;
+    {
+      std::ifstream held(sequence);
+      for (std::string line; std::getline(held, line);) queries.push_back(line);
+    }
+    REQUIRE(queries.size() == 12);
+    const std::string trajectory = (dir / "poses.tum").string();
+    std::vector<std::string> args{"localize", "--memory", mem, "--json", "--trajectory", trajectory};
+    args.insert(args.end(), queries.begin(), queries.end());
+    const Run l = run_vmap(args);
+    INFO(l.err);
+    REQUIRE(l.code == 0);
+    const auto j = nlohmann::json::parse(l.out);
+    const auto truth = vmap::load_camera_poses(gt);
+    std::size_t posed = 0;
+    for (const auto& q : j["queries"]) {
+      REQUIRE(q.contains("pose"));
+      REQUIRE(q["pose_reason"].is_string());
+      if (q["pose"].is_null()) {
+        CHECK(q["pose_reason_code"] != "posed");
+        continue;
+      }
+      ++posed;
+      CHECK(q["pose_reason_code"] == "posed");
+      const auto p = q["pose"]["position"].get<std::vector<double>>();
+      const auto r = q["pose"]["quaternion"].get<std::vector<double>>();
+      REQUIRE(p.size() == 3);
+      REQUIRE(r.size() == 4);
+      CHECK(r[0] * r[0] + r[1] * r[1] + r[2] * r[2] + r[3] * r[3] == doctest::Approx(1.0).epsilon(1e-9));
+      CHECK(r[3] >= 0.0);  // TUM's order, qw last
+      CHECK(q["pose"]["covariance"].size() == 6);
+      CHECK(q["pose"]["inliers"].get<int>() >= 12);
+      // Within 5 cm of the motion capture at the query's time (the image's name).
+      const double time = q["time"].get<double>();
+      CHECK(time == doctest::Approx(std::stod(fs::path(q["image"].get<std::string>()).stem().string())).epsilon(1e-12));
+      const auto at = vmap::poses_for_frames(truth, {time}, "groundtruth.txt", 0.05, false).front();
+      CHECK(cv::norm(cv::Vec3d(p[0], p[1], p[2]) - at.position) < 0.05);
+    }
+    CHECK(posed >= 8);
+    CHECK(j["posed"] == posed);
+    CHECK(j["trajectory"]["poses"] == posed);
+    // The trajectory: the answered poses with the queries' times, read back by vmap's TUM reader.
+    const auto back = vmap::load_tum_poses(trajectory);
+    REQUIRE(back.size() == posed);
+    std::size_t k = 0;
+    for (const auto& q : j["queries"]) {
+      if (q["pose"].is_null()) continue;
+      CHECK(back[k].timestamp == doctest::Approx(q["time"].get<double>()).epsilon(1e-12));
+      CHECK(back[k].position[0] == doctest::Approx(q["pose"]["position"][0].get<double>()).epsilon(1e-9));
+      ++k;
+    }
+    // The text: a pose line under the key image's.
+    const Run text = run_vmap({"localize", "--memory", mem, queries[0], queries[1]});
+    CHECK(text.out.find("  pose: position (") != std::string::npos);
+    // As a sequence of 8: a pose per image, no gross error.
+    std::vector<std::string> seq_args{"localize", "--memory", mem, sequence, "--sequence", "8", "--json"};
+    const Run s = run_vmap(seq_args);
+    INFO(s.err);
+    REQUIRE(s.code == 0);
+    for (const auto& q : nlohmann::json::parse(s.out)["queries"]) CHECK(q.contains("pose"));
+    // A memory with poses and no camera: no pose, and one message that says how to get one.
+    const std::string plain = (dir / "plain.vmdb").string();
+    REQUIRE(run_vmap({"build", (dir / "kept_rgb.txt").string(), "--memory", plain, "--poses", gt}).code == 0);
+    const Run n = run_vmap({"localize", "--memory", plain, queries[0], queries[1], "--json"});
+    REQUIRE(n.code == 0);
+    const std::string said = "has poses but no camera";
+    REQUIRE(n.err.find(said) != std::string::npos);
+    CHECK(n.err.find(said, n.err.find(said) + 1) == std::string::npos);
+    CHECK(n.err.find("--camera FILE") != std::string::npos);
+    for (const auto& q : nlohmann::json::parse(n.out)["queries"]) {
+      CHECK(q["pose"].is_null());
+      if (q["localized"].get<bool>()) CHECK(q["pose_reason_code"] == "no camera");
+    }
+    usage_error({"localize", "--train", sample, "--poses", gt, "--every-other", "--trajectory", trajectory},
+                "--trajectory is an option of --memory");
+  }
+
   TEST_CASE("cli: build --memory --poses --gcs keeps floor poses and trains the GCS; localize answers a position") {
     const std::string gt = vmap::test::data_path("tum_fr1_rpy/groundtruth.txt").string();
     const fs::path file = work_dir() / "memory_gcs.vmdb";
@@ -1367,7 +1472,9 @@ TEST_SUITE("data") {
       }
     }
     CHECK(vertices == tum.size());
-    CHECK(edges == info["loops"].size());
+    // An odometry edge between consecutive key images; the loops need a camera for their
+    // metric pose, which this memory has not.
+    CHECK(edges == tum.size() - 1);
   }
 }
 

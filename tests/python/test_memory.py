@@ -326,6 +326,66 @@ def test_camera_memory_gives_the_command_lines_relative_poses(tmp_path, shared, 
     assert posed >= 5
 
 
+def _tum_pose(row):
+    """A TUM line's pose (tx ty tz qx qy qz qw) as a 4 x 4 camera-to-world matrix."""
+    tx, ty, tz, x, y, z, w = row
+    n = np.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    pose = np.eye(4)
+    pose[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                    [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                    [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
+    pose[:3, 3] = tx, ty, tz
+    return pose
+
+
+def test_metric_pose_is_a_4x4_array_or_none_with_its_reason(tmp_path, shared, repo, sample_frames, vmap_cli):
+    """Localization.pose: the query's camera-to-world pose in the memory's frame, as the
+    command line's JSON gives it (TUM's quaternion order), or None and pose_reason."""
+    truth = np.loadtxt(shared / "data" / "tum_fr1_rpy" / "groundtruth.txt")
+    at = lambda t: _tum_pose(truth[np.abs(truth[:, 0] - t).argmin(), 1:])
+    camera = str(repo / "examples" / "data" / "tum_fr1_camera.yaml")
+    path = str(tmp_path / "metric.vmdb")
+    with vmap.VisualMemory.create(path, camera=camera) as mem:
+        for image, t, name in sample_frames[0::2]:
+            mem.push(image, timestamp=t, name=name, pose=at(t))
+    reader = vmap.VisualMemory.open(path, read_only=True)
+    queries = sample_frames[1::6]
+    posed = 0
+    for image, t, name in queries:
+        got = reader.localize(image)
+        assert isinstance(got.pose_reason, str) and got.pose_reason
+        if got.pose is None:
+            assert got.pose_reason_code != "posed" and got.pose_covariance is None and got.pose_inliers is None
+            continue
+        posed += 1
+        assert got.pose_reason_code == "posed"
+        assert got.pose.shape == (4, 4) and got.pose.dtype == np.float64
+        assert np.allclose(got.pose[3], [0, 0, 0, 1])
+        assert np.allclose(got.pose[:3, :3] @ got.pose[:3, :3].T, np.eye(3), atol=1e-9)
+        assert got.pose_covariance.shape == (6, 6)
+        assert got.pose_inliers >= 12
+        assert np.linalg.norm(got.pose[:3, 3] - at(t)[:3, 3]) < 0.05
+    assert posed >= 7
+    # The command line answers the same pose: position and quaternion (qx, qy, qz, qw).
+    folder = (repo / "examples" / "data" / "tum_fr1_rpy_60").resolve()
+    answers = cli_json(vmap_cli, "localize", "--memory", path, *[str(folder / "rgb" / n) for _, _, n in queries])["queries"]
+    for (image, _, _), answer in zip(queries, answers):
+        got = reader.localize(image)
+        if got.pose is None:
+            assert answer["pose"] is None and answer["pose_reason"] == got.pose_reason
+            continue
+        assert np.allclose(answer["pose"]["position"], got.pose[:3, 3], atol=1e-12)
+        x, y, z, w = answer["pose"]["quaternion"]
+        assert np.allclose(_tum_pose([0, 0, 0, x, y, z, w])[:3, :3], got.pose[:3, :3], atol=1e-9)
+    # A memory without poses answers the key image and no pose, saying why.
+    plain = vmap.VisualMemory(camera=camera)
+    for image, t, name in sample_frames[0::2]:
+        plain.push(image, timestamp=t, name=name)
+    answer = plain.localize(queries[1][0])
+    assert answer.ok and answer.pose is None and answer.pose_reason_code == "key image without a pose"
+
+
 def test_fleet_robots_share_a_memory_on_postgresql(fleet_server, sample_frames, sample_list, vmap_cli, tmp_path):
     """Two robots write one fleet's memory with one vocabulary; the second finds the first's
     key images, and the fleet lists both robots and the loops between them."""

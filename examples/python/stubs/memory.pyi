@@ -8,6 +8,18 @@ import numpy.typing as npt
 
 _Pose = tuple[float, float, float] | npt.NDArray[numpy.float64] | None
 _PlaceStatus = Literal["accepted", "unknown place", "ambiguous", "too little evidence"]
+_PoseReason = Literal[
+    "posed",
+    "place not accepted",
+    "no camera",
+    "key image without a pose",
+    "no baseline",
+    "too few points",
+    "few PnP inliers",
+    "rotation disagrees",
+    "uncertain",
+    "moved by the sequence",
+]
 
 class PlaceEvidence:
     """What a place decision weighed (lcd/place_decision.hpp)."""
@@ -156,6 +168,16 @@ class Localization:
     def verified_candidates(self) -> int: ...
     @property
     def relative_pose(self) -> Optional[RelativePose]: ...
+    @property
+    def pose(self) -> Optional[npt.NDArray[numpy.float64]]: ...
+    @property
+    def pose_covariance(self) -> Optional[npt.NDArray[numpy.float64]]: ...
+    @property
+    def pose_inliers(self) -> Optional[int]: ...
+    @property
+    def pose_reason(self) -> str: ...
+    @property
+    def pose_reason_code(self) -> _PoseReason: ...
     def __bool__(self) -> bool: ...
 
 class MemoryStep:

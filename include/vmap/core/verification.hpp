@@ -47,6 +47,12 @@ enum class Degeneracy : std::uint8_t {
 }
 [[nodiscard]] constexpr std::string_view to_string(Degeneracy d) noexcept { return names_of(d).name(d); }
 
+/// The angle of a rotation matrix, degrees (from its trace).
+[[nodiscard]] inline double rotation_angle_deg(const cv::Matx33d& r) {
+  const double c = std::clamp((cv::trace(r) - 1.0) / 2.0, -1.0, 1.0);
+  return std::acos(c) * 180.0 / CV_PI;
+}
+
 /// The motion between two calibrated views, from an essential matrix (cv::recoverPose):
 /// a point X_a in camera a's coordinates is X_b = rotation * X_a + translation in camera
 /// b's. Two views fix the translation only up to scale: |translation| = 1.
@@ -56,10 +62,7 @@ struct RelativePose {
   int points_in_front = 0;  ///< inliers triangulated in front of both cameras (cheirality)
 
   /// The rotation's angle in degrees (from its trace).
-  [[nodiscard]] double rotation_degrees() const {
-    const double c = std::clamp((cv::trace(rotation) - 1.0) / 2.0, -1.0, 1.0);
-    return std::acos(c) * 180.0 / CV_PI;
-  }
+  [[nodiscard]] double rotation_degrees() const { return rotation_angle_deg(rotation); }
 };
 
 /// The result of geometric verification of a set of matches.

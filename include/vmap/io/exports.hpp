@@ -11,7 +11,8 @@
 //                   "EDGE_SE3:QUAT from to dx dy dz qx qy qz qw I11 I12 .. I66" a line
 //                   (g2o's and GTSAM's readers): a constraint between two key images,
 //                   the pose of `to` in the frame of `from`, with the upper triangle of
-//                   a 6x6 information matrix (translation first, then rotation).
+//                   a 6x6 information matrix (translation first, then the quaternion's
+//                   vector part, as g2o's EdgeSE3 measures its error).
 //
 // Numbers are printed in the shortest decimal form that reads back as the same double
 // (std::to_chars: "1305031229.528748", not "1305031229.528748035"), in fixed notation and
@@ -163,24 +164,51 @@ struct LoopPair {
   return out;
 }
 
+/// A g2o EDGE_SE3:QUAT line between vertices `from_id` and `to_id`: the measured pose of
+/// `to` in the frame of `from` (`rotation`, `translation`), with the upper triangle of
+/// the 6x6 `information` matrix over g2o's error (translation, then the quaternion's
+/// vector part: g2o_information).
+[[nodiscard]] inline std::string g2o_edge_line(std::size_t from_id, std::size_t to_id, const cv::Matx33d& rotation,
+                                               const cv::Vec3d& translation, const cv::Matx66d& information) {
+  const auto q = quaternion_from_rotation(rotation);
+  std::string out = "EDGE_SE3:QUAT";
+  detail::append_field(out, std::to_string(from_id));
+  detail::append_field(out, std::to_string(to_id));
+  for (double v : {translation[0], translation[1], translation[2], q[0], q[1], q[2], q[3]})
+    detail::append_field(out, detail::shortest(v));
+  for (int i = 0; i < 6; ++i)
+    for (int j = i; j < 6; ++j) detail::append_field(out, detail::shortest(information(i, j)));
+  out += '\n';
+  return out;
+}
+
 /// A g2o EDGE_SE3:QUAT line: the pose of `to` in the frame of `from` (T_from^-1 T_to)
 /// between vertices `from_id` and `to_id`, with a diagonal information matrix
 /// (`translation_information` for x y z, `rotation_information` for the rotation).
 [[nodiscard]] inline std::string g2o_edge_line(std::size_t from_id, std::size_t to_id, const CameraPose& from,
                                                const CameraPose& to, double translation_information = 1.0,
                                                double rotation_information = 1.0) {
-  const cv::Matx33d r = from.rotation.t() * to.rotation;
-  const cv::Vec3d t = from.rotation.t() * (to.position - from.position);
-  const auto q = quaternion_from_rotation(r);
-  std::string out = "EDGE_SE3:QUAT";
-  detail::append_field(out, std::to_string(from_id));
-  detail::append_field(out, std::to_string(to_id));
-  for (double v : {t[0], t[1], t[2], q[0], q[1], q[2], q[3]}) detail::append_field(out, detail::shortest(v));
-  for (int i = 0; i < 6; ++i)
-    for (int j = i; j < 6; ++j)
-      detail::append_field(out, detail::shortest(i != j ? 0.0 : i < 3 ? translation_information : rotation_information));
-  out += '\n';
-  return out;
+  cv::Matx66d information = cv::Matx66d::zeros();
+  for (int i = 0; i < 6; ++i) information(i, i) = i < 3 ? translation_information : rotation_information;
+  return g2o_edge_line(from_id, to_id, from.rotation.t() * to.rotation, from.rotation.t() * (to.position - from.position),
+                       information);
+}
+
+/// The information matrix of an EDGE_SE3:QUAT whose measurement has covariance
+/// `covariance` over a small motion in the measurement's own frame (T exp(e), e = the
+/// translation, then a rotation vector): g2o's error for an SE(3) edge is the translation
+/// and the vector part of the quaternion (g2o's toVectorMQT), which is half the rotation
+/// vector for a small rotation, so the rotation rows are scaled by 1/2 before the inverse.
+/// `floor` is added to the variances so that an exact measurement (no residual) keeps a
+/// finite information.
+[[nodiscard]] inline cv::Matx66d g2o_information(const cv::Matx66d& covariance, double floor = 1e-8) {
+  cv::Matx66d J = cv::Matx66d::eye();
+  for (int i = 3; i < 6; ++i) J(i, i) = 0.5;
+  cv::Matx66d c = J * covariance * J.t();
+  for (int i = 0; i < 6; ++i) c(i, i) += floor;
+  cv::Matx66d info;
+  cv::invert(c, info, cv::DECOMP_SVD);
+  return 0.5 * (info + info.t());
 }
 
 }  // namespace vmap

@@ -114,6 +114,9 @@ struct PlaceDecision {
   std::optional<std::size_t> best;       ///< the best place's frame (verified), if any
   PlaceEvidence evidence;                ///< of `best`
   Verification verification;             ///< of `best` (the model: F, or E with a calibrated estimator)
+  /// The tentative matches of `best` that `verification` weighed (its inlier_mask is
+  /// aligned with them): queryIdx indexes the query's features, trainIdx the best's.
+  Matches best_matches;
   std::optional<std::size_t> second;     ///< the best other place, if verified
   double second_confidence = 0.0;
   std::size_t candidates = 0;            ///< frames the source proposed
@@ -608,6 +611,7 @@ class LoopEngine {
     PlaceEvidence evidence;
     Verification verification;
     std::size_t considered;  ///< its entry in PlaceDecision::considered
+    Matches matches;         ///< what `verification` weighed
   };
 
   /// Matches and verifies each candidate; the verified ones with their evidence.
@@ -619,7 +623,7 @@ class LoopEngine {
     std::vector<Verified> verified;
     for (const auto& [j, score] : to_verify) {
       const Features& old = lookup(j);
-      const Matches matches = matcher_.match(f, old);
+      Matches matches = matcher_.match(f, old);
       Verification v = estimator_.verify(f, old, matches);
       ++d.verifications;
       if (!v.ok()) {
@@ -632,7 +636,7 @@ class LoopEngine {
       e.bow_score = score;
       const double conf = place_confidence(e, dec);
       d.considered.push_back({j, score, e.inliers, conf, CandidateStage::weaker, e.matches, v.status, v.model, e});
-      verified.push_back({j, conf, e, std::move(v), d.considered.size() - 1});
+      verified.push_back({j, conf, e, std::move(v), d.considered.size() - 1, std::move(matches)});
     }
     d.verify_ms = ms_since(t0);
     return verified;
@@ -721,6 +725,7 @@ class LoopEngine {
     d.confidence = b.confidence;
     d.evidence = b.evidence;
     d.verification = b.verification;
+    d.best_matches = b.matches;
     d.considered[b.considered].stage = CandidateStage::chosen;
     // The best other place: the most confident verified candidate that is not the best
     // one's place (one_place).

@@ -77,6 +77,7 @@ inline void apply_sequence_answer(MemoryLocalization& a, const SequenceAnswer& s
   else
     std::snprintf(buf + at, sizeof buf - at, "confidence %.2f >= %.2f", s.confidence, d.min_confidence);
   a.reason = buf;
+  settle_pose(a, c != 0);
 }
 
 /// The sequence's answer for each of `singles` (localize()'s answers, in order).

@@ -7,6 +7,7 @@
 // the memory's templates.
 
 #include <vmap/core/verification.hpp>
+#include <vmap/geometry/metric_pose.hpp>
 #include <vmap/geometry/pose2.hpp>
 #include <vmap/keyframe/result.hpp>
 #include <vmap/lcd/place_decision.hpp>
@@ -20,6 +21,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <utility>
 #include <variant>
 #include <vector>
 
@@ -115,10 +117,53 @@ struct MemoryLocalization {
   std::optional<Localization> position;
   /// How a sequence of images decided (memory/sequence.hpp); empty for a single image.
   std::optional<SequenceSupport> sequence;
+  /// The query's camera-to-world pose in the memory's frame (memory/metric_pose.hpp):
+  /// set only when the place was accepted, the memory has SE(3) poses and a camera, and
+  /// the geometry holds; otherwise empty, and pose_reason_code says why.
+  std::optional<MetricPose> pose;
+  PoseReason pose_reason_code = PoseReason::not_accepted;  ///< posed, or why there is no pose
+  std::string pose_reason = "the place was not accepted";   ///< why, in words with the numbers
+  /// The metric pose at the decision's candidate (matches.front()) when the place was not
+  /// accepted: what `pose` becomes when a sequence accepts the image there
+  /// (memory/sequence.hpp). Not an answer: read `pose`.
+  PoseAnswer candidate_pose;
   [[nodiscard]] bool ok() const noexcept { return status == PlaceStatus::accepted; }
   /// The accepted key image; nullptr unless ok().
   [[nodiscard]] const PlaceLink* best() const noexcept { return ok() && !matches.empty() ? &matches.front() : nullptr; }
 };
+
+namespace detail {
+
+/// The metric pose of `a` after a sequence re-decided it (memory/sequence.hpp): an image
+/// accepted at its own candidate keeps its pose, or takes the one its candidate had when
+/// the sequence accepted it; an image `moved` to another of its verified key images has
+/// none (the pose was computed at its own candidate), nor has one the sequence did not
+/// accept.
+inline void settle_pose(MemoryLocalization& a, bool moved) {
+  if (moved) {
+    a.pose.reset();
+    a.candidate_pose = {};
+    a.pose_reason_code = PoseReason::moved;
+    a.pose_reason = "the sequence placed the image at another key image than its own answer's";
+    return;
+  }
+  if (!a.ok()) {
+    if (a.pose_reason_code != PoseReason::not_accepted)  // accepted alone: its candidate's answer
+      a.candidate_pose = {std::move(a.pose), a.pose_reason_code, std::move(a.pose_reason)};
+    a.pose.reset();
+    a.pose_reason_code = PoseReason::not_accepted;
+    a.pose_reason = "the place was not accepted";
+    return;
+  }
+  if (!a.pose && a.pose_reason_code == PoseReason::not_accepted) {
+    a.pose = std::move(a.candidate_pose.pose);
+    a.pose_reason_code = a.candidate_pose.reason_code;
+    a.pose_reason = std::move(a.candidate_pose.reason);
+    a.candidate_pose = {};
+  }
+}
+
+}  // namespace detail
 
 /// A session: one run of the robot, its own chain of key images (consecutive key images
 /// of a session are linked; the first key image of a session is not linked to the last

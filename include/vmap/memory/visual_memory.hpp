@@ -72,6 +72,7 @@
 #include <vmap/memory/detail/format.hpp>
 #include <vmap/memory/detail/record_codecs.hpp>
 #include <vmap/memory/gcs.hpp>
+#include <vmap/memory/metric_pose.hpp>
 #include <vmap/memory/records.hpp>
 #include <vmap/memory/types.hpp>
 #include <vmap/memory/vmem.hpp>
@@ -175,6 +176,32 @@ class VisualMemory {
   /// image it shows, or "unknown place" / "ambiguous" / "too little evidence" with the
   /// reason. `decision` overrides loops.decision for this query.
   [[nodiscard]] MemoryLocalization localize(const cv::Mat& image, const PlaceDecisionOptions* decision = nullptr);
+
+  /// The pose of a camera whose image (features `query`) shows key image `key`, by the
+  /// verified `matches` between them (queryIdx: the query's, trainIdx: the key image's)
+  /// and their `verification` (memory/metric_pose.hpp): the points the posed key images
+  /// beside `key` in its session triangulate with it, PnP, and the checks. No pose, with
+  /// the reason, without a camera (the estimator's), without an SE(3) pose of `key`, and
+  /// where the geometry does not hold. localize() answers it for its accepted key image.
+  [[nodiscard]] PoseAnswer metric_pose(const Features& query, std::uint32_t key, const Matches& matches,
+                                       const Verification& verification) const;
+
+  /// The metric pose of loop edge `edge`'s newer key image (`from`) measured against the
+  /// points of the key image it revisits (`link.key`), in the frame of that one's session:
+  /// the two are matched and verified again (the edge keeps no matches), then
+  /// metric_pose(). A g2o export's loop edge is the relative pose it gives
+  /// (runtime/exports.hpp).
+  [[nodiscard]] PoseAnswer loop_pose(const LoopEdge& edge) const;
+
+  /// When a query gets a metric pose (memory/metric_pose.hpp); not recorded with the
+  /// memory (a setting of the program that reads it). Invalid options are an Error.
+  void set_pose_options(const MetricPoseOptions& options) {
+    detail::check_metric_pose_options(options);
+    pose_options_ = options;
+  }
+  [[nodiscard]] const MetricPoseOptions& pose_options() const noexcept { return pose_options_; }
+  /// The camera of the memory's estimator (Calibrated, EssentialEstimator), or nullptr.
+  [[nodiscard]] const Camera* camera() const noexcept { return detail::camera_of(selector_.front_end().estimator()); }
 
   /// Trains the GCS localizer on the key images that have an SE(2) pose (at least 3),
   /// from their own features (no second extraction): a BowHistogram vocabulary learned
@@ -592,6 +619,7 @@ class VisualMemory {
   bool pixels_unread_ = false;  ///< loaded without decoding the key images' pixels
   std::vector<MemorySession> sessions_{MemorySession{}};  ///< never empty: the first starts at 0
   HeavyIndex heavy_;  ///< heavy words of the key images before the current session's (link_sessions; built when needed)
+  MetricPoseOptions pose_options_{};  ///< set_pose_options
 };
 
 }  // namespace vmap

@@ -62,6 +62,7 @@ class FleetIndex;
 class MemoryReplacement;
 class MemoryStore;
 struct MemoryRecords;
+struct MetricPoseOptions;
 struct VisualMap;
 
 /// The file name a folder given as a memory holds.
@@ -246,7 +247,16 @@ class AnyMemory {
 
   // ---- reading it --------------------------------------------------------------------
 
+  /// Where `image` was taken (VisualMemory::localize): the key image it shows and, for a
+  /// memory with SE(3) poses and a camera, its metric pose (MemoryLocalization::pose).
   [[nodiscard]] MemoryLocalization localize(const cv::Mat& image, const PlaceDecisionOptions* decision = nullptr);
+  /// The metric pose of a loop edge's newer key image against the one it revisits
+  /// (VisualMemory::loop_pose).
+  [[nodiscard]] PoseAnswer loop_pose(const LoopEdge& edge) const;
+  /// When a query gets a metric pose (memory/metric_pose.hpp, which a caller includes):
+  /// a setting of this program, not recorded with the memory.
+  void set_pose_options(const MetricPoseOptions& options);
+  [[nodiscard]] const MetricPoseOptions& pose_options() const noexcept;
   [[nodiscard]] const VisualMap& map() const noexcept;
   [[nodiscard]] std::size_t frames() const noexcept;
   [[nodiscard]] std::size_t key_images() const noexcept;

@@ -260,7 +260,68 @@ MemoryLocalization VisualMemory<D, M, E, S>::localize(const cv::Mat& image, cons
       out.match_evidence.push_back(c->evidence);
     }
     if (gcs_) out.position = gcs_->localize(q);
+    // The metric pose at the decision's candidate: the answer's when it was accepted, kept
+    // aside otherwise for a sequence that accepts the image there (memory/sequence.hpp).
+    if (d.best) {
+      PoseAnswer a = metric_pose(q, static_cast<std::uint32_t>(*d.best), d.best_matches, d.verification);
+      if (out.ok()) {
+        out.pose = std::move(a.pose);
+        out.pose_reason_code = a.reason_code;
+        out.pose_reason = std::move(a.reason);
+      } else {
+        out.candidate_pose = std::move(a);
+      }
+    }
     return out;
+  }
+
+template <Descriptor D, Matcher M, Estimator E, Similarity S>
+PoseAnswer VisualMemory<D, M, E, S>::metric_pose(const Features& query, std::uint32_t key, const Matches& matches,
+                                                 const Verification& verification) const {
+    const std::size_t m = key_images();
+    detail::check(key < m, [&] { return "VisualMemory::metric_pose: key " + std::to_string(key) + " of " + std::to_string(m); });
+    const Camera* cam = camera();
+    if (!cam)
+      return {std::nullopt, PoseReason::no_camera,
+              "the memory has no camera: a metric pose needs its calibration (build the memory with --camera FILE)"};
+    const auto* key_pose = std::get_if<cv::Affine3d>(&poses_[key]);
+    if (!key_pose)
+      return {std::nullopt, PoseReason::no_key_pose,
+              "key image " + std::to_string(key) + " has no SE(3) pose (build the memory with --poses FILE)"};
+    if (!verification.ok()) return {std::nullopt, PoseReason::few_inliers, "the key image was not verified"};
+    // The posed key images beside `key` in its session's chain, nearest first.
+    const std::size_t session = session_of_key(key);
+    const std::size_t first = sessions_[session].first_key;
+    const std::size_t end = session + 1 < sessions_.size() ? sessions_[session + 1].first_key : m;
+    std::vector<std::uint32_t> partners;
+    for (std::size_t d = 1; d <= pose_options_.chain_reach; ++d) {
+      if (key >= first + d && std::holds_alternative<cv::Affine3d>(poses_[key - d])) partners.push_back(key - static_cast<std::uint32_t>(d));
+      if (key + d < end && std::holds_alternative<cv::Affine3d>(poses_[key + d])) partners.push_back(key + static_cast<std::uint32_t>(d));
+    }
+    // Released key images' features are read (copies, held here); the others are referenced.
+    std::vector<Features> read;
+    read.reserve(partners.size() + 1);
+    const auto features_of = [&](std::uint32_t k) -> const Features* {
+      if (holds_features(k)) return &selector_.map().keys[k].features;
+      read.push_back(key_features(k));
+      return &read.back();
+    };
+    const Features* key_f = features_of(key);
+    std::vector<PosedView> views;
+    for (std::uint32_t p : partners) views.push_back({features_of(p), std::get<cv::Affine3d>(poses_[p])});
+    return place_query(query, matches, verification, key, *key_f, *key_pose, views, selector_.front_end().matcher(), *cam,
+                       pose_options_);
+  }
+
+template <Descriptor D, Matcher M, Estimator E, Similarity S>
+PoseAnswer VisualMemory<D, M, E, S>::loop_pose(const LoopEdge& edge) const {
+    const std::size_t m = key_images();
+    detail::check(edge.from < m && edge.link.key < m, "VisualMemory::loop_pose: the edge's key images are not in the memory");
+    const Features from = key_features(edge.from);
+    const Features to = key_features(edge.link.key);
+    const Matches matches = selector_.front_end().matcher().match(from, to);
+    const Verification v = selector_.front_end().estimator().verify(from, to, matches);
+    return metric_pose(from, edge.link.key, matches, v);
   }
 
 template <Descriptor D, Matcher M, Estimator E, Similarity S>

@@ -353,6 +353,12 @@ VMAP_INLINE MemoryLocalization AnyMemory::localize(const cv::Mat& image, const P
   return impl_->localize(image, decision);
 }
 
+VMAP_INLINE PoseAnswer AnyMemory::loop_pose(const LoopEdge& edge) const { return impl_->loop_pose(edge); }
+
+VMAP_INLINE void AnyMemory::set_pose_options(const MetricPoseOptions& options) { impl_->set_pose_options(options); }
+
+VMAP_INLINE const MetricPoseOptions& AnyMemory::pose_options() const noexcept { return impl_->pose_options(); }
+
 VMAP_INLINE const VisualMap& AnyMemory::map() const noexcept { return impl_->map(); }
 
 VMAP_INLINE std::size_t AnyMemory::frames() const noexcept { return impl_->map().frames; }

@@ -47,6 +47,9 @@ class MemoryConcept {
 
   virtual MemoryStep push(const Frame& frame, const OdometryPose& pose, const std::vector<Detection>* detections) = 0;
   virtual MemoryLocalization localize(const cv::Mat& image, const PlaceDecisionOptions* decision) = 0;
+  [[nodiscard]] virtual PoseAnswer loop_pose(const LoopEdge& edge) const = 0;
+  virtual void set_pose_options(const MetricPoseOptions& options) = 0;
+  [[nodiscard]] virtual const MetricPoseOptions& pose_options() const noexcept = 0;
   virtual void start_session() = 0;
   virtual GcsTrainStats train_gcs(const MemoryGcsOptions& options) = 0;
   virtual void merge(MemoryConcept& other, const std::string& name, const std::string& other_name) = 0;
@@ -95,6 +98,9 @@ class MemoryModel final : public MemoryConcept {
   MemoryLocalization localize(const cv::Mat& image, const PlaceDecisionOptions* decision) override {
     return memory_.localize(image, decision);
   }
+  PoseAnswer loop_pose(const LoopEdge& edge) const override { return memory_.loop_pose(edge); }
+  void set_pose_options(const MetricPoseOptions& options) override { memory_.set_pose_options(options); }
+  const MetricPoseOptions& pose_options() const noexcept override { return memory_.pose_options(); }
   void start_session() override { memory_.start_session(); }
   GcsTrainStats train_gcs(const MemoryGcsOptions& options) override { return memory_.train_gcs(options); }
   void merge(MemoryConcept& other, const std::string& name, const std::string& other_name) override {
