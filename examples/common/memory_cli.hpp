@@ -608,7 +608,7 @@ inline void print_localizations(const AnyMemory& mem, const std::vector<MemoryQu
       const cv::Vec3d t = p->position();
       const auto r = quaternion_from_rotation(p->rotation());
       std::printf("  pose: position (%.3f, %.3f, %.3f), quaternion (%.4f, %.4f, %.4f, %.4f), %d of %d points, %.2f px, "
-                  "sigma %.3f in position, %.2f deg in rotation\n",
+                  "sigma %.2g in position, %.2f deg in rotation\n",
                   t[0], t[1], t[2], r[0], r[1], r[2], r[3], p->inliers, p->points, p->reprojection_px,
                   p->position_sigma_max(), p->rotation_sigma_deg());
     } else if (q.answer.best() && std::holds_alternative<cv::Affine3d>(mem.poses()[q.answer.best()->key]) &&
