@@ -693,7 +693,7 @@ inline VocabularyFormat sniff_vocabulary_format(std::string_view head, const std
 /// Reads a binary vocabulary of any known format from a file; anything else is a
 /// vmap::Error naming the file.
 inline BinaryVocabularyTree import_binary_vocabulary(const std::filesystem::path& path) {
-  std::ifstream in = detail::open_regular_file(path);
+  std::ifstream in = detail::open_regular_file(path, "vocabulary file");
   const auto size = std::filesystem::file_size(path);
   if (size > max_vocabulary_file_bytes)
     detail::fail("'" + path.string() + "' is " + std::to_string(size) + " bytes, larger than a vocabulary file can be (" +
@@ -701,18 +701,19 @@ inline BinaryVocabularyTree import_binary_vocabulary(const std::filesystem::path
   std::string head(static_cast<std::size_t>(std::min<std::uintmax_t>(size, 4096)), '\0');
   if (!in.read(head.data(), static_cast<std::streamsize>(head.size()))) detail::fail(ErrorKind::io, "reading '" + path.string() + "' failed");
   in.close();
+  const auto whole = [&] { return detail::read_whole_file(path, "vocabulary file", max_vocabulary_file_bytes); };
   switch (sniff_vocabulary_format(head, path)) {
     case VocabularyFormat::vmap:
       return BinaryVocabularyTree::load(path);
     case VocabularyFormat::fbow:
-      return import_fbow(detail::read_whole_file(path), path.string());
+      return import_fbow(whole(), path.string());
     case VocabularyFormat::orbslam_text:
-      return import_orbslam_text(detail::read_whole_file(path), path.string());
+      return import_orbslam_text(whole(), path.string());
     case VocabularyFormat::dbow2_yaml:
       break;
   }
-  if (static_cast<unsigned char>(head[0]) != 0x1F) return import_dbow2_yaml(detail::read_whole_file(path), path.string());
-  return import_dbow2_yaml_gz(detail::read_whole_file(path), path.string());
+  if (static_cast<unsigned char>(head[0]) != 0x1F) return import_dbow2_yaml(whole(), path.string());
+  return import_dbow2_yaml_gz(whole(), path.string());
 }
 
 }  // namespace vmap

@@ -7,6 +7,7 @@
 
 #include "support/bags.hpp"
 #include "support/errors.hpp"
+#include "support/fifo.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/io/bag/bag.hpp>
@@ -18,6 +19,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <map>
@@ -608,4 +610,40 @@ TEST_CASE("without the vmap::bags component: MCAP and compressed ROS 1 chunks ar
   CHECK(ok == "no error");
   CHECK(plain == 3);
   CHECK(db3 == 3);
+}
+
+TEST_CASE("a bag that is not a regular file or a folder is refused by name before it is opened (a FIFO never blocks)") {
+  const auto dir = vmap::test::scratch_dir("bag_fifos");
+  std::vector<fs::path> fifos;
+  for (const char* name : {"f.bag", "f.mcap", "f.db3", "f"}) fifos.push_back(vmap::test::make_fifo(dir / name));
+  // A rosbag2 folder whose metadata.yaml lists a FIFO beside a real file, and one whose
+  // .db3 files (no metadata) include a FIFO.
+  const auto listed = dir / "listed";
+  const auto globbed = dir / "globbed";
+  for (const auto& d : {listed, globbed}) {
+    fs::create_directories(d);
+    vmap::test::write_db3(d / "a.db3", ros2_messages());
+    fifos.push_back(vmap::test::make_fifo(d / "b.db3"));
+  }
+  vmap::test::write_bytes(listed / "metadata.yaml",
+                          "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: sqlite3\n"
+                          "  relative_file_paths:\n    - a.db3\n    - b.db3\n");
+  const vmap::test::FifoWatchdog watchdog(fifos, std::chrono::seconds(20));
+  for (std::size_t k = 0; k < 4; ++k) {
+    const fs::path& f = fifos[k];
+    CAPTURE(f.string());
+    const auto seen = vmap::test::error_seen([&] { (void)vmap::FrameSource::open(f); });
+    CHECK(seen.message == "frame source: input '" + f.string() +
+                              "' is not a regular file or a folder (a device, FIFO or socket cannot be read as one)");
+    CHECK(seen.kind == vmap::ErrorKind::invalid_argument);
+    CHECK(error_of([&] { (void)vmap::bag_info(f); }) ==
+          "bag '" + f.string() + "' is not a regular file or a folder (a device, FIFO or socket cannot be read as one)");
+  }
+  for (const auto& d : {listed, globbed}) {
+    CAPTURE(d.string());
+    const std::string refused =
+        "bag file '" + (d / "b.db3").string() + "' is not a regular file (a device, FIFO or socket cannot be read as one)";
+    CHECK(error_of([&] { (void)vmap::bag_info(d); }) == refused);
+    CHECK(error_of([&] { (void)vmap::FrameSource::open(d, {.topic = "/mono8/image_raw"}); }) == refused);
+  }
 }

@@ -9,6 +9,7 @@
 #include <vmap/io/image.hpp>
 
 #include "support/errors.hpp"
+#include "support/fifo.hpp"
 #include "support/images.hpp"
 #include "support/shared_data.hpp"
 
@@ -21,6 +22,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <chrono>
 #include <fstream>
 #include <stdexcept>
 #include <string>
@@ -178,6 +180,20 @@ TEST_CASE("frame source: a TUM rgb.txt with a bad line is an error naming the li
   // A list file that is a device: refused by name, never read.
   fs::create_symlink("/dev/zero", dir / "zero.txt");
   CHECK(contains(error_of([&] { (void)vmap::FrameSource::open(dir / "zero.txt"); }), "zero.txt' is not a regular file"));
+}
+
+TEST_CASE("frame source: an input that is a FIFO or a device is refused before it is opened (no video backend waits)") {
+  const auto dir = vmap::test::scratch_dir("hardening_fifo_input");
+  const auto fifo = vmap::test::make_fifo(dir / "pipe.mp4");
+  std::string e;
+  {
+    const vmap::test::FifoWatchdog watchdog({fifo}, std::chrono::seconds(20));  // a hang fails the check below
+    e = error_of([&] { (void)vmap::FrameSource::open(fifo); });
+  }
+  CHECK(e == "frame source: input '" + fifo.string() +
+                 "' is not a regular file or a folder (a device, FIFO or socket cannot be read as one)");
+  fs::create_symlink("/dev/null", dir / "null.avi");
+  CHECK(contains(error_of([&] { (void)vmap::FrameSource::open(dir / "null.avi"); }), "null.avi' is not a regular file or a folder"));
 }
 
 TEST_CASE("frame source: a huge stride ends the sequence instead of wrapping around") {

@@ -8,11 +8,14 @@
 #include <vmap/runtime/vocabulary.hpp>
 
 #include "place_support.hpp"
+#include "support/fifo.hpp"
 
 #include <doctest/doctest.h>
 #include <sys/stat.h>
 #include <zlib.h>
 
+#include <chrono>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -107,6 +110,21 @@ TEST_CASE("gzip is decompressed up to the limit counted as it comes, whatever it
         "src: the gzip data is truncated");
   CHECK(error_of([&] { (void)vmap::import_dbow2_yaml_gz(std::string(100, 'x'), "x.yml.gz"); })
             .find("DBoW2 YAML vocabulary 'x.yml.gz': not valid gzip data") == 0);
+}
+
+TEST_CASE("vocabulary and place database files that are FIFOs or devices are refused before they are opened") {
+  const fs::path fifo = vmap::test::make_fifo(dir() / "voc_fifo");
+  const vmap::test::FifoWatchdog watchdog({fifo}, std::chrono::seconds(20));  // a hang fails the checks below
+  const std::string not_regular = "' is not a regular file (a device, FIFO or socket cannot be read as one)";
+  CHECK(error_of([&] { (void)vmap::AnyVocabulary::load(fifo); }) == "vocabulary file '" + fifo.string() + not_regular);
+  CHECK(error_of([&] { (void)vmap::BinaryVocabularyTree::load(fifo); }) == "vocabulary file '" + fifo.string() + not_regular);
+  CHECK(error_of([&] { (void)vmap::import_binary_vocabulary(fifo); }) == "vocabulary file '" + fifo.string() + not_regular);
+  CHECK(error_of([&] { (void)vmap::PlaceDatabase<std::uint32_t>::load(fifo); }) ==
+        "place database file '" + fifo.string() + not_regular);
+  CHECK(error_of([&] { (void)vmap::PlaceDatabase<std::uint32_t>::load("/dev/zero"); }) ==
+        "place database file '/dev/zero" + not_regular);
+  CHECK(error_of([&] { (void)vmap::AnyVocabulary::load(dir() / "missing.voc"); }) ==
+        "vocabulary file '" + (dir() / "missing.voc").string() + "': does not exist");
 }
 
 TEST_CASE("check_vocabulary_output: only a new file, or with overwrite another vocabulary, never the input") {

@@ -99,6 +99,7 @@ namespace detail {
 /// The message stream of the bag `input`. Errors: not a bag of its format, unreadable,
 /// an MCAP file without the vmap::bags component.
 inline std::unique_ptr<MessageStream> open_message_stream(const std::filesystem::path& input, const BagLimits& limits = {}) {
+  (void)require_file_or_folder(input, "bag");
   const auto format = bag_format(input);
   if (!format) fail("'" + input.string() + "' is not a bag (.bag, .db3, .mcap or a rosbag2 folder)");
   switch (*format) {
@@ -107,7 +108,6 @@ inline std::unique_ptr<MessageStream> open_message_stream(const std::filesystem:
     case BagFormat::rosbag2_sqlite: {
       std::error_code ec;
       if (!std::filesystem::is_directory(input, ec)) {
-        require_regular_file(input, "bag");
         char head[16] = {};
         std::ifstream in(input, std::ios::binary);
         in.read(head, sizeof head);

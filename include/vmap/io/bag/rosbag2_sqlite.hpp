@@ -8,7 +8,9 @@
 // Tables: `topics(id, name, type, serialization_format, ...)` and `messages(id, topic_id,
 // timestamp, data)`, messages in CDR. Messages are read by row id, the order they were
 // written, one row at a time. rosbag2's compressed bags (compression_mode file or
-// message) are refused with a message saying so.
+// message) are refused with a message saying so. Every file of the bag must be a regular
+// file, named once: a metadata.yaml that lists a FIFO, a device or one file twice is
+// refused before any file is opened.
 //
 // A file SQLite finds damaged ends with a warning naming the file and the last row read;
 // the next split file, if any, is still read.
@@ -18,6 +20,8 @@
 #include <vmap/io/detail/natural_order.hpp>
 #include <vmap/io/files.hpp>
 #include <vmap/io/sqlite.hpp>
+
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <cctype>
@@ -117,6 +121,7 @@ class Rosbag2Sqlite final : public MessageStream {
     } else {
       files_.push_back(input);
     }
+    check_files(what);
     std::map<std::tuple<std::string, std::string, std::string>, std::uint32_t> ids;
     bool any = false;
     for (std::size_t f = 0; f < files_.size(); ++f) {
@@ -215,6 +220,21 @@ class Rosbag2Sqlite final : public MessageStream {
     sqlite::Database db(file, sqlite::Access::read, "bag '" + file.string() + "'");
     db.exec("PRAGMA writable_schema=ON", "read it");
     return db;
+  }
+
+  /// Every file is a regular file (a FIFO named by metadata.yaml would block the reads
+  /// below, a device never end) and is named once: a file listed twice, under any name,
+  /// would be read twice.
+  void check_files(const std::string& what) const {
+    std::map<std::pair<dev_t, ino_t>, std::filesystem::path> seen;
+    for (const auto& file : files_) {
+      const struct stat st = require_regular_file(file, "bag file");
+      const auto [it, fresh] = seen.try_emplace({st.st_dev, st.st_ino}, file);
+      if (!fresh)
+        fail(ErrorKind::corrupt, what + " names the file '" + file.string() + "' twice" +
+             (it->second == file ? std::string() : " (also as '" + it->second.string() + "')") +
+             "; each file of a bag is read once: list it once in metadata.yaml's relative_file_paths");
+    }
   }
 
   /// A warning when the file is shorter than its SQLite header states (SQLite file

@@ -248,6 +248,9 @@ VMAP_INLINE FrameSource FrameSource::open(const std::filesystem::path& input, Fr
       detail::fail("frame source: '" + input.string() + "': " + ec.message());
     fail_missing(input);
   }
+  // A FIFO or a device would be opened below as a video, and a FIFO's open waits for a
+  // writer: refused by name first (cameras are given as "0" or /dev/video0, above).
+  (void)detail::require_file_or_folder(input, "frame source: input");
   FrameSource s;
   s.input_ = input;
   s.options_ = std::move(options);
