@@ -114,7 +114,7 @@ inline std::unique_ptr<MessageStream> open_message_stream(const std::filesystem:
         if (in.gcount() != 16 || std::string_view(head, 16) != std::string_view("SQLite format 3\0", 16))
           fail(ErrorKind::corrupt, "bag '" + input.string() + "' is not a rosbag2 sqlite3 file: it does not start with \"SQLite format 3\"");
       }
-      return std::make_unique<Rosbag2Sqlite>(input);
+      return std::make_unique<Rosbag2Sqlite>(input, limits);
     }
     case BagFormat::mcap: {
       std::error_code ec;

@@ -41,10 +41,12 @@ enum class BagFormat : std::uint8_t {
 /// Bounds of what one read may allocate.
 struct BagLimits {
   /// Largest chunk (after decompression), record or message held in memory at once. A
-  /// ROS 1 or MCAP chunk, or a single message, that claims more is refused (the rest of
-  /// the bag is read when its structure allows, see BagInfo::warnings). 512 MiB holds
-  /// the largest frame FrameSourceOptions::max_pixels lets through (64 Mi pixels of
-  /// 4 bytes) twice over.
+  /// ROS 1 or MCAP chunk, or a single message (a rosbag2 row's included, its length read
+  /// before its bytes), that claims more is refused (the rest of the bag is read when its
+  /// structure allows, see BagInfo::warnings). 512 MiB holds the largest frame
+  /// FrameSourceOptions::max_pixels lets through (64 Mi pixels of 4 bytes) twice over.
+  /// A compressed chunk costs what its data decompresses to, up to the size it states,
+  /// never a buffer of the stated size up front.
   std::uint64_t max_chunk_bytes = std::uint64_t{512} << 20;
   /// Largest record header of a ROS 1 bag (connection headers carry the message
   /// definition, a few kB).
@@ -160,10 +162,12 @@ class MessageStream {
 /// headers reach them through this table, filled when the component's translation unit
 /// is initialised, so that a program that reads no bag links none of those libraries.
 struct BagComponent {
-  /// Decompresses `in` into exactly `out_size` bytes at `out`; false and `reason` when
-  /// the data is corrupt or decompresses to another size.
-  bool (*bz2)(std::string_view in, char* out, std::size_t out_size, std::string& reason) = nullptr;
-  bool (*lz4_frame)(std::string_view in, char* out, std::size_t out_size, std::string& reason) = nullptr;
+  /// Decompresses `in` into `out`, which must come to exactly `out_size` bytes (the size
+  /// its chunk states); false and `reason` when the data is corrupt or decompresses to
+  /// another size. `out` grows with what the data gives, never past `out_size`: a chunk
+  /// that states more than its data holds costs what the data holds, not what it states.
+  bool (*bz2)(std::string_view in, std::size_t out_size, std::string& out, std::string& reason) = nullptr;
+  bool (*lz4_frame)(std::string_view in, std::size_t out_size, std::string& out, std::string& reason) = nullptr;
   /// An MCAP file's message stream.
   std::unique_ptr<MessageStream> (*open_mcap)(const std::filesystem::path& file, const BagLimits& limits) = nullptr;
 };
