@@ -62,19 +62,19 @@ inline void write_mcap(const std::filesystem::path& file, const std::vector<Test
                                           : mcap::Compression::None;
   o.chunkSize = chunk_size;
   REQUIRE(writer.open(file.string(), o).ok());
-  std::vector<std::pair<std::string, mcap::ChannelId>> channels;
+  std::vector<std::pair<std::string, mcap::ChannelId>> channels;  // a channel per topic and type
   for (const auto& m : messages) {
     mcap::ChannelId id = 0;
     bool found = false;
     for (const auto& [t, c] : channels)
-      if (t == m.topic) id = c, found = true;
+      if (t == m.topic + '\n' + m.type) id = c, found = true;
     if (!found) {
       mcap::Schema schema(m.type, "ros2msg", std::string("# test"));
       writer.addSchema(schema);
       mcap::Channel channel(m.topic, "cdr", schema.id);
       writer.addChannel(channel);
       id = channel.id;
-      channels.emplace_back(m.topic, id);
+      channels.emplace_back(m.topic + '\n' + m.type, id);
     }
     mcap::Message msg;
     msg.channelId = id;

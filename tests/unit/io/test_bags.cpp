@@ -795,3 +795,37 @@ TEST_CASE("chunks that decompress hundreds of times their size are read exact (t
     check(dir / (std::string(codec) + ".mcap"), "/cam/image_raw");
   }
 }
+
+TEST_CASE("a topic with messages of two types is refused, naming both; an empty or foreign .mcap is corrupt as a .bag is") {
+  const auto dir = vmap::test::scratch_dir("two_types");
+  const auto image = [](std::int64_t t) { return vmap::test::cdr_image(t, 24, 20, "mono8", 24, std::string(480, 'x')); };
+  const std::vector<vmap::test::TestMessage> mixed{
+      {"/cam/image_raw", "sensor_msgs/msg/Image", 1, image(1)},
+      {"/cam/image_raw", "std_msgs/msg/String", 2, vmap::test::CdrWriter().string("hello").str()},
+      {"/cam/image_raw", "sensor_msgs/msg/Image", 3, image(3)}};
+  vmap::test::write_db3(dir / "mixed.db3", mixed);
+  vmap::test::write_mcap(dir / "mixed.mcap", mixed, "zstd");
+  for (const char* name : {"mixed.db3", "mixed.mcap"}) {
+    const fs::path bag = dir / name;
+    CAPTURE(bag.string());
+    const std::string refused = "bag '" + bag.string() +
+                                "': topic '/cam/image_raw' holds messages of more than one type: sensor_msgs/msg/Image "
+                                "(2 messages), std_msgs/msg/String (1 message); vmap reads a topic of one type (the "
+                                "others' messages would be dropped)";
+    CHECK(error_of([&] { (void)vmap::FrameSource::open(bag); }) == refused);
+    CHECK(error_of([&] { (void)vmap::FrameSource::open(bag, {.topic = "/cam/image_raw"}); }) == refused);
+    CHECK(vmap::bag_info(bag).topics.size() == 2);  // listed, each type with its count
+  }
+  // Image and CompressedImage on one topic: the same refusal, not "2 image topics".
+  vmap::test::write_db3(dir / "both.db3", {{"/cam/image_raw", "sensor_msgs/msg/Image", 1, image(1)},
+                                           {"/cam/image_raw", "sensor_msgs/msg/CompressedImage", 2,
+                                            vmap::test::cdr_compressed(2, "png", "x")}});
+  CHECK(error_of([&] { (void)vmap::FrameSource::open(dir / "both.db3"); }).find("holds messages of more than one type") !=
+        std::string::npos);
+  // A file of 0 bytes with each bag's extension: the same kind (corrupt) for all three.
+  for (const char* name : {"zero.bag", "zero.mcap", "zero.db3"}) {
+    vmap::test::write_bytes(dir / name, "");
+    CAPTURE(name);
+    CHECK(vmap::test::error_seen([&] { (void)vmap::bag_info(dir / name); }).kind == vmap::ErrorKind::corrupt);
+  }
+}

@@ -209,7 +209,7 @@ class McapBag final : public vmap::detail::MessageStream {
     format_ = vmap::BagFormat::mcap;
     char head[8];
     if (file_.size() < magic.size() || !file_.read(0, head, sizeof head) || std::string_view(head, 8) != magic)
-      vmap::detail::fail(file_.what() + " is not an MCAP file: it does not start with the MCAP magic");
+      vmap::detail::fail(vmap::ErrorKind::corrupt, file_.what() + " is not an MCAP file: it does not start with the MCAP magic");
     if (!read_summary()) scan();
     rewind();
   }

@@ -17,8 +17,10 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace vmap {
@@ -67,6 +69,27 @@ struct BagCamera {
   std::string topic;   ///< "/cam0/camera_info"
   std::string source;  ///< "bag 'x.bag', topic '/cam0/camera_info' (its first CameraInfo)"
 };
+
+/// A bag's CameraInfo topic as the source of a calibration ("x.bag:/cam0/camera_info"),
+/// as PolicyStack::camera_source records it beside calibration files.
+[[nodiscard]] inline std::string bag_camera_source(const std::filesystem::path& bag, std::string_view topic) {
+  return bag.string() + ":" + std::string(topic);
+}
+
+/// The bag and topic of a source bag_camera_source wrote; nullopt for anything else (a
+/// calibration file). A ROS topic name is '/' then letters, digits, '_', '~' and '/', never
+/// ':', so the split is at the last ':' and a file name with a dot or a space after its
+/// last ":/" is not taken for one.
+[[nodiscard]] inline std::optional<std::pair<std::string, std::string>> parse_bag_camera_source(std::string_view source) {
+  const auto colon = source.rfind(':');
+  if (colon == std::string_view::npos || colon == 0 || colon + 2 > source.size() || source[colon + 1] != '/')
+    return std::nullopt;
+  const std::string_view topic = source.substr(colon + 1);
+  for (const char c : topic)
+    if (!(c == '/' || c == '_' || c == '~' || (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9')))
+      return std::nullopt;
+  return std::pair{std::string(source.substr(0, colon)), std::string(topic)};
+}
 
 /// What a bag holds, from its index where it has one (else from reading it through).
 struct BagInfo {
