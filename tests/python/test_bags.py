@@ -97,3 +97,14 @@ def test_inputs_that_are_fifos_are_refused_before_they_are_opened(tmp_path):
     finally:
         done.set()
         watchdog.join()
+
+
+def test_a_time_beyond_the_range_of_nanoseconds_is_refused(tmp_path):
+    image = numpy.zeros((48, 64), numpy.uint8)
+    memory = vmap.VisualMemory()
+    with pytest.raises(vmap.Error, match=r"push: timestamp: time 1000000000000 s is beyond \+-9.2e9 s"):
+        memory.push(image, timestamp=1e12)
+    (tmp_path / "a.png").write_bytes(b"")
+    (tmp_path / "far.txt").write_text("1.0 a.png\n1e10 a.png\n")
+    with pytest.raises(vmap.Error, match=r"far.txt:2: time 10000000000 s is beyond"):
+        vmap.frames(str(tmp_path / "far.txt"))

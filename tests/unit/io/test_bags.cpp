@@ -23,6 +23,7 @@
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <random>
 #include <string>
@@ -828,4 +829,26 @@ TEST_CASE("a topic with messages of two types is refused, naming both; an empty 
     CAPTURE(name);
     CHECK(vmap::test::error_seen([&] { (void)vmap::bag_info(dir / name); }).kind == vmap::ErrorKind::corrupt);
   }
+}
+
+TEST_CASE("an MCAP log time beyond the range of nanosecond times is skipped with a warning, never clamped") {
+  const auto dir = vmap::test::scratch_dir("mcap_times");
+  const auto image = [](std::int64_t t) { return vmap::test::cdr_image(t, 24, 20, "mono8", 24, std::string(480, 'x')); };
+  // record_ns -1 is written as log time 2^64 - 1 (an unsigned field).
+  vmap::test::write_mcap(dir / "late.mcap", {{"/cam/image_raw", "sensor_msgs/msg/Image", 1, image(1)},
+                                             {"/cam/image_raw", "sensor_msgs/msg/Image", -1, image(2)},
+                                             {"/cam/image_raw", "sensor_msgs/msg/Image", 3, image(3)}},
+                         "");
+  const auto info = vmap::bag_info(dir / "late.mcap");
+  CHECK(info.end_ns == 3);
+  CHECK(info.messages == 2);
+  REQUIRE_FALSE(info.warnings.empty());
+  CHECK(info.warnings[0].find("its statistics give a message time 18446744073.709551615 s, beyond the range of nanosecond "
+                              "times (the year 2262); read through to list it") != std::string::npos);
+  const auto r = read_all(dir / "late.mcap", {.record_time = true});
+  REQUIRE(r.frames.size() == 2);
+  CHECK(r.frames[1].time_ns == 3);
+  REQUIRE_FALSE(r.warnings.empty());
+  CHECK(r.warnings.back().find("has log time 18446744073.709551615 s, beyond the range of nanosecond times (the year 2262); skipped") !=
+        std::string::npos);
 }

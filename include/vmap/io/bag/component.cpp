@@ -35,6 +35,7 @@
 #include <map>
 #include <memory>
 #include <new>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -196,9 +197,18 @@ bool zstd_decompress(std::string_view in, std::size_t out_size, std::string& out
 constexpr std::string_view magic{"\x89MCAP0\r\n", 8};
 constexpr std::uint64_t record_head = 9;  // opcode, uint64 length
 
-std::int64_t as_ns(std::uint64_t t) {
-  return t > static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max()) ? std::numeric_limits<std::int64_t>::max()
-                                                                                  : static_cast<std::int64_t>(t);
+/// An MCAP time (uint64 nanoseconds) as the signed count every frame time is; nullopt
+/// beyond INT64_MAX (the year 2262), which a reader refuses rather than clamps.
+std::optional<std::int64_t> as_ns(std::uint64_t t) {
+  if (t > static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max())) return std::nullopt;
+  return static_cast<std::int64_t>(t);
+}
+
+/// "time 18446744073.709551615 s", exact, for a time as_ns refuses.
+std::string mcap_time_text(std::uint64_t t) {
+  std::string frac = std::to_string(t % 1000000000U);
+  frac.insert(0, 9 - frac.size(), '0');
+  return "time " + std::to_string(t / 1000000000U) + "." + frac + " s";
 }
 
 /// An MCAP file's messages, one chunk in memory at a time.
@@ -219,7 +229,7 @@ class McapBag final : public vmap::detail::MessageStream {
     while (advance(item))
       if (item.op == mcap::OpCode::Message && wanted(item.message.channelId)) {
         out.connection = item.message.channelId;
-        out.record_ns = as_ns(item.message.logTime);
+        out.record_ns = *as_ns(item.message.logTime);  // advance() returns times in range only
         out.offset = item.offset;
         out.bytes = std::string_view(reinterpret_cast<const char*>(item.message.data),
                                      static_cast<std::size_t>(item.message.dataSize));
@@ -360,14 +370,23 @@ class McapBag final : public vmap::detail::MessageStream {
       schemas_.clear();
       return false;
     }
+    const auto start = as_ns(stats->messageStartTime), end = as_ns(stats->messageEndTime);
+    if (stats->messageCount > 0 && (!start || !end)) {  // a message out of range: read through to skip it
+      warnings_.push_back(file_.what() + ": its statistics give a message " +
+                          mcap_time_text(start ? stats->messageEndTime : stats->messageStartTime) +
+                          ", beyond the range of nanosecond times (the year 2262); read through to list it");
+      channels_.clear();
+      schemas_.clear();
+      return false;
+    }
     for (auto& [id, c] : channels_) {
       const auto n = stats->channelMessageCounts.find(id);
       c.messages = n == stats->channelMessageCounts.end() ? 0 : n->second;
       connections_.push_back(c);
     }
     if (stats->messageCount > 0) {
-      start_ns_ = as_ns(stats->messageStartTime);
-      end_ns_ = as_ns(stats->messageEndTime);
+      start_ns_ = *start;
+      end_ns_ = *end;
       any_time_ = true;
     }
     indexed_ = true;
@@ -384,7 +403,7 @@ class McapBag final : public vmap::detail::MessageStream {
     while (advance(item))
       if (item.op == mcap::OpCode::Message) {
         ++counts[item.message.channelId];
-        saw_time(as_ns(item.message.logTime));
+        saw_time(*as_ns(item.message.logTime));
       }
     for (auto& [id, c] : channels_) {
       c.messages = counts.count(id) ? counts[id] : 0;
@@ -434,6 +453,12 @@ class McapBag final : public vmap::detail::MessageStream {
                  std::to_string(at) + " of the chunk is malformed; skipped");
             continue;
           }
+          if (!as_ns(out.message.logTime)) {
+            warn(file_.what() + ": chunk at byte " + std::to_string(chunk_offset_) + ": the message record at byte " +
+                 std::to_string(at) + " of the chunk has log " + mcap_time_text(out.message.logTime) +
+                 ", beyond the range of nanosecond times (the year 2262); skipped");
+            continue;
+          }
           out.op = r.opcode;
           out.owner = chunk_;
           out.offset = chunk_offset_;
@@ -477,6 +502,11 @@ class McapBag final : public vmap::detail::MessageStream {
       } else if (opcode == mcap::OpCode::Message) {
         if (!mcap::McapReader::ParseMessage(r, &out.message).ok()) {
           warn(file_.what() + ": the message record at byte " + std::to_string(at) + " is malformed; skipped");
+          continue;
+        }
+        if (!as_ns(out.message.logTime)) {
+          warn(file_.what() + ": the message record at byte " + std::to_string(at) + " has log " +
+               mcap_time_text(out.message.logTime) + ", beyond the range of nanosecond times (the year 2262); skipped");
           continue;
         }
         out.op = opcode;
