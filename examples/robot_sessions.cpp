@@ -14,6 +14,7 @@
 // A run-3 answer is right when its key image is within --within frames of the query, or
 // (with --gt, an N x N 0/1 loop matrix such as rtabmap_loop's) when the ground truth marks
 // the two frames as the same place.
+#include <vmap/io/files.hpp>
 #include <vmap/memory/store.hpp>
 #include <vmap/vmap.hpp>
 
@@ -25,7 +26,6 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -45,10 +45,16 @@ struct Args {
 };
 
 /// An N x N 0/1 matrix, one row per line (rtabmap_loop's gt_loop_matrix_84x84.txt);
-/// nullopt when the file cannot be read.
+/// nullopt, said on stderr, when the file cannot be read (vmap::read_text_file: a FIFO or
+/// a device is refused unopened).
 std::optional<std::vector<std::vector<int>>> read_matrix(const std::string& file) {
-  std::ifstream in(file);
-  if (!in) return std::nullopt;
+  std::istringstream in;
+  try {
+    in.str(vmap::read_text_file(file, "ground truth matrix"));
+  } catch (const vmap::Error& e) {
+    std::fprintf(stderr, "robot_sessions: %s\n", e.what());
+    return std::nullopt;
+  }
   std::vector<std::vector<int>> m;
   for (std::string line; std::getline(in, line);) {
     std::istringstream row(line);

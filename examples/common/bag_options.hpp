@@ -64,7 +64,7 @@ inline std::optional<CameraOption> camera_option(const std::string& camera, cons
   if (!note.empty()) std::fprintf(stderr, "vmap: %s; the frames are used as raw pixels\n", note.c_str());
   if (!found) return std::nullopt;
   std::fprintf(stderr, "vmap: camera calibration from %s (--camera FILE overrides it)\n", found->source.c_str());
-  return CameraOption{input + ":" + found->topic, found->camera};
+  return CameraOption{bag_camera_source(input, found->topic), found->camera};
 }
 
 }  // namespace vmap::examples

@@ -539,7 +539,7 @@ void bind(py::module_& m) {
               f.index = mem.last_frame_index() ? *mem.last_frame_index() + 1 : mem.frames();
               f.name = name.value_or("frame#" + std::to_string(f.index));
               f.timestamp = timestamp.value_or(static_cast<double>(f.index));
-              f.time_ns = nanoseconds_from_seconds(f.timestamp);
+              f.time_ns = frame_time_ns(f.timestamp, "push: timestamp");
               return mem.push(f, p);
             });
           },

@@ -5,6 +5,7 @@
 
 #include "support/euroc_layout.hpp"
 #include "support/pg_server.hpp"
+#include "support/ros2_bags.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/place/vocabulary.hpp>
@@ -2258,4 +2259,87 @@ TEST_CASE("cli: a robot of a fleet's memory killed (SIGKILL) at any moment resum
     CHECK(got["loops"] == whole["loops"]);
     CHECK(got["frames"] == whole["frames"]);
   }
+}
+
+namespace {
+
+/// run_vmap killed after `seconds` (exit 137): for inputs that must be refused at once,
+/// so that a run that waits on one fails the test instead of hanging it.
+Run run_vmap_within(int seconds, const std::vector<std::string>& args) {
+  const fs::path out = work_dir() / "stdout.txt", err = work_dir() / "stderr.txt";
+  std::string cmd = "cd " + quote(VMAP_TEST_SOURCE_DIR) + " && timeout -s KILL " + std::to_string(seconds) + " " +
+                    quote(VMAP_CLI_BINARY);
+  for (const auto& a : args) cmd += " " + quote(a);
+  cmd += " >" + quote(out.string()) + " 2>" + quote(err.string()) + " </dev/null";
+  const int status = std::system(cmd.c_str());
+  Run r;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+}  // namespace
+
+TEST_CASE("cli: inputs that are FIFOs are refused at once by name (exit 1), bags listing one too; empty bags exit 4") {
+  const fs::path dir = work_dir() / "fifo_inputs";
+  fs::create_directories(dir);
+  const auto refused = [](const Run& r, const std::string& message) {
+    INFO("stderr: " << r.err);
+    CHECK(r.code == 1);
+    CHECK(r.err.find(message) != std::string::npos);
+    CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+  };
+  const std::string not_input = "' is not a regular file or a folder (a device, FIFO or socket cannot be read as one)";
+  for (const char* name : {"f.bag", "f.mcap", "f.db3", "f"}) {
+    const fs::path fifo = dir / name;
+    REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+    CAPTURE(name);
+    refused(run_vmap_within(30, {"build", fifo.string()}), "frame source: input '" + fifo.string() + not_input);
+    refused(run_vmap_within(30, {"bag", "info", fifo.string()}), "bag '" + fifo.string() + not_input);
+    refused(run_vmap_within(30, {"calibrate", fifo.string(), fifo.string()}), "frame source: input '" + fifo.string() + not_input);
+  }
+  // A rosbag2 folder whose metadata.yaml lists a FIFO beside its .db3 file.
+  const fs::path bag = dir / "listed";
+  fs::create_directories(bag);
+  vmap::test::write_db3(bag / "a.db3", {});
+  REQUIRE(::mkfifo((bag / "b.db3").c_str(), 0600) == 0);
+  write(bag / "metadata.yaml", "rosbag2_bagfile_information:\n  relative_file_paths:\n    - a.db3\n    - b.db3\n");
+  const std::string listed = "bag file '" + (bag / "b.db3").string() + "' is not a regular file";
+  refused(run_vmap_within(30, {"bag", "info", bag.string()}), listed);
+  refused(run_vmap_within(30, {"build", bag.string()}), listed);
+  // A file of 0 bytes with each bag's extension: corrupt (4) alike.
+  for (const char* name : {"zero.bag", "zero.mcap", "zero.db3"}) {
+    write(dir / name, "");
+    CAPTURE(name);
+    const Run r = run_vmap({"bag", "info", (dir / name).string()});
+    INFO("stderr: " << r.err);
+    CHECK(r.code == 4);
+    CHECK(r.err.find((dir / name).string()) != std::string::npos);
+  }
+}
+
+TEST_CASE("cli: a bag's CameraInfo of another image size is named as such, not as --camera (none was given)") {
+  const fs::path dir = work_dir() / "camera_info_size";
+  fs::create_directories(dir);
+  // JPEG frames of 640 x 480 beside a CameraInfo for 320 x 240.
+  std::vector<vmap::test::TestMessage> messages;
+  const auto frames = vmap::FrameSource::open(VMAP_TEST_SOURCE_DIR + std::string("/") + sample).paths();
+  for (std::size_t k = 0; k < 6; ++k) {
+    const std::string jpeg = slurp(frames[k]);
+    const auto t = static_cast<std::int64_t>(k + 1) * 100000000;
+    messages.push_back({"/cam/camera_info", "sensor_msgs/msg/CameraInfo", t,
+                        vmap::test::cdr_camera_info(t, 320, 240, "plumb_bob", {0, 0, 0, 0, 0}, {300, 0, 160, 0, 300, 120, 0, 0, 1})});
+    messages.push_back({"/cam/image_raw/compressed", "sensor_msgs/msg/CompressedImage", t, vmap::test::cdr_compressed(t, "jpeg", jpeg)});
+  }
+  const fs::path bag = dir / "small_info.db3";
+  vmap::test::write_db3(bag, messages);
+  const Run r = run_vmap({"build", bag.string()});
+  INFO("stderr: " << r.err);
+  CHECK(r.code == 1);
+  CHECK(r.err.find("camera calibration from bag '" + bag.string() + "', topic '/cam/camera_info'") != std::string::npos);
+  CHECK(r.err.find("error: the CameraInfo of bag '" + bag.string() +
+                   "', topic '/cam/camera_info': the calibration is for 320 x 240 images, the frames are 640 x 480") !=
+        std::string::npos);
+  CHECK(r.err.find("--camera " + bag.string()) == std::string::npos);
 }

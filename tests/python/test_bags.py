@@ -63,3 +63,48 @@ def test_conformance_stub_images_are_skipped_with_their_reasons(shared):
     assert "carries 30 bytes of pixels, rgb8 640x480 with step 1920 needs 921600" in frames.skipped[0][2]
     with pytest.raises(vmap.Error, match="holds sensor_msgs/msg/Imu, not images"):
         vmap.frames(bag, topic="/test/sensor_msgs/imu")
+
+
+def test_inputs_that_are_fifos_are_refused_before_they_are_opened(tmp_path):
+    import os
+    import threading
+
+    fifos = []
+    for name in ["f.bag", "f.mcap", "f.db3", "f"]:
+        os.mkfifo(tmp_path / name)
+        fifos.append(tmp_path / name)
+    done = threading.Event()
+
+    def unblock():  # a reader that waits on a FIFO gets an empty file after 20 s: a failure, not a hang
+        if done.wait(20):
+            return
+        while not done.is_set():
+            for f in fifos:
+                try:
+                    os.close(os.open(f, os.O_WRONLY | os.O_NONBLOCK))
+                except OSError:
+                    pass
+            done.wait(0.05)
+
+    watchdog = threading.Thread(target=unblock)
+    watchdog.start()
+    try:
+        for f in fifos:
+            with pytest.raises(vmap.Error, match="is not a regular file or a folder"):
+                vmap.frames(str(f))
+            with pytest.raises(vmap.Error, match="is not a regular file or a folder"):
+                vmap.bag_info(str(f))
+    finally:
+        done.set()
+        watchdog.join()
+
+
+def test_a_time_beyond_the_range_of_nanoseconds_is_refused(tmp_path):
+    image = numpy.zeros((48, 64), numpy.uint8)
+    memory = vmap.VisualMemory()
+    with pytest.raises(vmap.Error, match=r"push: timestamp: time 1000000000000 s is beyond \+-9.2e9 s"):
+        memory.push(image, timestamp=1e12)
+    (tmp_path / "a.png").write_bytes(b"")
+    (tmp_path / "far.txt").write_text("1.0 a.png\n1e10 a.png\n")
+    with pytest.raises(vmap.Error, match=r"far.txt:2: time 10000000000 s is beyond"):
+        vmap.frames(str(tmp_path / "far.txt"))

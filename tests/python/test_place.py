@@ -387,7 +387,7 @@ def test_database_without_vocabulary():
 
 
 def test_errors_carry_the_library_message(features, vocabulary, tmp_path):
-    with pytest.raises(vmap.Error, match="no such file"):
+    with pytest.raises(vmap.Error, match="missing.voc': does not exist"):
         vmap.Vocabulary.load(tmp_path / "missing.voc")
     bad = tmp_path / "bad.voc"
     bad.write_bytes(b"VMAPVOCB" + b"\x00" * 40)

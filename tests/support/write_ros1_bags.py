@@ -14,6 +14,9 @@ python3-sensor-msgs) for the bag reader's tests (tests/unit/io/test_bags.cpp):
                                 (sensor_msgs/Imu), /cam/camera_info_zero (K all zero)
   no_images.bag                 only /imu/data
   empty.bag                     no message
+  flat_<bz2|lz4>.bag            /cam/image_raw: 2 mono8 320x240 frames of one value each (k + 1),
+                                in one chunk that compresses hundreds of times: the readers grow
+                                their buffer while it decompresses
 
 Usage: write_ros1_bags.py OUT_DIR
 """
@@ -111,3 +114,13 @@ with rosbag.Bag(f"{out}/no_images.bag", "w") as bag:
 
 with rosbag.Bag(f"{out}/empty.bag", "w") as bag:
     pass
+
+for compression in ("bz2", "lz4"):
+    with rosbag.Bag(f"{out}/flat_{compression}.bag", "w", compression=compression, chunk_threshold=1 << 20) as bag:
+        for k in range(2):
+            t = rospy.Time(200 + k, 0)
+            m = Image()
+            m.header.stamp = t
+            m.height, m.width, m.encoding, m.step = 240, 320, "mono8", 320
+            m.data = bytes([k + 1]) * (320 * 240)
+            bag.write("/cam/image_raw", m, t)

@@ -5,14 +5,18 @@
 // std::filesystem_error, an iostream failure or a bad_alloc escaping from a loader.
 //
 // Policy for inputs that must be files (maps, GCS and tree files, ground truth, poses,
-// detections, class names, list files, images):
-//   - a folder is refused ("is a folder, expected a file");
-//   - anything that is not a regular file after following symbolic links (a device such
-//     as /dev/zero, a FIFO, a socket) is refused before it is opened, so reading never
-//     blocks on a FIFO and never runs until memory is exhausted;
+// detections, class names, list files, images, vocabularies, calibration files, bag
+// files) and for those that may be folders too (frame sources, rosbag2 bags):
+//   - a folder is refused ("is a folder, expected a file") where a file is expected;
+//   - anything else that is not a regular file after following symbolic links (a device
+//     such as /dev/zero, a FIFO, a socket) is refused before it is opened, so reading never
+//     blocks on a FIFO and never runs until memory is exhausted (require_regular_file,
+//     require_file_or_folder: every reader of an input calls one of them first);
 //   - the size is checked against a limit before anything is allocated (each loader
 //     documents its limit; `default_max_file_bytes` otherwise).
-// Streaming inputs (videos, cameras) do not go through these functions.
+// Videos go through require_file_or_folder too (FrameSource::open); only camera indices,
+// V4L devices, URLs and GStreamer pipelines, which the frame sources tell from their
+// text, do not.
 
 #include <vmap/core/error.hpp>
 
@@ -41,18 +45,37 @@ namespace detail {
 /// The operating system's description of errno `e` ("Permission denied"), thread-safe.
 inline std::string os_reason(int e) { return std::generic_category().message(e); }
 
-/// Fails unless `path` names a regular file (symbolic links followed); `what` names
-/// the role of the input ("map file", "class names file").
-inline struct stat require_regular_file(const std::filesystem::path& path, const std::string& what) {
+/// stat() of an input `path` (symbolic links followed); a missing or unreachable path
+/// is an Error naming `what` ("map file", "bag") and the path.
+inline struct stat stat_input(const std::filesystem::path& path, const std::string& what) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) {
     const int e = errno;
     fail(e == ENOENT || e == ENOTDIR ? ErrorKind::not_found : ErrorKind::io,
          what + " '" + path.string() + "': " + (e == ENOENT ? std::string("does not exist") : os_reason(e)));
   }
+  return st;
+}
+
+/// Fails unless `path` names a regular file (symbolic links followed); `what` names
+/// the role of the input ("map file", "class names file").
+inline struct stat require_regular_file(const std::filesystem::path& path, const std::string& what) {
+  const struct stat st = stat_input(path, what);
   if (S_ISDIR(st.st_mode)) fail(what + " '" + path.string() + "' is a folder, expected a file");
   if (!S_ISREG(st.st_mode))
     fail(what + " '" + path.string() + "' is not a regular file (a device, FIFO or socket cannot be read as one)");
+  return st;
+}
+
+/// Fails unless `path` names a regular file or a folder (symbolic links followed): the
+/// check of an input that may be either (a frame source, a bag, a rosbag2 folder), made
+/// before anything opens it, since opening a FIFO for reading waits for a writer and a
+/// device never ends. `what` names the role of the input.
+inline struct stat require_file_or_folder(const std::filesystem::path& path, const std::string& what) {
+  const struct stat st = stat_input(path, what);
+  if (!S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode))
+    fail(what + " '" + path.string() +
+         "' is not a regular file or a folder (a device, FIFO or socket cannot be read as one)");
   return st;
 }
 

@@ -24,6 +24,14 @@
 //     topic's messages; FrameSourceOptions::topic picks the topic when the bag has
 //     several image topics, and camera() gives the calibration of a CameraInfo topic
 //     beside it.
+// A time beyond +-9.2e9 s (io/timestamps.hpp, max_time_seconds: what whole nanoseconds
+// in an int64 hold) is never clamped: a list line, a file name or a time offset beyond it
+// is an Error naming it; a bag message, a warning and a skipped message.
+//
+// An input that is neither a regular file nor a folder (a FIFO, a device, a socket) is
+// refused by name before anything opens it (io/files.hpp, require_file_or_folder): a
+// video backend would wait on a FIFO's writer. Cameras and streams are told from their
+// text first (is_live_source below).
 //
 // Unreadable frames are skipped, counted and reported (FrameSourceOptions::on_skip,
 // FrameSource::skipped()), never taken as the end of the sequence:

@@ -11,8 +11,11 @@
 // double first; splitting whole seconds from the remainder keeps the double as close as
 // it can be.
 
+#include <vmap/core/error.hpp>
+
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <limits>
 #include <optional>
 #include <string>
@@ -39,6 +42,41 @@ namespace vmap {
   if (ns >= 9.2e18) return std::numeric_limits<std::int64_t>::max();
   if (ns <= -9.2e18) return std::numeric_limits<std::int64_t>::min();
   return static_cast<std::int64_t>(ns);
+}
+
+/// The widest time, in seconds either side of the Unix epoch, that a frame can have: its
+/// whole nanoseconds must fit a signed 64-bit integer (INT64_MAX ns is 9223372036.85 s,
+/// in the year 2262), with room for a rounding. Inputs with times beyond it (a list, a
+/// folder's file names, a bag, an offset) are refused by name, never clamped.
+inline constexpr double max_time_seconds = 9.2e9;
+
+/// `seconds` in whole nanoseconds, or nullopt when it is NaN or beyond +-max_time_seconds.
+[[nodiscard]] inline std::optional<std::int64_t> nanoseconds_in_range(double seconds) noexcept {
+  if (!(std::abs(seconds) <= max_time_seconds)) return std::nullopt;
+  return nanoseconds_from_seconds(seconds);
+}
+
+/// `t` + `offset` nanoseconds, or nullopt when the sum leaves the int64 range.
+[[nodiscard]] inline std::optional<std::int64_t> add_nanoseconds(std::int64_t t, std::int64_t offset) noexcept {
+  std::int64_t sum = 0;
+  if (__builtin_add_overflow(t, offset, &sum)) return std::nullopt;
+  return sum;
+}
+
+/// "time 1e+12 s is beyond +-9.2e9 s, the range of nanosecond times (the year 2262)": the
+/// words of every refusal of a time out of range.
+[[nodiscard]] inline std::string time_out_of_range(double seconds) {
+  char text[40];
+  std::snprintf(text, sizeof text, "%.17g", seconds);
+  return std::string("time ") + text + " s is beyond +-9.2e9 s, the range of nanosecond times (the year 2262)";
+}
+
+/// `seconds` in whole nanoseconds; an Error "WHAT: time ... s is beyond +-9.2e9 s ..."
+/// when it is NaN or out of range (a time a caller gives, e.g. a pushed frame's).
+[[nodiscard]] inline std::int64_t frame_time_ns(double seconds, const std::string& what) {
+  const auto ns = nanoseconds_in_range(seconds);
+  if (!ns) detail::fail(what + ": " + time_out_of_range(seconds));
+  return *ns;
 }
 
 /// Exact nanoseconds of a decimal number of seconds ("1305031229.528748", "-0.5", "12"):

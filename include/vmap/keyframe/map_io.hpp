@@ -414,7 +414,9 @@ inline VisualMap parse_map(std::string_view file, const std::string& name, const
     if (!map.keys.empty() && idx <= map.keys.back().frame_index) r.corrupt("key image frame indices are not increasing");
     k.frame_index = static_cast<std::size_t>(idx);
     k.timestamp = r.f64("timestamp");
-    k.time_ns = nanoseconds_from_seconds(k.timestamp);  // a map file keeps seconds only
+    const auto time_ns = nanoseconds_in_range(k.timestamp);  // a map file keeps seconds only
+    if (!time_ns) r.corrupt("key image " + std::to_string(i) + ": " + time_out_of_range(k.timestamp));
+    k.time_ns = *time_ns;
     k.name = r.str("name", map_max_string);
     k.features = read_features(r);
     k.image = read_image(r, limits, total_pixels);

@@ -488,7 +488,7 @@ class VisualMemory {
     f.index = index;
     f.name = "frame#" + std::to_string(f.index);
     f.timestamp = timestamp.value_or(static_cast<double>(f.index));
-    f.time_ns = nanoseconds_from_seconds(f.timestamp);
+    f.time_ns = frame_time_ns(f.timestamp, "push: timestamp");
     return f;
   }
 

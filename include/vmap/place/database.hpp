@@ -352,7 +352,7 @@ class PlaceDatabase {
   [[nodiscard]] static PlaceDatabase load(const std::filesystem::path& path)
     requires std::integral<Id>
   {
-    return deserialize(detail::read_whole_file(path), path.string());
+    return deserialize(detail::read_whole_file(path, "place database file"), path.string());
   }
 
   static constexpr std::uint32_t file_version = 1;

@@ -58,7 +58,7 @@ class AnyVocabulary {
   /// ORB-SLAM2/3's ORBvoc.txt, DBoW2's YAML (.yml, .yml.gz) or FBoW's binary.
   static AnyVocabulary load(const std::filesystem::path& path) {
     {
-      std::ifstream in = detail::open_regular_file(path);
+      std::ifstream in = detail::open_regular_file(path, "vocabulary file");
       char head[detail::place_header_size + 1] = {};
       in.read(head, sizeof head);
       if (in.gcount() == static_cast<std::streamsize>(sizeof head) &&

@@ -66,6 +66,17 @@ inline constexpr std::uint64_t max_vocabulary_file_bytes = std::uint64_t{4} << 3
 /// 1M-word ORB vocabulary is about 400 MB; the text is held whole while OpenCV parses it.
 inline constexpr std::uint64_t max_vocabulary_yaml_bytes = std::uint64_t{1} << 30;  // 1 GiB
 
+/// Most a gzipped DBoW2 vocabulary's text may outgrow its compressed bytes (above
+/// `min_vocabulary_yaml_bound`). The text is descriptors learned from images written as
+/// decimal bytes, which gzip shrinks about 3.5 times (the k10L3 vocabulary of
+/// ../shared/data/vocabularies: 75 kB for 266 kB); gzip shrinks filler up to 1032 times, so
+/// without this bound a 1 MB file would be inflated to 1 GB and handed to OpenCV's parser.
+inline constexpr std::uint64_t max_vocabulary_gzip_ratio = 32;
+
+/// The text a gzipped vocabulary may decompress to whatever its ratio: small files
+/// (crafted or not) are checked as text, as plain YAML is.
+inline constexpr std::uint64_t min_vocabulary_yaml_bound = std::uint64_t{16} << 20;  // 16 MiB
+
 namespace detail {
 
 /// A tree given as parent links (another library's node ids; node 0 the root, children
@@ -415,9 +426,10 @@ namespace detail {
 
 /// The gzip data `compressed` (one or more members, as gzip writes and reads them)
 /// decompressed, counting the bytes as they come out: more than `max_bytes` is an Error
-/// as soon as it happens. The trailer's size field (ISIZE) is not trusted, as any writer
-/// can put any number there.
-inline std::string gunzip_bounded(std::string_view compressed, std::uint64_t max_bytes, const std::string& source) {
+/// as soon as it happens (`limit` says what the bound is in it). The trailer's size field
+/// (ISIZE) is not trusted, as any writer can put any number there.
+inline std::string gunzip_bounded(std::string_view compressed, std::uint64_t max_bytes, const std::string& source,
+                                  const std::string& limit = "the limit") {
   z_stream z{};
   if (inflateInit2(&z, 15 + 16) != Z_OK) bad_vocabulary(source, "zlib cannot start decompressing");  // 16: gzip wrapper
   struct End {
@@ -439,7 +451,7 @@ inline std::string gunzip_bounded(std::string_view compressed, std::uint64_t max
     const int rc = inflate(&z, Z_NO_FLUSH);
     const std::size_t got = buf.size() - z.avail_out;
     if (out.size() + got > max_bytes)
-      bad_vocabulary(source, "decompresses to more than " + std::to_string(max_bytes) + " bytes (the limit)");
+      bad_vocabulary(source, "decompresses to more than " + std::to_string(max_bytes) + " bytes (" + limit + ")");
     out.append(buf.data(), got);
     if (rc == Z_STREAM_END) {
       if (z.avail_in == 0 && fed == compressed.size()) return out;
@@ -456,13 +468,22 @@ inline std::string gunzip_bounded(std::string_view compressed, std::uint64_t max
 }  // namespace detail
 
 /// Reads DBoW2's YAML vocabulary from the bytes of a gzipped file (.yml.gz). It is
-/// decompressed here, bounded by `max_vocabulary_yaml_bytes`, and the text gets the same
-/// checks as plain YAML before OpenCV parses it: OpenCV would decompress it while
-/// parsing, past every check of the text.
+/// decompressed here, bounded before anything is inflated by what its compressed bytes
+/// can hold as a vocabulary (`max_vocabulary_gzip_ratio` times them, at least
+/// `min_vocabulary_yaml_bound`, at most `max_vocabulary_yaml_bytes`), and the text gets
+/// the same checks as plain YAML before OpenCV parses it: OpenCV would decompress it
+/// while parsing, past every check of the text.
 inline BinaryVocabularyTree import_dbow2_yaml_gz(std::string_view compressed, const std::string& name = "<memory>") {
   const std::string source = "DBoW2 YAML vocabulary '" + name + "'";
   if (compressed.size() < 18) detail::bad_vocabulary(source, "too short to be gzip");
-  return import_dbow2_yaml(detail::gunzip_bounded(compressed, max_vocabulary_yaml_bytes, source), name);
+  const std::uint64_t bound = std::clamp(max_vocabulary_gzip_ratio * static_cast<std::uint64_t>(compressed.size()),
+                                         min_vocabulary_yaml_bound, max_vocabulary_yaml_bytes);
+  const std::string limit = bound == max_vocabulary_yaml_bytes
+                                ? std::string("the limit")
+                                : "the limit for " + std::to_string(compressed.size()) + " compressed bytes: " +
+                                      std::to_string(max_vocabulary_gzip_ratio) +
+                                      " times them, at least 16 MiB; gzip shrinks a vocabulary's text far less";
+  return import_dbow2_yaml(detail::gunzip_bounded(compressed, bound, source, limit), name);
 }
 
 /// Reads FBoW's binary vocabulary (fbow::Vocabulary::saveToFile; binary descriptors).
@@ -693,7 +714,7 @@ inline VocabularyFormat sniff_vocabulary_format(std::string_view head, const std
 /// Reads a binary vocabulary of any known format from a file; anything else is a
 /// vmap::Error naming the file.
 inline BinaryVocabularyTree import_binary_vocabulary(const std::filesystem::path& path) {
-  std::ifstream in = detail::open_regular_file(path);
+  std::ifstream in = detail::open_regular_file(path, "vocabulary file");
   const auto size = std::filesystem::file_size(path);
   if (size > max_vocabulary_file_bytes)
     detail::fail("'" + path.string() + "' is " + std::to_string(size) + " bytes, larger than a vocabulary file can be (" +
@@ -701,18 +722,19 @@ inline BinaryVocabularyTree import_binary_vocabulary(const std::filesystem::path
   std::string head(static_cast<std::size_t>(std::min<std::uintmax_t>(size, 4096)), '\0');
   if (!in.read(head.data(), static_cast<std::streamsize>(head.size()))) detail::fail(ErrorKind::io, "reading '" + path.string() + "' failed");
   in.close();
+  const auto whole = [&] { return detail::read_whole_file(path, "vocabulary file", max_vocabulary_file_bytes); };
   switch (sniff_vocabulary_format(head, path)) {
     case VocabularyFormat::vmap:
       return BinaryVocabularyTree::load(path);
     case VocabularyFormat::fbow:
-      return import_fbow(detail::read_whole_file(path), path.string());
+      return import_fbow(whole(), path.string());
     case VocabularyFormat::orbslam_text:
-      return import_orbslam_text(detail::read_whole_file(path), path.string());
+      return import_orbslam_text(whole(), path.string());
     case VocabularyFormat::dbow2_yaml:
       break;
   }
-  if (static_cast<unsigned char>(head[0]) != 0x1F) return import_dbow2_yaml(detail::read_whole_file(path), path.string());
-  return import_dbow2_yaml_gz(detail::read_whole_file(path), path.string());
+  if (static_cast<unsigned char>(head[0]) != 0x1F) return import_dbow2_yaml(whole(), path.string());
+  return import_dbow2_yaml_gz(whole(), path.string());
 }
 
 }  // namespace vmap

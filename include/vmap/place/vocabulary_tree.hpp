@@ -522,7 +522,7 @@ class VocabularyTree {
   /// Reads a vocabulary written by save() (either file version), in one pass from the
   /// file into the tree's arrays; anything else is a vmap::Error naming the file.
   [[nodiscard]] static VocabularyTree load(const std::filesystem::path& path) {
-    std::ifstream in = detail::open_regular_file(path);
+    std::ifstream in = detail::open_regular_file(path, "vocabulary file");
     const std::string source = "vocabulary file '" + path.string() + "'";
     in.seekg(0, std::ios::end);
     const std::streamoff size = in.tellg();

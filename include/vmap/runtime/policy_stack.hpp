@@ -58,8 +58,9 @@ struct PolicyStack {
   /// Keypoints are undistorted before the F-matrix, and a localized query gets its pose
   /// relative to the key image; nullopt: raw pixels, as the papers do.
   std::optional<Camera> camera;
-  /// Where the calibration came from (a file), for messages; not part of the stack's
-  /// identity (two stacks with the same camera parameters are equal).
+  /// Where the calibration came from (a file, or a bag's CameraInfo topic written by
+  /// bag_camera_source), for messages; not part of the stack's identity (two stacks with
+  /// the same camera parameters are equal).
   std::string camera_source;
 
   /// Whether the descriptor is a network (needs `model`).

@@ -16,6 +16,7 @@
 #include <vmap/core/names.hpp>
 #include <vmap/geometry/camera.hpp>
 #include <vmap/geometry/fundamental.hpp>
+#include <vmap/io/bag/types.hpp>
 #include <vmap/runtime/option_names.hpp>
 #include <vmap/runtime/stack.hpp>
 
@@ -38,10 +39,15 @@ struct StackChoice {
   std::string camera_source{};     ///< where the camera came from (its file), for messages
 };
 
-/// The name of the stack's camera in the errors of its estimator ("--camera tum.yaml",
-/// "camera=tum.yaml"; "camera" without a source).
+/// The name of the stack's camera in the errors of its estimator: the option that gave
+/// its file ("--camera tum.yaml", "camera=tum.yaml"), the CameraInfo topic of a bag it
+/// came from without one (bag_camera_source: "the CameraInfo of bag 'x.bag', topic
+/// '/cam/camera_info'"), or "camera" without a source.
 [[nodiscard]] inline std::string camera_name(const PolicyStack& s, const OptionNames& names) {
-  return s.camera_source.empty() ? std::string("camera") : names.with_value("camera", s.camera_source);
+  if (s.camera_source.empty()) return "camera";
+  if (const auto bag = parse_bag_camera_source(s.camera_source))
+    return "the CameraInfo of bag '" + bag->first + "', topic '" + bag->second + "'";
+  return names.with_value("camera", s.camera_source);
 }
 
 /// The stack the words name; an Error naming the input (as `names` spells it) and what is

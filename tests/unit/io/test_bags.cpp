@@ -7,6 +7,8 @@
 
 #include "support/bags.hpp"
 #include "support/errors.hpp"
+#include "support/fifo.hpp"
+#include "support/peak_memory.hpp"
 #include "support/shared_data.hpp"
 
 #include <vmap/io/bag/bag.hpp>
@@ -18,8 +20,10 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <random>
 #include <string>
@@ -608,4 +612,243 @@ TEST_CASE("without the vmap::bags component: MCAP and compressed ROS 1 chunks ar
   CHECK(ok == "no error");
   CHECK(plain == 3);
   CHECK(db3 == 3);
+}
+
+TEST_CASE("a bag that is not a regular file or a folder is refused by name before it is opened (a FIFO never blocks)") {
+  const auto dir = vmap::test::scratch_dir("bag_fifos");
+  std::vector<fs::path> fifos;
+  for (const char* name : {"f.bag", "f.mcap", "f.db3", "f"}) fifos.push_back(vmap::test::make_fifo(dir / name));
+  // A rosbag2 folder whose metadata.yaml lists a FIFO beside a real file, and one whose
+  // .db3 files (no metadata) include a FIFO.
+  const auto listed = dir / "listed";
+  const auto globbed = dir / "globbed";
+  for (const auto& d : {listed, globbed}) {
+    fs::create_directories(d);
+    vmap::test::write_db3(d / "a.db3", ros2_messages());
+    fifos.push_back(vmap::test::make_fifo(d / "b.db3"));
+  }
+  vmap::test::write_bytes(listed / "metadata.yaml",
+                          "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: sqlite3\n"
+                          "  relative_file_paths:\n    - a.db3\n    - b.db3\n");
+  const vmap::test::FifoWatchdog watchdog(fifos, std::chrono::seconds(20));
+  for (std::size_t k = 0; k < 4; ++k) {
+    const fs::path& f = fifos[k];
+    CAPTURE(f.string());
+    const auto seen = vmap::test::error_seen([&] { (void)vmap::FrameSource::open(f); });
+    CHECK(seen.message == "frame source: input '" + f.string() +
+                              "' is not a regular file or a folder (a device, FIFO or socket cannot be read as one)");
+    CHECK(seen.kind == vmap::ErrorKind::invalid_argument);
+    CHECK(error_of([&] { (void)vmap::bag_info(f); }) ==
+          "bag '" + f.string() + "' is not a regular file or a folder (a device, FIFO or socket cannot be read as one)");
+  }
+  for (const auto& d : {listed, globbed}) {
+    CAPTURE(d.string());
+    const std::string refused =
+        "bag file '" + (d / "b.db3").string() + "' is not a regular file (a device, FIFO or socket cannot be read as one)";
+    CHECK(error_of([&] { (void)vmap::bag_info(d); }) == refused);
+    CHECK(error_of([&] { (void)vmap::FrameSource::open(d, {.topic = "/mono8/image_raw"}); }) == refused);
+  }
+}
+
+TEST_CASE("rosbag2: a metadata.yaml that names one file twice is refused; a message over the limit is skipped unread") {
+  const auto dir = vmap::test::scratch_dir("rosbag2_checks");
+  const auto twice = dir / "twice";
+  fs::create_directories(twice);
+  vmap::test::write_db3(twice / "a.db3", ros2_messages());
+  for (const std::string second : {"a.db3", "./a.db3"}) {
+    vmap::test::write_bytes(twice / "metadata.yaml", "rosbag2_bagfile_information:\n  relative_file_paths:\n    - a.db3\n    - " +
+                                                          second + "\n");
+    const auto seen = vmap::test::error_seen([&] { (void)vmap::bag_info(twice); });
+    CHECK(seen.kind == vmap::ErrorKind::corrupt);
+    CHECK(seen.message == "bag '" + twice.string() + "' names the file '" + (twice / second).string() + "' twice" +
+                              (second == "a.db3" ? std::string() : " (also as '" + (twice / "a.db3").string() + "')") +
+                              "; each file of a bag is read once: list it once in metadata.yaml's relative_file_paths");
+  }
+  // The second message holds 2 MiB, over a limit of 1 MiB: skipped with a warning naming its
+  // row; the first and the third are read.
+  const std::string big(2 << 20, '\x07');
+  vmap::test::write_db3(dir / "big.db3",
+                        {{"/c/image_raw", "sensor_msgs/msg/Image", 1, vmap::test::cdr_image(1, 24, 20, "mono8", 24, std::string(480, 'a'))},
+                         {"/c/image_raw", "sensor_msgs/msg/Image", 2, vmap::test::cdr_image(2, 2048, 1024, "mono8", 2048, big)},
+                         {"/c/image_raw", "sensor_msgs/msg/Image", 3, vmap::test::cdr_image(3, 24, 20, "mono8", 24, std::string(480, 'c'))}});
+  const vmap::BagLimits limits{.max_chunk_bytes = 1 << 20};
+  auto s = vmap::detail::open_message_stream(dir / "big.db3", limits);
+  const auto got = vmap::test::all_messages(*s);
+  REQUIRE(got.size() == 2);
+  CHECK(got[0].record_ns == 1);
+  CHECK(got[1].record_ns == 3);
+  const std::size_t bytes = vmap::test::cdr_image(2, 2048, 1024, "mono8", 2048, big).size();
+  REQUIRE(s->warnings().size() == 1);
+  CHECK(s->warnings()[0] == "bag '" + (dir / "big.db3").string() + "', row 2: a message of " + std::to_string(bytes) +
+                                " bytes, more than the limit of 1048576 (BagLimits::max_chunk_bytes); skipped");
+  const auto r = read_all(dir / "big.db3", {.bag_limits = limits});
+  REQUIRE(r.frames.size() == 2);
+  CHECK(r.frames[1].time_ns == 3);
+  CHECK(r.warnings == s->warnings());
+}
+
+namespace {
+
+/// The byte of the first top-level chunk of a bag (ROS 1 op 0x05, MCAP opcode 0x06).
+std::size_t first_chunk_of(const std::string& bytes, vmap::BagFormat f) {
+  for (std::size_t at : vmap::test::record_boundaries(bytes, f)) {
+    if (at >= bytes.size()) break;
+    if (f == vmap::BagFormat::ros1 ? ros1_op(bytes, ros1_record(bytes, at)) == 0x05 : bytes[at] == 0x06) return at;
+  }
+  FAIL("no chunk");
+  return 0;
+}
+
+/// `bag` with its first chunk's stated uncompressed size set to `size`, written to `out`.
+fs::path with_chunk_size(const fs::path& bag, vmap::BagFormat f, std::uint64_t size, const fs::path& out) {
+  std::string bytes = vmap::test::read_bytes(bag);
+  const std::size_t at = first_chunk_of(bytes, f);
+  if (f == vmap::BagFormat::ros1) {
+    put_u32(bytes, ros1_field(bytes, ros1_record(bytes, at), "size"), static_cast<std::uint32_t>(size));
+  } else {  // MCAP chunk body: start time, end time (8 + 8), uncompressed size (8)
+    for (int i = 0; i < 8; ++i) bytes[at + 9 + 16 + static_cast<std::size_t>(i)] = static_cast<char>((size >> (8 * i)) & 0xff);
+  }
+  vmap::test::write_bytes(out, bytes);
+  return out;
+}
+
+/// The uncompressed size the first chunk of a bag states.
+std::uint64_t chunk_size_of(const fs::path& bag, vmap::BagFormat f) {
+  const std::string bytes = vmap::test::read_bytes(bag);
+  const std::size_t at = first_chunk_of(bytes, f);
+  if (f == vmap::BagFormat::ros1) return vmap::detail::le_u32(bytes.data() + ros1_field(bytes, ros1_record(bytes, at), "size"));
+  return vmap::detail::le_u64(bytes.data() + at + 9 + 16);
+}
+
+}  // namespace
+
+TEST_CASE("a chunk that states more bytes than its data holds costs what the data holds, and is skipped") {
+  // Each codec's first chunk states 512 MiB (the limit) for the few kB its data gives:
+  // the reader decompresses into a buffer that grows with the output, so the process's
+  // peak memory does not rise by the 512 MiB stated (a buffer of that size filled with
+  // zeros first did); the chunk is skipped with the size it gave, the others are read.
+  const auto dir = vmap::test::scratch_dir("lying_chunks");
+  const auto ros2 = ros2_test_bags("lying_chunks_ros2");
+  struct Case {
+    fs::path bag;
+    vmap::BagFormat format;
+    std::string codec;
+  };
+  const std::vector<Case> cases{{vmap::test::ros1_test_bags() / "encodings_lz4.bag", vmap::BagFormat::ros1, "lz4"},
+                                {vmap::test::ros1_test_bags() / "encodings_bz2.bag", vmap::BagFormat::ros1, "bz2"},
+                                {ros2[2], vmap::BagFormat::mcap, "lz4"},
+                                {ros2[1], vmap::BagFormat::mcap, "zstd"}};
+  const std::uint64_t claim = vmap::BagLimits{}.max_chunk_bytes;
+  for (const auto& c : cases) {
+    CAPTURE(c.bag.string());
+    const auto full = vmap::test::all_messages(c.bag);
+    const std::uint64_t real = chunk_size_of(c.bag, c.format);
+    const std::string bytes = vmap::test::read_bytes(c.bag);
+    const std::size_t at = first_chunk_of(bytes, c.format);
+    std::size_t in_first = 0;
+    for (const auto& m : full) in_first += m.offset == at ? 1 : 0;  // a chunk's messages carry its byte
+    REQUIRE(in_first > 0);
+    const auto lying = with_chunk_size(c.bag, c.format, claim, dir / ("lying" + c.bag.extension().string()));
+    std::vector<vmap::test::ReadMessage> got;
+    std::vector<std::string> warnings;
+    const auto growth = vmap::test::peak_growth([&] {
+      auto s = vmap::detail::open_message_stream(lying);
+      got = vmap::test::all_messages(*s);
+      warnings = s->warnings();
+    });
+    if (growth) CHECK(*growth < (std::uint64_t{64} << 20));
+    CHECK(got.size() == full.size() - in_first);
+    REQUIRE_FALSE(warnings.empty());
+    CHECK(warnings[0] == "bag '" + lying.string() + "': chunk at byte " + std::to_string(at) + " does not decompress (" +
+                             c.codec + ": it decompresses to " + std::to_string(real) + " bytes, its chunk states " +
+                             std::to_string(claim) + "); skipped");
+    // A chunk that states one byte less than it holds: the probe past the stated size
+    // finds the byte more.
+    const auto short_by_one = with_chunk_size(c.bag, c.format, real - 1, dir / ("short" + c.bag.extension().string()));
+    auto s = vmap::detail::open_message_stream(short_by_one);
+    CHECK(vmap::test::all_messages(*s).size() == full.size() - in_first);
+    REQUIRE_FALSE(s->warnings().empty());
+    CHECK(s->warnings()[0].find("(" + c.codec + ": it decompresses to more than the " + std::to_string(real - 1) +
+                                " bytes its chunk states); skipped") != std::string::npos);
+  }
+}
+
+TEST_CASE("chunks that decompress hundreds of times their size are read exact (the buffer grows as they decompress)") {
+  // 320x240 frames of one value: each codec's chunk is a few hundred times smaller than
+  // its 150 kB of records, past the reader's first guess of its size.
+  const auto check = [](const fs::path& bag, const std::string& topic) {
+    CAPTURE(bag.string());
+    const auto r = read_all(bag, {.topic = topic});
+    REQUIRE(r.frames.size() == 2);
+    CHECK(r.warnings.empty());
+    for (int k = 0; k < 2; ++k)
+      CHECK(same_pixels(r.frames[static_cast<std::size_t>(k)].image, cv::Mat(240, 320, CV_8UC1, cv::Scalar(k + 1))));
+  };
+  for (const char* codec : {"bz2", "lz4"}) check(vmap::test::ros1_test_bags() / ("flat_" + std::string(codec) + ".bag"), "/cam/image_raw");
+  const auto dir = vmap::test::scratch_dir("flat_mcap");
+  std::vector<vmap::test::TestMessage> flat;
+  for (int k = 0; k < 2; ++k)
+    flat.push_back({"/cam/image_raw", "sensor_msgs/msg/Image", 5 + k,
+                    vmap::test::cdr_image(5 + k, 320, 240, "mono8", 320, std::string(320 * 240, static_cast<char>(k + 1)))});
+  for (const char* codec : {"lz4", "zstd"}) {
+    vmap::test::write_mcap(dir / (std::string(codec) + ".mcap"), flat, codec, std::uint64_t{1} << 20);
+    CHECK(fs::file_size(dir / (std::string(codec) + ".mcap")) < 40000);
+    check(dir / (std::string(codec) + ".mcap"), "/cam/image_raw");
+  }
+}
+
+TEST_CASE("a topic with messages of two types is refused, naming both; an empty or foreign .mcap is corrupt as a .bag is") {
+  const auto dir = vmap::test::scratch_dir("two_types");
+  const auto image = [](std::int64_t t) { return vmap::test::cdr_image(t, 24, 20, "mono8", 24, std::string(480, 'x')); };
+  const std::vector<vmap::test::TestMessage> mixed{
+      {"/cam/image_raw", "sensor_msgs/msg/Image", 1, image(1)},
+      {"/cam/image_raw", "std_msgs/msg/String", 2, vmap::test::CdrWriter().string("hello").str()},
+      {"/cam/image_raw", "sensor_msgs/msg/Image", 3, image(3)}};
+  vmap::test::write_db3(dir / "mixed.db3", mixed);
+  vmap::test::write_mcap(dir / "mixed.mcap", mixed, "zstd");
+  for (const char* name : {"mixed.db3", "mixed.mcap"}) {
+    const fs::path bag = dir / name;
+    CAPTURE(bag.string());
+    const std::string refused = "bag '" + bag.string() +
+                                "': topic '/cam/image_raw' holds messages of more than one type: sensor_msgs/msg/Image "
+                                "(2 messages), std_msgs/msg/String (1 message); vmap reads a topic of one type (the "
+                                "others' messages would be dropped)";
+    CHECK(error_of([&] { (void)vmap::FrameSource::open(bag); }) == refused);
+    CHECK(error_of([&] { (void)vmap::FrameSource::open(bag, {.topic = "/cam/image_raw"}); }) == refused);
+    CHECK(vmap::bag_info(bag).topics.size() == 2);  // listed, each type with its count
+  }
+  // Image and CompressedImage on one topic: the same refusal, not "2 image topics".
+  vmap::test::write_db3(dir / "both.db3", {{"/cam/image_raw", "sensor_msgs/msg/Image", 1, image(1)},
+                                           {"/cam/image_raw", "sensor_msgs/msg/CompressedImage", 2,
+                                            vmap::test::cdr_compressed(2, "png", "x")}});
+  CHECK(error_of([&] { (void)vmap::FrameSource::open(dir / "both.db3"); }).find("holds messages of more than one type") !=
+        std::string::npos);
+  // A file of 0 bytes with each bag's extension: the same kind (corrupt) for all three.
+  for (const char* name : {"zero.bag", "zero.mcap", "zero.db3"}) {
+    vmap::test::write_bytes(dir / name, "");
+    CAPTURE(name);
+    CHECK(vmap::test::error_seen([&] { (void)vmap::bag_info(dir / name); }).kind == vmap::ErrorKind::corrupt);
+  }
+}
+
+TEST_CASE("an MCAP log time beyond the range of nanosecond times is skipped with a warning, never clamped") {
+  const auto dir = vmap::test::scratch_dir("mcap_times");
+  const auto image = [](std::int64_t t) { return vmap::test::cdr_image(t, 24, 20, "mono8", 24, std::string(480, 'x')); };
+  // record_ns -1 is written as log time 2^64 - 1 (an unsigned field).
+  vmap::test::write_mcap(dir / "late.mcap", {{"/cam/image_raw", "sensor_msgs/msg/Image", 1, image(1)},
+                                             {"/cam/image_raw", "sensor_msgs/msg/Image", -1, image(2)},
+                                             {"/cam/image_raw", "sensor_msgs/msg/Image", 3, image(3)}},
+                         "");
+  const auto info = vmap::bag_info(dir / "late.mcap");
+  CHECK(info.end_ns == 3);
+  CHECK(info.messages == 2);
+  REQUIRE_FALSE(info.warnings.empty());
+  CHECK(info.warnings[0].find("its statistics give a message time 18446744073.709551615 s, beyond the range of nanosecond "
+                              "times (the year 2262); read through to list it") != std::string::npos);
+  const auto r = read_all(dir / "late.mcap", {.record_time = true});
+  REQUIRE(r.frames.size() == 2);
+  CHECK(r.frames[1].time_ns == 3);
+  REQUIRE_FALSE(r.warnings.empty());
+  CHECK(r.warnings.back().find("has log time 18446744073.709551615 s, beyond the range of nanosecond times (the year 2262); skipped") !=
+        std::string::npos);
 }

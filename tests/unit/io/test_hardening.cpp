@@ -9,6 +9,7 @@
 #include <vmap/io/image.hpp>
 
 #include "support/errors.hpp"
+#include "support/fifo.hpp"
 #include "support/images.hpp"
 #include "support/shared_data.hpp"
 
@@ -21,10 +22,13 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <chrono>
+#include <cstdint>
 #include <fstream>
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <variant>
 #include <vector>
 
 namespace fs = std::filesystem;
@@ -178,6 +182,58 @@ TEST_CASE("frame source: a TUM rgb.txt with a bad line is an error naming the li
   // A list file that is a device: refused by name, never read.
   fs::create_symlink("/dev/zero", dir / "zero.txt");
   CHECK(contains(error_of([&] { (void)vmap::FrameSource::open(dir / "zero.txt"); }), "zero.txt' is not a regular file"));
+}
+
+TEST_CASE("frame source: times beyond +-9.2e9 s are refused by name, never clamped") {
+  const auto dir = vmap::test::scratch_dir("hardening_times");
+  cv::imwrite((dir / "a.png").string(), numbered_image(0, 3));
+  const std::string beyond = " s is beyond +-9.2e9 s, the range of nanosecond times (the year 2262)";
+  write_bytes(dir / "far.txt", "1.0 a.png\n1e10 a.png\n");
+  CHECK(error_of([&] { (void)vmap::FrameSource::open(dir / "far.txt"); }) ==
+        "frame source: " + (dir / "far.txt").string() + ":2: time 10000000000" + beyond);
+  write_bytes(dir / "decimal.txt", "-99999999999.5 a.png\n");
+  CHECK(error_of([&] { (void)vmap::FrameSource::open(dir / "decimal.txt"); }) ==
+        "frame source: " + (dir / "decimal.txt").string() + ":1: time -99999999999.5" + beyond);
+  // Image names that are times: seconds (below 1e11), and nanoseconds past INT64_MAX.
+  for (const std::string name : {"10000000000", "10000000000000000000"}) {
+    const auto folder = dir / ("names_" + std::to_string(name.size()));
+    fs::create_directories(folder);
+    cv::imwrite((folder / (name + ".png")).string(), numbered_image(0, 3));
+    CHECK(error_of([&] { (void)vmap::FrameSource::open(folder); }) == "frame source: folder '" + folder.string() + "', file '" +
+                                                                         name + ".png' (its name is its time): time 10000000000" +
+                                                                         beyond);
+  }
+  // An offset beyond the range, and one that takes a frame's time past it.
+  CHECK(error_of([&] { (void)vmap::FrameSource::open(dir / "a.png", {.time_offset = -1e10}); }) ==
+        "frame source: time_offset: time -10000000000" + beyond);
+  write_bytes(dir / "late.txt", "1e9 a.png\n2e9 a.png\n");
+  auto late = vmap::FrameSource::open(dir / "late.txt", {.time_offset = 9e9});
+  CHECK(error_of([&] { (void)late.times_ns(); }) ==
+        "frame source: '" + (dir / "late.txt").string() +
+            "': with the time offset (FrameSourceOptions::time_offset), a frame's time 10000000000" + beyond);
+  auto p = late.claim();
+  REQUIRE(p);
+  const auto d = late.decode(std::move(*p));
+  REQUIRE(std::holds_alternative<vmap::SkippedFrame>(d));
+  CHECK(std::get<vmap::SkippedFrame>(d).reason ==
+        "with the time offset (FrameSourceOptions::time_offset), its time 10000000000" + beyond);
+  // Within the range: exact.
+  auto near = vmap::FrameSource::open(dir / "late.txt", {.time_offset = 7e9});
+  CHECK(near.times_ns() == std::vector<std::int64_t>{8000000000000000000LL, 9000000000000000000LL});
+}
+
+TEST_CASE("frame source: an input that is a FIFO or a device is refused before it is opened (no video backend waits)") {
+  const auto dir = vmap::test::scratch_dir("hardening_fifo_input");
+  const auto fifo = vmap::test::make_fifo(dir / "pipe.mp4");
+  std::string e;
+  {
+    const vmap::test::FifoWatchdog watchdog({fifo}, std::chrono::seconds(20));  // a hang fails the check below
+    e = error_of([&] { (void)vmap::FrameSource::open(fifo); });
+  }
+  CHECK(e == "frame source: input '" + fifo.string() +
+                 "' is not a regular file or a folder (a device, FIFO or socket cannot be read as one)");
+  fs::create_symlink("/dev/null", dir / "null.avi");
+  CHECK(contains(error_of([&] { (void)vmap::FrameSource::open(dir / "null.avi"); }), "null.avi' is not a regular file or a folder"));
 }
 
 TEST_CASE("frame source: a huge stride ends the sequence instead of wrapping around") {

@@ -8,11 +8,15 @@
 #include <vmap/runtime/vocabulary.hpp>
 
 #include "place_support.hpp"
+#include "support/fifo.hpp"
+#include "support/peak_memory.hpp"
 
 #include <doctest/doctest.h>
 #include <sys/stat.h>
 #include <zlib.h>
 
+#include <chrono>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -107,6 +111,44 @@ TEST_CASE("gzip is decompressed up to the limit counted as it comes, whatever it
         "src: the gzip data is truncated");
   CHECK(error_of([&] { (void)vmap::import_dbow2_yaml_gz(std::string(100, 'x'), "x.yml.gz"); })
             .find("DBoW2 YAML vocabulary 'x.yml.gz': not valid gzip data") == 0);
+}
+
+TEST_CASE("a gzipped vocabulary is inflated only as far as its compressed bytes can hold a vocabulary's text") {
+  // 40 MiB of YAML filler in 40 kB of gzip: refused at 16 MiB (32 times 40 kB is below
+  // the 16 MiB every file may reach), before OpenCV parses anything; the peak memory of
+  // the refusal stays near the 16 MiB, not the 40 MiB the file would inflate to.
+  const std::string text = "%YAML:1.0\n---\nvocabulary:\n   k: 10\n   x: \"" + std::string(40 << 20, ' ') + "\"\n";
+  const fs::path gz = dir() / "filler.yml.gz";
+  write(gz, gzip(text));
+  const auto compressed = fs::file_size(gz);
+  CHECK(compressed < 64000);
+  std::string e;
+  const auto growth = vmap::test::peak_growth([&] { e = error_of([&] { (void)vmap::AnyVocabulary::load(gz); }); });
+  CHECK(e == "DBoW2 YAML vocabulary '" + gz.string() + "': decompresses to more than 16777216 bytes (the limit for " +
+                 std::to_string(compressed) + " compressed bytes: 32 times them, at least 16 MiB; gzip shrinks a "
+                 "vocabulary's text far less)");
+  if (growth) CHECK(*growth < (std::uint64_t{40} << 20));
+  // A larger file: the bound is 32 times its bytes (here 1 MiB of gzip, 32 MiB).
+  std::string big = gzip(text);
+  big.resize(std::size_t{1} << 20, '\0');  // trailing bytes past the member: never reached
+  CHECK(error_of([&] { (void)vmap::import_dbow2_yaml_gz(big, "big.yml.gz"); }) ==
+        "DBoW2 YAML vocabulary 'big.yml.gz': decompresses to more than 33554432 bytes (the limit for 1048576 compressed "
+        "bytes: 32 times them, at least 16 MiB; gzip shrinks a vocabulary's text far less)");
+}
+
+TEST_CASE("vocabulary and place database files that are FIFOs or devices are refused before they are opened") {
+  const fs::path fifo = vmap::test::make_fifo(dir() / "voc_fifo");
+  const vmap::test::FifoWatchdog watchdog({fifo}, std::chrono::seconds(20));  // a hang fails the checks below
+  const std::string not_regular = "' is not a regular file (a device, FIFO or socket cannot be read as one)";
+  CHECK(error_of([&] { (void)vmap::AnyVocabulary::load(fifo); }) == "vocabulary file '" + fifo.string() + not_regular);
+  CHECK(error_of([&] { (void)vmap::BinaryVocabularyTree::load(fifo); }) == "vocabulary file '" + fifo.string() + not_regular);
+  CHECK(error_of([&] { (void)vmap::import_binary_vocabulary(fifo); }) == "vocabulary file '" + fifo.string() + not_regular);
+  CHECK(error_of([&] { (void)vmap::PlaceDatabase<std::uint32_t>::load(fifo); }) ==
+        "place database file '" + fifo.string() + not_regular);
+  CHECK(error_of([&] { (void)vmap::PlaceDatabase<std::uint32_t>::load("/dev/zero"); }) ==
+        "place database file '/dev/zero" + not_regular);
+  CHECK(error_of([&] { (void)vmap::AnyVocabulary::load(dir() / "missing.voc"); }) ==
+        "vocabulary file '" + (dir() / "missing.voc").string() + "': does not exist");
 }
 
 TEST_CASE("check_vocabulary_output: only a new file, or with overwrite another vocabulary, never the input") {

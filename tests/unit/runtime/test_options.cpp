@@ -109,6 +109,18 @@ TEST_CASE("stack words: checked once, named as the front end names them") {
   calibrated.camera_source = "tum.yaml";
   CHECK(vmap::camera_name(calibrated, cli) == "--camera tum.yaml");
   CHECK(vmap::camera_name(calibrated, OptionNames::keywords()) == "camera=tum.yaml");
+  // A calibration from a bag's CameraInfo came from no option: its topic is named.
+  calibrated.camera_source = vmap::bag_camera_source("runs/a.db3", "/cam/camera_info");
+  CHECK(calibrated.camera_source == "runs/a.db3:/cam/camera_info");
+  for (const auto& names : {cli, OptionNames::keywords()})
+    CHECK(vmap::camera_name(calibrated, names) == "the CameraInfo of bag 'runs/a.db3', topic '/cam/camera_info'");
+  // Files whose names hold ':' stay files.
+  for (const char* file : {"cal:/tum.yaml", "/data/run:1/cam.yaml", "x:", ":/cam"}) {
+    CAPTURE(file);
+    CHECK_FALSE(vmap::parse_bag_camera_source(file));
+  }
+  calibrated.camera_source = "cal:/tum.yaml";
+  CHECK(vmap::camera_name(calibrated, cli) == "--camera cal:/tum.yaml");
 }
 
 TEST_CASE("frame range: an empty range or a zero stride is refused before any frame") {

@@ -99,6 +99,7 @@ namespace detail {
 /// The message stream of the bag `input`. Errors: not a bag of its format, unreadable,
 /// an MCAP file without the vmap::bags component.
 inline std::unique_ptr<MessageStream> open_message_stream(const std::filesystem::path& input, const BagLimits& limits = {}) {
+  (void)require_file_or_folder(input, "bag");
   const auto format = bag_format(input);
   if (!format) fail("'" + input.string() + "' is not a bag (.bag, .db3, .mcap or a rosbag2 folder)");
   switch (*format) {
@@ -107,14 +108,13 @@ inline std::unique_ptr<MessageStream> open_message_stream(const std::filesystem:
     case BagFormat::rosbag2_sqlite: {
       std::error_code ec;
       if (!std::filesystem::is_directory(input, ec)) {
-        require_regular_file(input, "bag");
         char head[16] = {};
         std::ifstream in(input, std::ios::binary);
         in.read(head, sizeof head);
         if (in.gcount() != 16 || std::string_view(head, 16) != std::string_view("SQLite format 3\0", 16))
           fail(ErrorKind::corrupt, "bag '" + input.string() + "' is not a rosbag2 sqlite3 file: it does not start with \"SQLite format 3\"");
       }
-      return std::make_unique<Rosbag2Sqlite>(input);
+      return std::make_unique<Rosbag2Sqlite>(input, limits);
     }
     case BagFormat::mcap: {
       std::error_code ec;
@@ -154,8 +154,23 @@ inline bool is_image_type(std::string_view type) {
   return k == RosMessageKind::image || k == RosMessageKind::compressed_image;
 }
 
+/// Fails when the topic `chosen` also carries messages of another type (ROS 1 allows a
+/// topic's connections to differ): reading one type would drop the others' messages
+/// without a word.
+inline const BagTopic& single_type(const std::vector<BagTopic>& topics, const BagTopic& chosen, const std::string& what) {
+  std::string others;
+  for (const auto& t : topics)
+    if (t.name == chosen.name && t.type != chosen.type)
+      others += ", " + t.type + " (" + std::to_string(t.messages) + (t.messages == 1 ? " message)" : " messages)");
+  if (!others.empty())
+    fail(what + ": topic '" + chosen.name + "' holds messages of more than one type: " + chosen.type + " (" +
+         std::to_string(chosen.messages) + (chosen.messages == 1 ? " message)" : " messages)") + others +
+         "; vmap reads a topic of one type (the others' messages would be dropped)");
+  return chosen;
+}
+
 /// The image topic to read: `wanted`, or the only image topic; an Error otherwise that
-/// lists the topics.
+/// lists the topics, or when the topic holds messages of several types.
 inline BagTopic choose_image_topic(const std::vector<BagTopic>& topics, const std::string& wanted,
                                    const std::string& what) {
   std::vector<BagTopic> images;
@@ -163,14 +178,16 @@ inline BagTopic choose_image_topic(const std::vector<BagTopic>& topics, const st
     if (is_image_type(t.type)) images.push_back(t);
   if (!wanted.empty()) {
     for (const auto& t : topics)
-      if (t.name == wanted && is_image_type(t.type)) return t;
+      if (t.name == wanted && is_image_type(t.type)) return single_type(topics, t, what);
     for (const auto& t : topics)
       if (t.name == wanted)
         fail(what + ": topic '" + wanted + "' holds " + t.type +
              ", not images (sensor_msgs/Image or sensor_msgs/CompressedImage); its image topics: " + describe_topics(images));
     fail(what + " has no topic '" + wanted + "'; its topics: " + describe_topics(topics));
   }
-  if (images.size() == 1) return images.front();
+  // One image topic (or one topic with two image types, refused by single_type).
+  if (!images.empty() && std::all_of(images.begin(), images.end(), [&](const BagTopic& t) { return t.name == images.front().name; }))
+    return single_type(topics, images.front(), what);
   if (images.empty())
     fail(what + " has no image topic (sensor_msgs/Image or sensor_msgs/CompressedImage); its topics: " +
          describe_topics(topics));

@@ -23,7 +23,9 @@
 
 #include <bzlib.h>
 #include <lz4frame.h>
+#include <zstd.h>
 
+#include <algorithm>
 #include <climits>
 #include <cstddef>
 #include <cstdint>
@@ -33,6 +35,7 @@
 #include <map>
 #include <memory>
 #include <new>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -43,24 +46,38 @@ namespace {
 using vmap::detail::BagConnection;
 using vmap::detail::StreamMessage;
 
-bool bz2_decompress(std::string_view in, char* out, std::size_t out_size, std::string& reason) {
-  if (in.size() > UINT_MAX || out_size > UINT_MAX) {
-    reason = "larger than libbz2 can decompress at once";
-    return false;
-  }
-  auto produced = static_cast<unsigned int>(out_size);
-  const int rc = BZ2_bzBuffToBuffDecompress(out, &produced, const_cast<char*>(in.data()),
-                                            static_cast<unsigned int>(in.size()), 0, 0);
-  if (rc == BZ_OUTBUFF_FULL) {
-    reason = "it decompresses to more than the " + std::to_string(out_size) + " bytes its chunk states";
-    return false;
-  }
-  if (rc != BZ_OK) {
-    reason = rc == BZ_DATA_ERROR       ? "corrupt data (its CRC does not match)"
-             : rc == BZ_DATA_ERROR_MAGIC ? "not bz2 data"
-             : rc == BZ_UNEXPECTED_EOF   ? "the compressed data is cut short"
-                                         : "libbz2 error " + std::to_string(rc);
-    return false;
+/// What one call of a streaming decoder did.
+enum class Step { going, ended, failed };
+
+/// Runs a streaming decoder into `out`, which must come to exactly `out_size` bytes (the
+/// size a chunk states). `out` grows as output comes, from a first guess of a few times
+/// the `in_size` compressed bytes, doubling, never past `out_size`; once it holds
+/// `out_size` bytes, one probe byte tells whether the data holds more. So a chunk that
+/// states 512 MiB and holds 5 kB costs what its 5 kB decompress to, not a 512 MiB
+/// buffer filled with zeros first. `step(dst, room, wrote, why)` decodes into
+/// dst[0, room), sets `wrote`, and says whether the data ended, or failed with `why`
+/// (corrupt, or cut short: no progress with room to write).
+template <class StepFn>
+bool decompress_growing(std::size_t in_size, std::size_t out_size, std::string& out, std::string& reason, StepFn step) {
+  constexpr std::size_t first_guess = std::size_t{64} << 10;
+  out.clear();
+  std::size_t produced = 0;
+  char probe = 0;
+  for (;;) {
+    if (produced == out.size() && out.size() < out_size) {
+      const std::size_t want = out.empty() ? std::max(first_guess, in_size * 4) : out.size() * 2;
+      out.resize(std::min(out_size, want));
+    }
+    const bool full = produced == out.size();
+    std::size_t wrote = 0;
+    const Step s = step(full ? &probe : out.data() + produced, full ? std::size_t{1} : out.size() - produced, wrote, reason);
+    if (s == Step::failed) return false;
+    if (full && wrote > 0) {
+      reason = "it decompresses to more than the " + std::to_string(out_size) + " bytes its chunk states";
+      return false;
+    }
+    produced += wrote;
+    if (s == Step::ended) break;
   }
   if (produced != out_size) {
     reason = "it decompresses to " + std::to_string(produced) + " bytes, its chunk states " + std::to_string(out_size);
@@ -69,49 +86,129 @@ bool bz2_decompress(std::string_view in, char* out, std::size_t out_size, std::s
   return true;
 }
 
-/// An LZ4 frame (roslz4 writes the LZ4 frame format) into exactly `out_size` bytes.
-bool lz4_frame_decompress(std::string_view in, char* out, std::size_t out_size, std::string& reason) {
+bool bz2_decompress(std::string_view in, std::size_t out_size, std::string& out, std::string& reason) {
+  if (in.size() > UINT_MAX) {
+    reason = "larger than libbz2 can decompress at once";
+    return false;
+  }
+  bz_stream z{};
+  if (BZ2_bzDecompressInit(&z, 0, 0) != BZ_OK) {
+    reason = "libbz2 could not start decompressing";
+    return false;
+  }
+  struct End {
+    bz_stream& z;
+    ~End() { BZ2_bzDecompressEnd(&z); }
+  } end{z};
+  z.next_in = const_cast<char*>(in.data());
+  z.avail_in = static_cast<unsigned int>(in.size());
+  return decompress_growing(in.size(), out_size, out, reason, [&](char* dst, std::size_t room, std::size_t& wrote, std::string& why) {
+    const auto avail = static_cast<unsigned int>(std::min<std::size_t>(room, UINT_MAX));
+    const unsigned int in_before = z.avail_in;
+    z.next_out = dst;
+    z.avail_out = avail;
+    const int rc = BZ2_bzDecompress(&z);
+    wrote = avail - z.avail_out;
+    if (rc == BZ_STREAM_END) return Step::ended;
+    if (rc != BZ_OK) {
+      why = rc == BZ_DATA_ERROR         ? "corrupt data (its CRC does not match)"
+            : rc == BZ_DATA_ERROR_MAGIC ? "not bz2 data"
+            : rc == BZ_MEM_ERROR        ? "not enough memory"
+                                        : "libbz2 error " + std::to_string(rc);
+      return Step::failed;
+    }
+    if (wrote == 0 && z.avail_in == in_before) {
+      why = "the compressed data is cut short";
+      return Step::failed;
+    }
+    return Step::going;
+  });
+}
+
+/// An LZ4 frame (roslz4 writes the LZ4 frame format, as MCAP's lz4 chunks hold) into
+/// exactly `out_size` bytes.
+bool lz4_frame_decompress(std::string_view in, std::size_t out_size, std::string& out, std::string& reason) {
   LZ4F_dctx* ctx = nullptr;
   if (LZ4F_isError(LZ4F_createDecompressionContext(&ctx, LZ4F_VERSION))) {
     reason = "liblz4 could not create a decompression context";
     return false;
   }
-  std::size_t in_pos = 0, out_pos = 0, hint = 1;
-  while (hint != 0) {
-    std::size_t dst = out_size - out_pos, src = in.size() - in_pos;
-    hint = LZ4F_decompress(ctx, out + out_pos, &dst, in.data() + in_pos, &src, nullptr);
+  struct End {
+    LZ4F_dctx* ctx;
+    ~End() { LZ4F_freeDecompressionContext(ctx); }
+  } end{ctx};
+  std::size_t in_pos = 0;
+  const bool ok = decompress_growing(in.size(), out_size, out, reason, [&](char* dst, std::size_t room, std::size_t& wrote, std::string& why) {
+    std::size_t src = in.size() - in_pos;
+    wrote = room;
+    const std::size_t hint = LZ4F_decompress(ctx, dst, &wrote, in.data() + in_pos, &src, nullptr);
     if (LZ4F_isError(hint)) {
-      reason = std::string("corrupt data (") + LZ4F_getErrorName(hint) + ")";
-      break;
+      why = std::string("corrupt data (") + LZ4F_getErrorName(hint) + ")";
+      return Step::failed;
     }
     in_pos += src;
-    out_pos += dst;
-    if (hint != 0 && src == 0 && dst == 0) {
-      reason = in_pos == in.size() ? "the LZ4 frame is cut short"
-                                   : "it decompresses to more than the " + std::to_string(out_size) +
-                                         " bytes its chunk states";
-      break;
+    if (hint == 0) return Step::ended;
+    if (src == 0 && wrote == 0) {
+      why = "the LZ4 frame is cut short";
+      return Step::failed;
     }
-  }
-  LZ4F_freeDecompressionContext(ctx);
-  if (hint != 0) return false;
-  if (out_pos != out_size) {
-    reason = "it decompresses to " + std::to_string(out_pos) + " bytes, its chunk states " + std::to_string(out_size);
-    return false;
-  }
-  if (in_pos != in.size()) {
+    return Step::going;
+  });
+  if (ok && in_pos != in.size()) {
     reason = std::to_string(in.size() - in_pos) + " bytes follow the LZ4 frame";
     return false;
   }
-  return true;
+  return ok;
+}
+
+/// Zstandard data (one or more frames, as MCAP's zstd chunks hold) into exactly
+/// `out_size` bytes.
+bool zstd_decompress(std::string_view in, std::size_t out_size, std::string& out, std::string& reason) {
+  ZSTD_DCtx* ctx = ZSTD_createDCtx();
+  if (ctx == nullptr) {
+    reason = "libzstd could not create a decompression context";
+    return false;
+  }
+  struct End {
+    ZSTD_DCtx* ctx;
+    ~End() { ZSTD_freeDCtx(ctx); }
+  } end{ctx};
+  std::size_t in_pos = 0;
+  return decompress_growing(in.size(), out_size, out, reason, [&](char* dst, std::size_t room, std::size_t& wrote, std::string& why) {
+    ZSTD_outBuffer o{dst, room, 0};
+    ZSTD_inBuffer i{in.data(), in.size(), in_pos};
+    const std::size_t left = ZSTD_decompressStream(ctx, &o, &i);
+    if (ZSTD_isError(left)) {
+      why = std::string("corrupt data (") + ZSTD_getErrorName(left) + ")";
+      return Step::failed;
+    }
+    wrote = o.pos;
+    const bool consumed = i.pos > in_pos;
+    in_pos = i.pos;
+    if (left == 0 && in_pos == in.size()) return Step::ended;  // a frame ended with the data
+    if (!consumed && wrote == 0) {
+      why = "the zstd data is cut short";
+      return Step::failed;
+    }
+    return Step::going;
+  });
 }
 
 constexpr std::string_view magic{"\x89MCAP0\r\n", 8};
 constexpr std::uint64_t record_head = 9;  // opcode, uint64 length
 
-std::int64_t as_ns(std::uint64_t t) {
-  return t > static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max()) ? std::numeric_limits<std::int64_t>::max()
-                                                                                  : static_cast<std::int64_t>(t);
+/// An MCAP time (uint64 nanoseconds) as the signed count every frame time is; nullopt
+/// beyond INT64_MAX (the year 2262), which a reader refuses rather than clamps.
+std::optional<std::int64_t> as_ns(std::uint64_t t) {
+  if (t > static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max())) return std::nullopt;
+  return static_cast<std::int64_t>(t);
+}
+
+/// "time 18446744073.709551615 s", exact, for a time as_ns refuses.
+std::string mcap_time_text(std::uint64_t t) {
+  std::string frac = std::to_string(t % 1000000000U);
+  frac.insert(0, 9 - frac.size(), '0');
+  return "time " + std::to_string(t / 1000000000U) + "." + frac + " s";
 }
 
 /// An MCAP file's messages, one chunk in memory at a time.
@@ -122,7 +219,7 @@ class McapBag final : public vmap::detail::MessageStream {
     format_ = vmap::BagFormat::mcap;
     char head[8];
     if (file_.size() < magic.size() || !file_.read(0, head, sizeof head) || std::string_view(head, 8) != magic)
-      vmap::detail::fail(file_.what() + " is not an MCAP file: it does not start with the MCAP magic");
+      vmap::detail::fail(vmap::ErrorKind::corrupt, file_.what() + " is not an MCAP file: it does not start with the MCAP magic");
     if (!read_summary()) scan();
     rewind();
   }
@@ -132,7 +229,7 @@ class McapBag final : public vmap::detail::MessageStream {
     while (advance(item))
       if (item.op == mcap::OpCode::Message && wanted(item.message.channelId)) {
         out.connection = item.message.channelId;
-        out.record_ns = as_ns(item.message.logTime);
+        out.record_ns = *as_ns(item.message.logTime);  // advance() returns times in range only
         out.offset = item.offset;
         out.bytes = std::string_view(reinterpret_cast<const char*>(item.message.data),
                                      static_cast<std::size_t>(item.message.dataSize));
@@ -273,14 +370,23 @@ class McapBag final : public vmap::detail::MessageStream {
       schemas_.clear();
       return false;
     }
+    const auto start = as_ns(stats->messageStartTime), end = as_ns(stats->messageEndTime);
+    if (stats->messageCount > 0 && (!start || !end)) {  // a message out of range: read through to skip it
+      warnings_.push_back(file_.what() + ": its statistics give a message " +
+                          mcap_time_text(start ? stats->messageEndTime : stats->messageStartTime) +
+                          ", beyond the range of nanosecond times (the year 2262); read through to list it");
+      channels_.clear();
+      schemas_.clear();
+      return false;
+    }
     for (auto& [id, c] : channels_) {
       const auto n = stats->channelMessageCounts.find(id);
       c.messages = n == stats->channelMessageCounts.end() ? 0 : n->second;
       connections_.push_back(c);
     }
     if (stats->messageCount > 0) {
-      start_ns_ = as_ns(stats->messageStartTime);
-      end_ns_ = as_ns(stats->messageEndTime);
+      start_ns_ = *start;
+      end_ns_ = *end;
       any_time_ = true;
     }
     indexed_ = true;
@@ -297,7 +403,7 @@ class McapBag final : public vmap::detail::MessageStream {
     while (advance(item))
       if (item.op == mcap::OpCode::Message) {
         ++counts[item.message.channelId];
-        saw_time(as_ns(item.message.logTime));
+        saw_time(*as_ns(item.message.logTime));
       }
     for (auto& [id, c] : channels_) {
       c.messages = counts.count(id) ? counts[id] : 0;
@@ -347,6 +453,12 @@ class McapBag final : public vmap::detail::MessageStream {
                  std::to_string(at) + " of the chunk is malformed; skipped");
             continue;
           }
+          if (!as_ns(out.message.logTime)) {
+            warn(file_.what() + ": chunk at byte " + std::to_string(chunk_offset_) + ": the message record at byte " +
+                 std::to_string(at) + " of the chunk has log " + mcap_time_text(out.message.logTime) +
+                 ", beyond the range of nanosecond times (the year 2262); skipped");
+            continue;
+          }
           out.op = r.opcode;
           out.owner = chunk_;
           out.offset = chunk_offset_;
@@ -392,6 +504,11 @@ class McapBag final : public vmap::detail::MessageStream {
           warn(file_.what() + ": the message record at byte " + std::to_string(at) + " is malformed; skipped");
           continue;
         }
+        if (!as_ns(out.message.logTime)) {
+          warn(file_.what() + ": the message record at byte " + std::to_string(at) + " has log " +
+               mcap_time_text(out.message.logTime) + ", beyond the range of nanosecond times (the year 2262); skipped");
+          continue;
+        }
         out.op = opcode;
         out.owner = std::move(body);
         out.offset = at;
@@ -429,23 +546,27 @@ class McapBag final : public vmap::detail::MessageStream {
       size = static_cast<std::size_t>(chunk.compressedSize);
       owner = std::move(body);
     } else {
-      auto out = std::make_shared<Bytes>();
-      mcap::Status st;
-      try {
-        if (chunk.compression == "lz4")
-          st = lz4_.decompressAll(chunk.records, chunk.compressedSize, chunk.uncompressedSize, out.get());
-        else if (chunk.compression == "zstd")
-          st = mcap::ZStdReader::DecompressAll(chunk.records, chunk.compressedSize, chunk.uncompressedSize, out.get());
-        else
-          st = mcap::Status{mcap::StatusCode::UnrecognizedCompression, "compression '" + chunk.compression + "'"};
-      } catch (const std::bad_alloc&) {
-        st = mcap::Status{mcap::StatusCode::DecompressionFailed, "not enough memory"};
-      }
-      if (!st.ok() || out->size() != chunk.uncompressedSize) {
-        warn(where + " does not decompress (" + (st.ok() ? std::string("size mismatch") : st.message) + "); skipped");
+      if (chunk.compression != "lz4" && chunk.compression != "zstd") {
+        warn(where + " is compressed with '" + chunk.compression + "' (MCAP chunks are lz4, zstd or uncompressed); skipped");
         return;
       }
-      data = out->data();
+      auto out = std::make_shared<std::string>();
+      const std::string_view compressed(reinterpret_cast<const char*>(chunk.records),
+                                        static_cast<std::size_t>(chunk.compressedSize));
+      const auto uncompressed = static_cast<std::size_t>(chunk.uncompressedSize);
+      std::string reason;
+      bool ok = false;
+      try {
+        ok = chunk.compression == "lz4" ? lz4_frame_decompress(compressed, uncompressed, *out, reason)
+                                        : zstd_decompress(compressed, uncompressed, *out, reason);
+      } catch (const std::bad_alloc&) {
+        reason = "not enough memory";
+      }
+      if (!ok) {
+        warn(where + " does not decompress (" + chunk.compression + ": " + reason + "); skipped");
+        return;
+      }
+      data = reinterpret_cast<const std::byte*>(out->data());
       size = out->size();
       owner = std::move(out);
     }
@@ -467,7 +588,6 @@ class McapBag final : public vmap::detail::MessageStream {
   vmap::BagLimits limits_;
   std::map<std::uint16_t, std::string> schemas_;
   std::map<std::uint16_t, BagConnection> channels_;
-  mcap::LZ4Reader lz4_;
   std::uint64_t pos_ = 0;
   bool ended_ = false;
   std::shared_ptr<const void> chunk_;

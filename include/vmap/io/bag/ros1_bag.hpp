@@ -444,15 +444,14 @@ class Ros1Bag final : public MessageStream {
     if (how == "none") {
       chunk_ = std::make_shared<const std::string>(std::move(data));
     } else {
-      std::string out;
+      std::string out, reason;
+      bool ok = false;
       try {
-        out.resize(static_cast<std::size_t>(size));
+        ok = how == "bz2" ? codecs->bz2(data, static_cast<std::size_t>(size), out, reason)
+                          : codecs->lz4_frame(data, static_cast<std::size_t>(size), out, reason);
       } catch (const std::bad_alloc&) {
         fail(where + ": not enough memory for its " + std::to_string(size) + " uncompressed bytes");
       }
-      std::string reason;
-      const bool ok = how == "bz2" ? codecs->bz2(data, out.data(), out.size(), reason)
-                                   : codecs->lz4_frame(data, out.data(), out.size(), reason);
       if (!ok) {
         warn(where + " does not decompress (" + how + ": " + reason + "); skipped");
         return;

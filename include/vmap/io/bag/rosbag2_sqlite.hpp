@@ -7,8 +7,11 @@
 //
 // Tables: `topics(id, name, type, serialization_format, ...)` and `messages(id, topic_id,
 // timestamp, data)`, messages in CDR. Messages are read by row id, the order they were
-// written, one row at a time. rosbag2's compressed bags (compression_mode file or
-// message) are refused with a message saying so.
+// written, one row at a time; a message's length is read before its bytes, and one longer
+// than BagLimits::max_chunk_bytes is skipped with a warning naming its row, unread.
+// rosbag2's compressed bags (compression_mode file or message) are refused with a message
+// saying so. Every file of the bag must be a regular file, named once: a metadata.yaml
+// that lists a FIFO, a device or one file twice is refused before any file is opened.
 //
 // A file SQLite finds damaged ends with a warning naming the file and the last row read;
 // the next split file, if any, is still read.
@@ -18,6 +21,8 @@
 #include <vmap/io/detail/natural_order.hpp>
 #include <vmap/io/files.hpp>
 #include <vmap/io/sqlite.hpp>
+
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <cctype>
@@ -89,7 +94,8 @@ inline std::vector<std::string> rosbag2_metadata_list(std::string_view text, std
 class Rosbag2Sqlite final : public MessageStream {
  public:
   /// `input`: a `.db3` file or a rosbag2 folder.
-  explicit Rosbag2Sqlite(const std::filesystem::path& input) : input_(input) {
+  explicit Rosbag2Sqlite(const std::filesystem::path& input, const BagLimits& limits = {})
+      : input_(input), limits_(limits) {
     format_ = BagFormat::rosbag2_sqlite;
     const std::string what = "bag '" + input.string() + "'";
     std::error_code ec;
@@ -117,6 +123,7 @@ class Rosbag2Sqlite final : public MessageStream {
     } else {
       files_.push_back(input);
     }
+    check_files(what);
     std::map<std::tuple<std::string, std::string, std::string>, std::uint32_t> ids;
     bool any = false;
     for (std::size_t f = 0; f < files_.size(); ++f) {
@@ -170,7 +177,14 @@ class Rosbag2Sqlite final : public MessageStream {
           const auto it = map.find(statement_->integer(1));
           last_row_ = statement_->integer(0);
           if (it == map.end() || !wanted(it->second)) continue;
-          auto data = std::make_shared<const std::string>(statement_->blob(3));
+          const std::int64_t length = statement_->integer(3);
+          if (length < 0 || static_cast<std::uint64_t>(length) > limits_.max_chunk_bytes) {
+            warnings_.push_back("bag '" + files_[file_].string() + "', row " + std::to_string(last_row_) + ": a message of " +
+                                std::to_string(length) + " bytes, more than the limit of " +
+                                std::to_string(limits_.max_chunk_bytes) + " (BagLimits::max_chunk_bytes); skipped");
+            continue;
+          }
+          auto data = std::make_shared<const std::string>(statement_->blob(4));
           out.connection = it->second;
           out.record_ns = statement_->integer(2);
           out.offset = static_cast<std::uint64_t>(last_row_);
@@ -193,11 +207,15 @@ class Rosbag2Sqlite final : public MessageStream {
     try {
       db_ = std::make_unique<sqlite::Database>(open_db(files_[file_]));
       // Only the rows of selected topics: the others' data (point clouds ...) is not read.
+      // length() of a blob is read from its record header, without its bytes; the bytes
+      // are read only when the length is within the limit.
       std::string in;
       for (const auto& [row, id] : topic_maps_[file_])
         if (wanted(id)) in += (in.empty() ? "" : ",") + std::to_string(row);
+      const std::string limit = std::to_string(limits_.max_chunk_bytes);
       statement_ = std::make_unique<sqlite::Statement>(
-          db_->prepare("SELECT id, topic_id, timestamp, data FROM messages WHERE topic_id IN (" + in + ") ORDER BY id",
+          db_->prepare("SELECT id, topic_id, timestamp, length(data), CASE WHEN length(data) <= " + limit +
+                           " THEN data END FROM messages WHERE topic_id IN (" + in + ") ORDER BY id",
                        "read its messages"));
       last_row_ = 0;
     } catch (const Error& e) {
@@ -215,6 +233,21 @@ class Rosbag2Sqlite final : public MessageStream {
     sqlite::Database db(file, sqlite::Access::read, "bag '" + file.string() + "'");
     db.exec("PRAGMA writable_schema=ON", "read it");
     return db;
+  }
+
+  /// Every file is a regular file (a FIFO named by metadata.yaml would block the reads
+  /// below, a device never end) and is named once: a file listed twice, under any name,
+  /// would be read twice.
+  void check_files(const std::string& what) const {
+    std::map<std::pair<dev_t, ino_t>, std::filesystem::path> seen;
+    for (const auto& file : files_) {
+      const struct stat st = require_regular_file(file, "bag file");
+      const auto [it, fresh] = seen.try_emplace({st.st_dev, st.st_ino}, file);
+      if (!fresh)
+        fail(ErrorKind::corrupt, what + " names the file '" + file.string() + "' twice" +
+             (it->second == file ? std::string() : " (also as '" + it->second.string() + "')") +
+             "; each file of a bag is read once: list it once in metadata.yaml's relative_file_paths");
+    }
   }
 
   /// A warning when the file is shorter than its SQLite header states (SQLite file
@@ -235,6 +268,7 @@ class Rosbag2Sqlite final : public MessageStream {
   }
 
   std::filesystem::path input_;
+  BagLimits limits_;
   std::vector<std::filesystem::path> files_;
   std::vector<std::map<std::int64_t, std::uint32_t>> topic_maps_;  ///< per file: topic row -> connection
   std::size_t file_ = 0;

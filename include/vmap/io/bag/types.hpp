@@ -17,8 +17,10 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace vmap {
@@ -41,10 +43,12 @@ enum class BagFormat : std::uint8_t {
 /// Bounds of what one read may allocate.
 struct BagLimits {
   /// Largest chunk (after decompression), record or message held in memory at once. A
-  /// ROS 1 or MCAP chunk, or a single message, that claims more is refused (the rest of
-  /// the bag is read when its structure allows, see BagInfo::warnings). 512 MiB holds
-  /// the largest frame FrameSourceOptions::max_pixels lets through (64 Mi pixels of
-  /// 4 bytes) twice over.
+  /// ROS 1 or MCAP chunk, or a single message (a rosbag2 row's included, its length read
+  /// before its bytes), that claims more is refused (the rest of the bag is read when its
+  /// structure allows, see BagInfo::warnings). 512 MiB holds the largest frame
+  /// FrameSourceOptions::max_pixels lets through (64 Mi pixels of 4 bytes) twice over.
+  /// A compressed chunk costs what its data decompresses to, up to the size it states,
+  /// never a buffer of the stated size up front.
   std::uint64_t max_chunk_bytes = std::uint64_t{512} << 20;
   /// Largest record header of a ROS 1 bag (connection headers carry the message
   /// definition, a few kB).
@@ -65,6 +69,27 @@ struct BagCamera {
   std::string topic;   ///< "/cam0/camera_info"
   std::string source;  ///< "bag 'x.bag', topic '/cam0/camera_info' (its first CameraInfo)"
 };
+
+/// A bag's CameraInfo topic as the source of a calibration ("x.bag:/cam0/camera_info"),
+/// as PolicyStack::camera_source records it beside calibration files.
+[[nodiscard]] inline std::string bag_camera_source(const std::filesystem::path& bag, std::string_view topic) {
+  return bag.string() + ":" + std::string(topic);
+}
+
+/// The bag and topic of a source bag_camera_source wrote; nullopt for anything else (a
+/// calibration file). A ROS topic name is '/' then letters, digits, '_', '~' and '/', never
+/// ':', so the split is at the last ':' and a file name with a dot or a space after its
+/// last ":/" is not taken for one.
+[[nodiscard]] inline std::optional<std::pair<std::string, std::string>> parse_bag_camera_source(std::string_view source) {
+  const auto colon = source.rfind(':');
+  if (colon == std::string_view::npos || colon == 0 || colon + 2 > source.size() || source[colon + 1] != '/')
+    return std::nullopt;
+  const std::string_view topic = source.substr(colon + 1);
+  for (const char c : topic)
+    if (!(c == '/' || c == '_' || c == '~' || (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9')))
+      return std::nullopt;
+  return std::pair{std::string(source.substr(0, colon)), std::string(topic)};
+}
 
 /// What a bag holds, from its index where it has one (else from reading it through).
 struct BagInfo {
@@ -160,10 +185,12 @@ class MessageStream {
 /// headers reach them through this table, filled when the component's translation unit
 /// is initialised, so that a program that reads no bag links none of those libraries.
 struct BagComponent {
-  /// Decompresses `in` into exactly `out_size` bytes at `out`; false and `reason` when
-  /// the data is corrupt or decompresses to another size.
-  bool (*bz2)(std::string_view in, char* out, std::size_t out_size, std::string& reason) = nullptr;
-  bool (*lz4_frame)(std::string_view in, char* out, std::size_t out_size, std::string& reason) = nullptr;
+  /// Decompresses `in` into `out`, which must come to exactly `out_size` bytes (the size
+  /// its chunk states); false and `reason` when the data is corrupt or decompresses to
+  /// another size. `out` grows with what the data gives, never past `out_size`: a chunk
+  /// that states more than its data holds costs what the data holds, not what it states.
+  bool (*bz2)(std::string_view in, std::size_t out_size, std::string& out, std::string& reason) = nullptr;
+  bool (*lz4_frame)(std::string_view in, std::size_t out_size, std::string& out, std::string& reason) = nullptr;
   /// An MCAP file's message stream.
   std::unique_ptr<MessageStream> (*open_mcap)(const std::filesystem::path& file, const BagLimits& limits) = nullptr;
 };

@@ -95,6 +95,9 @@ VMAP_INLINE std::vector<ListEntry> read_list(const std::filesystem::path& file, 
       if (!parse_tum_line(lines[k].first, e.timestamp, p, &e.time_ns))
         fail("frame source: " + file.string() + ":" + std::to_string(lines[k].second) + ": '" + lines[k].first +
              "' is not '<timestamp> <path>' like the lines before it (TUM rgb.txt)");
+      if (!nanoseconds_in_range(e.timestamp))
+        fail("frame source: " + file.string() + ":" + std::to_string(lines[k].second) + ": " +
+             time_out_of_range(e.timestamp));
     } else {
       e.timestamp = static_cast<double>(k);
       e.time_ns = nanoseconds_from_seconds(e.timestamp);
@@ -156,7 +159,12 @@ struct NameTimes {
   std::vector<std::int64_t> ns;
 };
 
-VMAP_INLINE std::optional<NameTimes> times_from_names(const std::vector<std::string>& names) {
+VMAP_INLINE std::optional<NameTimes> times_from_names(const std::vector<std::string>& names,
+                                                      const std::filesystem::path& folder) {
+  const auto beyond = [&](const std::string& name, double seconds) {
+    fail("frame source: folder '" + folder.string() + "', file '" + name + "' (its name is its time): " +
+         time_out_of_range(seconds));
+  };
   NameTimes out;
   std::vector<double>& values = out.seconds;
   bool fractional = false;
@@ -183,9 +191,11 @@ VMAP_INLINE std::optional<NameTimes> times_from_names(const std::vector<std::str
   }
   if (values.empty()) return out;
   if (fractional) {
-    for (std::size_t k = 0; k < names.size(); ++k)
+    for (std::size_t k = 0; k < names.size(); ++k) {
+      if (!nanoseconds_in_range(values[k])) beyond(names[k], values[k]);
       out.ns.push_back(nanoseconds_from_decimal(std::filesystem::path(names[k]).stem().string())
                            .value_or(nanoseconds_from_seconds(values[k])));
+    }
     return out;
   }
   const double largest = *std::max_element(values.begin(), values.end());
@@ -197,11 +207,11 @@ VMAP_INLINE std::optional<NameTimes> times_from_names(const std::vector<std::str
     std::uint64_t v = 0;
     (void)std::from_chars(stem.data(), stem.data() + stem.size(), v);
     const std::uint64_t ns_per_unit = 1000000000ULL / per_second;
-    out.ns.push_back(v <= static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max()) / ns_per_unit
-                         ? static_cast<std::int64_t>(v * ns_per_unit)
-                         : nanoseconds_from_seconds(seconds_from_count(v, per_second)));
+    const double seconds = seconds_from_count(v, per_second);
+    if (!nanoseconds_in_range(seconds)) beyond(names[k], seconds);
+    out.ns.push_back(static_cast<std::int64_t>(v * ns_per_unit));  // within +-9.2e9 s: it fits
     if (unit == 1.0) continue;
-    values[k] = seconds_from_count(v, per_second);
+    values[k] = seconds;
   }
   return out;
 }
@@ -236,6 +246,8 @@ VMAP_INLINE FrameSource FrameSource::open(const std::filesystem::path& input, Fr
   detail::check(options.min_side >= 1, "frame source: min_side must be >= 1");
   detail::check(options.max_failed_reads >= 1, "frame source: max_failed_reads must be >= 1");
   detail::check(std::isfinite(options.time_offset), "frame source: time_offset must be a finite number of seconds");
+  detail::check(nanoseconds_in_range(options.time_offset).has_value(),
+                "frame source: time_offset: " + time_out_of_range(options.time_offset));
   detail::check(options.start < options.end, "frame source: start (" + std::to_string(options.start) +
                                                  ") must be before end (" + std::to_string(options.end) + ")");
   detail::check(options.resize.width >= 0 && options.resize.height >= 0 &&
@@ -248,6 +260,9 @@ VMAP_INLINE FrameSource FrameSource::open(const std::filesystem::path& input, Fr
       detail::fail("frame source: '" + input.string() + "': " + ec.message());
     fail_missing(input);
   }
+  // A FIFO or a device would be opened below as a video, and a FIFO's open waits for a
+  // writer: refused by name first (cameras are given as "0" or /dev/video0, above).
+  (void)detail::require_file_or_folder(input, "frame source: input");
   FrameSource s;
   s.input_ = input;
   s.options_ = std::move(options);
@@ -275,7 +290,7 @@ VMAP_INLINE FrameSource FrameSource::open(const std::filesystem::path& input, Fr
     if (ec) detail::fail("frame source: cannot read folder '" + input.string() + "': " + ec.message());
     if (names.empty()) fail_no_image(input);
     std::sort(names.begin(), names.end(), detail::natural_less);
-    const auto times = detail::times_from_names(names);
+    const auto times = detail::times_from_names(names, input);
     for (std::size_t k = 0; k < names.size(); ++k) {
       const double t = times ? times->seconds[k] : static_cast<double>(k);
       s.entries_.push_back({input / names[k], t, times ? times->ns[k] : nanoseconds_from_seconds(t)});
@@ -312,7 +327,11 @@ VMAP_INLINE std::variant<Frame, SkippedFrame> FrameSource::decode(PendingFrame p
   f.index = p.index;
   f.name = std::move(p.name);
   f.timestamp = p.timestamp + options_.time_offset;
-  f.time_ns = p.time_ns + nanoseconds_from_seconds(options_.time_offset);
+  const auto time_ns = add_nanoseconds(p.time_ns, nanoseconds_from_seconds(options_.time_offset));
+  if (!time_ns)
+    return SkippedFrame{p.index, f.name,
+                        "with the time offset (FrameSourceOptions::time_offset), its " + time_out_of_range(f.timestamp)};
+  f.time_ns = *time_ns;
   if (p.message_owner) {
     std::string reason;
     f.image = decode_bag_image(p.message, reason);
@@ -385,9 +404,16 @@ VMAP_INLINE std::vector<double> FrameSource::timestamps() const {
 VMAP_INLINE std::vector<std::int64_t> FrameSource::times_ns() const {
   std::vector<std::int64_t> out;
   const std::int64_t offset = nanoseconds_from_seconds(options_.time_offset);
+  const auto shifted = [&](std::int64_t t) {
+    const auto sum = add_nanoseconds(t, offset);
+    if (!sum)
+      detail::fail("frame source: '" + input_.string() + "': with the time offset (FrameSourceOptions::time_offset), " +
+                   "a frame's " + time_out_of_range(seconds_of(t) + options_.time_offset));
+    return *sum;
+  };
   if (kind_ == SourceKind::bag) {
     out = bag_times_ns();
-    for (auto& t : out) t += offset;
+    for (auto& t : out) t = shifted(t);
     return out;
   }
   if (kind_ == SourceKind::video) {
@@ -395,7 +421,7 @@ VMAP_INLINE std::vector<std::int64_t> FrameSource::times_ns() const {
     return out;
   }
   out.reserve(entries_.size());
-  for (const auto& e : entries_) out.push_back(e.time_ns + offset);
+  for (const auto& e : entries_) out.push_back(shifted(e.time_ns));
   return out;
 }
 

@@ -6,6 +6,7 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/binary.hpp>
+#include <vmap/io/files.hpp>
 #include <vmap/place/detail/crc32c.hpp>
 
 #include <algorithm>
@@ -15,6 +16,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -69,16 +71,11 @@ inline BinaryReader open_payload(std::string_view file, std::string_view magic, 
 }
 
 /// Reads a whole file in one read (large vocabularies: no per-character stream
-/// iteration); a missing or unreadable file is an Error naming it.
-inline std::string read_whole_file(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) fail(std::filesystem::exists(path) ? ErrorKind::io : ErrorKind::not_found, "cannot open '" + path.string() + "'");
-  const std::streamoff size = in.tellg();
-  if (size < 0) fail(ErrorKind::io, "cannot read the size of '" + path.string() + "'");
-  std::string data(static_cast<std::size_t>(size), '\0');
-  in.seekg(0);
-  if (!in.read(data.data(), static_cast<std::streamsize>(size))) fail(ErrorKind::io, "reading '" + path.string() + "' failed");
-  return data;
+/// iteration), through vmap::read_file: a missing file, a folder, a FIFO or a device, or
+/// one larger than `max_bytes`, is an Error naming `what` and the path.
+inline std::string read_whole_file(const std::filesystem::path& path, const std::string& what = "file",
+                                   std::uintmax_t max_bytes = std::numeric_limits<std::uintmax_t>::max()) {
+  return read_file(path, max_bytes, what);
 }
 
 /// Float values read as raw little-endian bytes, put in host order (nothing to do on a
@@ -94,15 +91,13 @@ inline void f32_from_little_endian(float* p, std::size_t n) noexcept {
   (void)n;
 }
 
-/// An input stream on a regular file: a missing file, a folder, a FIFO or a device is
-/// an Error naming it (reading one could block or never end).
-inline std::ifstream open_regular_file(const std::filesystem::path& path) {
-  std::error_code ec;
-  const auto status = std::filesystem::status(path, ec);
-  if (ec || !std::filesystem::exists(status)) fail(ErrorKind::not_found, "cannot open '" + path.string() + "': no such file");
-  if (!std::filesystem::is_regular_file(status)) fail("'" + path.string() + "' is not a regular file");
+/// An input stream on a regular file: a missing file, a folder, a FIFO or a device is an
+/// Error naming `what` and the path (require_regular_file: reading one could block or
+/// never end), checked before the file is opened.
+inline std::ifstream open_regular_file(const std::filesystem::path& path, const std::string& what = "file") {
+  (void)require_regular_file(path, what);
   std::ifstream in(path, std::ios::binary);
-  if (!in) fail(ErrorKind::io, "cannot open '" + path.string() + "'");
+  if (!in) fail(ErrorKind::io, "cannot open " + what + " '" + path.string() + "'");
   return in;
 }
 
