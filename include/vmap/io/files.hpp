@@ -15,6 +15,7 @@
 // Streaming inputs (videos, cameras) do not go through these functions.
 
 #include <vmap/core/error.hpp>
+#include <vmap/io/database_files.hpp>
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -56,16 +57,16 @@ inline struct stat require_regular_file(const std::filesystem::path& path, const
   return st;
 }
 
-/// Closes a file descriptor on scope exit.
+/// Closes a file descriptor on scope exit, through io/database_files.hpp: the file read
+/// may be a memory store this process has open, whose SQLite locks a plain close() would
+/// drop.
 struct FdGuard {
   int fd = -1;
   FdGuard() = default;
   explicit FdGuard(int f) : fd(f) {}
   FdGuard(const FdGuard&) = delete;
   FdGuard& operator=(const FdGuard&) = delete;
-  ~FdGuard() {
-    if (fd >= 0) ::close(fd);
-  }
+  ~FdGuard() { close_descriptor(fd); }
 };
 
 }  // namespace detail
