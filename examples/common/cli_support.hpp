@@ -10,6 +10,7 @@
 #include <vmap/io/calibration.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/image.hpp>
+#include <vmap/io/postgres.hpp>
 #include <vmap/io/yaml_limits.hpp>
 
 #include <CLI/CLI.hpp>
@@ -84,11 +85,11 @@ inline std::vector<std::string>& current_inputs() {
   return inputs;
 }
 
-/// " (input: a, b)" or "".
+/// " (input: a, b)" or "" (a fleet's URI without its password).
 inline std::string input_note() {
   std::string s;
   for (const auto& i : current_inputs())
-    if (!i.empty()) s += (s.empty() ? " (input: " : ", ") + i;
+    if (!i.empty()) s += (s.empty() ? " (input: " : ", ") + (vmap::pg::is_uri(i) ? vmap::pg::redacted(i) : i);
   return s.empty() ? s : s + ")";
 }
 
@@ -352,8 +353,12 @@ inline void check_no_empty_values(const CLI::App& app) {
 // JSON.
 
 /// A file name for JSON: valid UTF-8 stays as it is; other bytes become U+FFFD when the
-/// object is dumped (see dump_json), so a Latin-1 name never aborts --json.
-inline std::string path_string(const std::filesystem::path& p) { return p.string(); }
+/// object is dumped (see dump_json), so a Latin-1 name never aborts --json. A fleet's
+/// URI is shown without its password (pg::redacted: every URI the command line shows
+/// goes through it).
+inline std::string path_string(const std::filesystem::path& p) {
+  return vmap::pg::is_uri(p.native()) ? vmap::pg::redacted(p.native()) : p.string();
+}
 
 /// One JSON document on stdout; invalid UTF-8 in strings is replaced, not an exception.
 inline void print_json(const nlohmann::json& j) {
@@ -365,6 +370,7 @@ inline void print_json(const nlohmann::json& j) {
 namespace cli_detail {
 
 inline nlohmann::json typed_value(const std::string& s) {
+  if (vmap::pg::is_uri(s)) return vmap::pg::redacted(s);  // a fleet's URI, never with its password
   if (s == "true") return true;
   if (s == "false") return false;
   if (!s.empty()) {
@@ -465,10 +471,19 @@ inline bool is_folder(const std::filesystem::path& p) {
 
 }  // namespace cli_detail
 
-/// Refuses an output file that is one of the inputs (after resolving symbolic links and
-/// "..") or a symbolic link (outputs are replaced by rename, which would replace the link
-/// itself, not write through it: give the link's target instead), or an existing folder.
-/// Creates the output's folder when it is missing and checks that it is writable.
+/// Refuses (a usage error) an output file that is one of the inputs, after resolving
+/// symbolic links and "..".
+inline void refuse_input_as_output(const std::filesystem::path& out, const std::string& option,
+                                   const std::vector<std::filesystem::path>& inputs) {
+  const std::filesystem::path r = cli_detail::resolved(out);
+  for (const auto& in : inputs)
+    if (!in.empty() && cli_detail::resolved(in) == r)
+      usage_error(option + ": '" + out.string() + "' is also an input; refusing to overwrite it");
+}
+
+/// Refuses an output file that is one of the inputs (refuse_input_as_output) or a
+/// symbolic link (outputs are replaced by rename, which would replace the link itself,
+/// not write through it: give the link's target instead), or an existing folder.
 inline void check_output_file(const std::filesystem::path& out, const std::string& option,
                               const std::vector<std::filesystem::path>& inputs) {
   namespace fs = std::filesystem;
@@ -477,10 +492,7 @@ inline void check_output_file(const std::filesystem::path& out, const std::strin
     usage_error(option + ": '" + out.string() +
                 "' is a symbolic link; vmap replaces output files by rename and does not write through links "
                 "(give the link's target)");
-  const fs::path r = cli_detail::resolved(out);
-  for (const auto& in : inputs)
-    if (!in.empty() && cli_detail::resolved(in) == r)
-      usage_error(option + ": '" + out.string() + "' is also an input; refusing to overwrite it");
+  refuse_input_as_output(out, option, inputs);
   if (fs::is_directory(out, ec)) usage_error(option + ": '" + out.string() + "' is a folder, not a file");
 }
 
@@ -513,7 +525,8 @@ inline std::filesystem::path prepare_output_dir(const std::filesystem::path& dir
       if (p == p.parent_path()) break;
     }
     fs::create_directories(dir, ec);
-    if (ec) vmap::detail::fail(option + ": cannot create the folder '" + dir.string() + "': " + ec.message());
+    if (ec)
+      vmap::detail::fail(vmap::ErrorKind::io, option + ": cannot create the folder '" + dir.string() + "': " + ec.message());
     auto& created = cli_detail::created_folders();
     created.insert(created.begin(), missing.begin(), missing.end());
   }
@@ -522,7 +535,7 @@ inline std::filesystem::path prepare_output_dir(const std::filesystem::path& dir
   std::string probe = (dir / ".vmap-write-test-XXXXXX").string();
   const int fd = ::mkstemp(probe.data());
   if (fd < 0)
-    vmap::detail::fail(option + ": cannot write into the folder '" + dir.string() + "': " +
+    vmap::detail::fail(vmap::ErrorKind::io, option + ": cannot write into the folder '" + dir.string() + "': " +
                        std::error_code(errno, std::generic_category()).message());
   ::close(fd);
   ::unlink(probe.c_str());
@@ -574,8 +587,10 @@ inline void check_input_file(const std::filesystem::path& p, const std::string& 
   if (ec || !fs::exists(st)) usage_error(option + ": '" + p.string() + "' does not exist");
   if (fs::is_directory(st)) usage_error(option + ": '" + p.string() + "' is a folder, not a file");
   if (!fs::is_regular_file(st)) usage_error(option + ": '" + p.string() + "' is not a regular file");
-  std::ifstream f(p);
-  if (!f) vmap::detail::fail(option + ": '" + p.string() + "' cannot be read (permission?)");
+  // Asked without opening it: a descriptor closed here would drop the locks of a
+  // memory store this process reads (io/database_files.hpp).
+  if (::faccessat(AT_FDCWD, p.c_str(), R_OK, AT_EACCESS) != 0)
+    vmap::detail::fail(option + ": '" + p.string() + "' cannot be read (permission?)");
 }
 
 /// Frame-source options that report each skipped (unreadable) frame on stderr; the count

@@ -106,7 +106,8 @@ AnyVocabulary vocabulary_of(const std::optional<std::string>& file) {
 }
 
 /// A new memory store at `path`; an existing memory is replaced with force (by the
-/// library, when the new one is closed), any other existing file refused.
+/// library, when the new one is closed), any other existing file refused (by the
+/// library: AnyMemory::create, which knows a memory by its own records).
 std::unique_ptr<PyMemory> create_memory(const std::string& given, const PolicyStack& stack, const MemoryOptions& o,
                                         AnyVocabulary vocabulary, bool force, std::size_t working_memory,
                                         const std::optional<std::string>& robot) {
@@ -118,11 +119,8 @@ std::unique_ptr<PyMemory> create_memory(const std::string& given, const PolicySt
   }
   if (robot) fail("create: robot= needs a fleet's memory (a postgresql:// URI as path)");
   std::error_code ec;
-  if (!force && fs::exists(path, ec)) {
-    if (memory_kind(path) == MemoryKind::other)
-      fail("path: '" + path.string() + "' exists and is not a vmap memory; refusing to replace it");
+  if (!force && fs::exists(path, ec) && memory_kind(path) != MemoryKind::other)
     fail("path: the memory '" + path.string() + "' exists: give force=True to replace it");
-  }
   return std::make_unique<PyMemory>(AnyMemory::create(path, stack, o, std::move(vocabulary),
                                                       {.working_memory = working_memory, .replace = force}));
 }
@@ -140,6 +138,10 @@ OdometryPose pose_of(const py::object& pose) {
     }
   }
   if (a.ndim() == 2 && (a.shape(0) == 3 || a.shape(0) == 4) && a.shape(1) == 4) {
+    // A 4 x 4 is homogeneous: its last row is 0 0 0 1 (anything else is no rigid motion).
+    if (a.shape(0) == 4 && (a.at(3, 0) != 0.0 || a.at(3, 1) != 0.0 || a.at(3, 2) != 0.0 || a.at(3, 3) != 1.0))
+      fail("pose: the last row of a 4 x 4 pose must be 0 0 0 1, got " + std::to_string(a.at(3, 0)) + " " +
+           std::to_string(a.at(3, 1)) + " " + std::to_string(a.at(3, 2)) + " " + std::to_string(a.at(3, 3)));
     cv::Matx33d R;
     cv::Vec3d t;
     for (int r = 0; r < 3; ++r) {
@@ -661,20 +663,18 @@ void bind(py::module_& m) {
             self.locked([&](AnyMemory& mem) { mem.save(path, storage); });
           },
           py::arg("path"), py::kw_only(), py::arg("images") = py::none(),
-          "Writes the whole memory as one .vmem file, atomically (images: none, png, jpeg; default: as kept).")
+          "Writes the whole memory as one .vmem file, atomically (images: none, png, jpeg; default: as kept).\n"
+          "An existing file there is replaced only when it is a .vmem memory file: a memory store (the\n"
+          "memory's own included), another file or a folder is refused.")
       .def(
           "export",
           [](PyMemory& self, const std::string& folder) {
-            return self.locked([&](AnyMemory& mem) {
-              std::error_code ec;
-              fs::create_directories(folder, ec);
-              if (ec) vmap::detail::fail("export: cannot create the folder '" + folder + "': " + ec.message());
-              return export_memory(mem, folder);
-            });
+            return self.locked([&](AnyMemory& mem) { return export_memory_folder(mem, folder); });
           },
           py::arg("folder"),
-          "Writes key_images.txt, loops.txt and, with poses, key_images.tum and loops.g2o into `folder`\n"
-          "(each atomically, times exact to the nanosecond); returns the names written.")
+          "Writes key_images.txt, loops.txt and, with poses, key_images.tum and loops.g2o as the folder\n"
+          "`folder`, replaced as a whole (as `vmap memory export --out`): it must be new, empty or an earlier\n"
+          "export holding only its own files; times exact to the nanosecond. Returns the names written.")
       .def(
           "view",
           [](PyMemory& self, const std::string& folder, const py::object& answers, int image_side, bool matches,

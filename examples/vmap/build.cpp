@@ -274,7 +274,7 @@ int report(const BuildArgs& args, const CLI::App& app, const vmap::VisualMap& ma
   std::fprintf(out, "  time              %.2f s (%.1f frames/s)\n", seconds, fps);
   if (memory)
     std::fprintf(out, "  memory            %s%s: session %zu %s %zu frames, %zu loop edges (%zu new), last frame %zu%s\n",
-                 memory->file.c_str(), memory->robot.empty() ? "" : (", robot '" + memory->robot + "'").c_str(),
+                 ex::path_string(memory->file).c_str(), memory->robot.empty() ? "" : (", robot '" + memory->robot + "'").c_str(),
                  memory->session, memory->resumed ? "resumed with" : "pushed", memory->record.pushed, memory->loops,
                  memory->record.loops.size(), memory->last_frame.value_or(0),
                  memory->bytes ? (", " + std::to_string(*memory->bytes) + " bytes").c_str() : "");

@@ -106,7 +106,7 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
         ex::print_json(j);
         return 0;
       }
-      std::printf("memory %s: %zu frames, %zu key images\n", file.c_str(), mem.frames(), mem.key_images());
+      std::printf("memory %s: %zu frames, %zu key images\n", ex::path_string(file).c_str(), mem.frames(), mem.key_images());
       if (mem.stationary()) std::printf("the camera never left its place: no key image is a revisit\n");
       std::printf("%zu loop edges (confidence >= %.2f):\n", mem.loops().size(), min_confidence);
       ex::print_loop_edges(mem, a.edges);
@@ -147,7 +147,7 @@ int run_memory(const LoopsArgs& a, const CLI::App& app) {
       return 0;
     }
     std::printf("memory %s: %zu frames, %zu key images, %zu with a ground-truth loop to a key image %zu or more before\n",
-                file.c_str(), mem.frames(), mem.key_images(), pr.positives, mem.options().loops.window + 1);
+                ex::path_string(file).c_str(), mem.frames(), mem.key_images(), pr.positives, mem.options().loops.window + 1);
     std::printf("%zu loop edges (confidence >= %.2f), %zu true:\n", mem.loops().size(), min_confidence, true_edges);
     ex::print_loop_edges(mem, a.edges);
     std::printf("key images (best edge each): TP %zu, FP %zu, precision %.3f, recall %.3f; recall@100%%P %.3f\n",

@@ -185,8 +185,10 @@ int convert(const MemoryArgs& a) {
   auto mem = ex::open_memory_input(a.convert_in, "INPUT", true, fleet_in ? a.robot : "");
   std::optional<vmap::AnyMemory> written;
   ex::NewMemoryGuard guard(written, true, out.native());
-  written.emplace(vmap::AnyMemory::copy_into_store(std::move(mem), out,
-                                                   {.robot = fleet_out ? a.robot : "", .replace = a.force && !fleet_out}));
+  // A new OUTPUT appears only complete, when the command ends (as merge's): killed, it
+  // leaves no file there.
+  written.emplace(vmap::AnyMemory::copy_into_store(
+      std::move(mem), out, {.robot = fleet_out ? a.robot : "", .replace = a.force && !fleet_out, .whole_at_close = !fleet_out}));
   written->close();
   guard.keep();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

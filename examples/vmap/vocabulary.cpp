@@ -45,6 +45,7 @@ struct VocabularyArgs {
 };
 
 int convert(const VocabularyArgs& a) {
+  ex::refuse_input_as_output(a.convert_out, "OUTPUT", {a.convert_in});
   vmap::check_vocabulary_output(a.convert_out, a.convert_force, std::filesystem::path(a.convert_in), "--force");
   const auto t0 = std::chrono::steady_clock::now();
   const vmap::AnyVocabulary v = vmap::AnyVocabulary::load(a.convert_in);
@@ -65,6 +66,7 @@ int run(const VocabularyArgs& a) {
     ex::usage_error("learning needs FRAMES and --out (converting: vmap vocabulary convert INPUT OUTPUT)");
   ex::as_usage([&] { a.learning.validate(vmap::OptionNames::command_line()); });
   // Before the frames are read: a refused --out is known at once, not after the learning.
+  ex::refuse_input_as_output(a.out, "--out", {a.input});
   vmap::check_vocabulary_output(a.out, a.force, std::nullopt, "--force");
   const vmap::PolicyStack stack = ex::stack_of(a.descriptor, "magsac", std::nullopt);
   std::optional<ex::Progress> progress;

@@ -74,10 +74,11 @@ fs::path work_dir() {
   return dir;
 }
 
-/// Runs `vmap ARGS...` from the repository's root (the docs' working folder).
-Run run_vmap(const std::vector<std::string>& args) {
+/// Runs `PREFIX vmap ARGS...` from the repository's root (the docs' working folder), PREFIX
+/// a command that runs another (`timeout ...`, `env ...`) or nothing.
+Run run_vmap_prefixed(const std::string& prefix, const std::vector<std::string>& args) {
   const fs::path out = work_dir() / "stdout.txt", err = work_dir() / "stderr.txt";
-  std::string cmd = "cd " + quote(VMAP_TEST_SOURCE_DIR) + " && " + quote(VMAP_CLI_BINARY);
+  std::string cmd = "cd " + quote(VMAP_TEST_SOURCE_DIR) + " && " + prefix + " " + quote(VMAP_CLI_BINARY);
   for (const auto& a : args) cmd += " " + quote(a);
   cmd += " >" + quote(out.string()) + " 2>" + quote(err.string()) + " </dev/null";
   const int status = std::system(cmd.c_str());
@@ -87,6 +88,9 @@ Run run_vmap(const std::vector<std::string>& args) {
   r.err = slurp(err);
   return r;
 }
+
+/// Runs `vmap ARGS...` from the repository's root.
+Run run_vmap(const std::vector<std::string>& args) { return run_vmap_prefixed("", args); }
 
 const std::string sample = "examples/data/tum_fr1_rpy_60/rgb.txt";
 const std::string frame_a = "examples/data/tum_fr1_rpy_60/rgb/1305031229.528748.jpg";
@@ -865,9 +869,13 @@ TEST_CASE("cli: vocabulary convert never replaces its input, a memory or any fil
       if (force) args.push_back("--force");
       return args;
     };
-    refused(with({"vocabulary", "convert", gz.string(), gz.string()}), "is the input file");
-    refused(with({"vocabulary", "convert", voc.string(), voc.string()}), "is the input file");
-    refused(with({"vocabulary", "convert", voc.string(), (dir / "link.vmapvoc").string()}), "is the input file");
+    // An output that is the input is a usage error (exit 2), also through a link.
+    for (const fs::path& same : {gz, voc, dir / "link.vmapvoc"}) {
+      const Run r = run_vmap(with({"vocabulary", "convert", same == gz ? gz.string() : voc.string(), same.string()}));
+      INFO("stderr: " << r.err);
+      CHECK(r.code == 2);
+      CHECK(r.err.find("OUTPUT: '" + same.string() + "' is also an input") != std::string::npos);
+    }
     refused(with({"vocabulary", "convert", fbow.string(), memory.string()}),
             force ? "exists and is not a vocabulary vmap reads, so it is not replaced" : "already exists");
     refused(with({"vocabulary", "convert", voc.string(), notes.string()}),
@@ -903,6 +911,12 @@ TEST_CASE("cli: vocabulary --out follows the same rule, checked before any frame
     CHECK(r.err.find(force ? "exists and is not a vocabulary vmap reads" : "already exists") != std::string::npos);
   }
   CHECK(file_bytes(memory) == memory_bytes);
+  // Its own frames' list as --out: a usage error, the list as it was.
+  const std::string list = file_bytes(fs::path(VMAP_TEST_SOURCE_DIR) / sample);
+  const Run same = run_vmap({"vocabulary", sample, "--out", sample, "--words", "8", "--depth", "1", "--force"});
+  CHECK(same.code == 2);
+  CHECK(same.err.find("--out: '" + sample + "' is also an input") != std::string::npos);
+  CHECK(file_bytes(fs::path(VMAP_TEST_SOURCE_DIR) / sample) == list);
 }
 
 TEST_SUITE("data") {
@@ -2266,20 +2280,208 @@ namespace {
 /// run_vmap killed after `seconds` (exit 137): for inputs that must be refused at once,
 /// so that a run that waits on one fails the test instead of hanging it.
 Run run_vmap_within(int seconds, const std::vector<std::string>& args) {
-  const fs::path out = work_dir() / "stdout.txt", err = work_dir() / "stderr.txt";
-  std::string cmd = "cd " + quote(VMAP_TEST_SOURCE_DIR) + " && timeout -s KILL " + std::to_string(seconds) + " " +
-                    quote(VMAP_CLI_BINARY);
-  for (const auto& a : args) cmd += " " + quote(a);
-  cmd += " >" + quote(out.string()) + " 2>" + quote(err.string()) + " </dev/null";
-  const int status = std::system(cmd.c_str());
-  Run r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
+  return run_vmap_prefixed("timeout -s KILL " + std::to_string(seconds), args);
+}
+
+/// Runs `vmap ARGS...` as run_vmap does, with `env` ("NAME=value ...") set for it.
+Run run_vmap_with(const std::string& env, const std::vector<std::string>& args) {
+  return run_vmap_prefixed("env " + env, args);
+}
+
+/// A process id that is no process's: a child that has ended.
+std::string dead_pid() {
+  const pid_t child = ::fork();
+  REQUIRE(child >= 0);
+  if (child == 0) ::_exit(0);
+  REQUIRE(::waitpid(child, nullptr, 0) == child);
+  return std::to_string(child);
 }
 
 }  // namespace
+
+TEST_CASE("cli: --force replaces only memories: an SQLite database or a rosbag2 file is never one") {
+  const fs::path dir = fresh_dir("foreign_sqlite");
+  const std::string a = (dir / "a.vmdb").string(), b = (dir / "b.vmdb").string();
+  REQUIRE(run_vmap({"build", sample, "--memory", a, "--end", "20"}).code == 0);
+  REQUIRE(run_vmap({"build", sample, "--memory", b, "--start", "20"}).code == 0);
+  const std::string user = (dir / "p.db").string();
+  REQUIRE(std::system(("sqlite3 " + quote(user) + " \"create table t(x); insert into t values('mine')\"").c_str()) == 0);
+  const std::string bag = (dir / "bag.db3").string();
+  REQUIRE(std::system(("sqlite3 " + quote(bag) + " \"pragma journal_mode=wal; create table messages(data blob)\" >/dev/null")
+                          .c_str()) == 0);
+  for (const std::string& other : {user, bag}) {
+    CAPTURE(other);
+    const std::string before = slurp(other);
+    for (const std::vector<std::string>& args :
+         {std::vector<std::string>{"build", sample, "--end", "8", "--memory", other, "--force"},
+          std::vector<std::string>{"memory", "convert", a, other, "--force"},
+          std::vector<std::string>{"memory", "merge", a, b, "--out", other, "--force"},
+          std::vector<std::string>{"build", sample, "--end", "8", "--memory", other},
+          std::vector<std::string>{"memory", "convert", a, other}}) {
+      CAPTURE(args[1]);
+      const Run r = fails_with(args, 2, "'" + other + "' exists and is not a vmap memory; refusing to replace it");
+      // Not called a memory, and --force not suggested for it.
+      CHECK(r.err.find("the memory") == std::string::npos);
+      CHECK(r.err.find("give --force") == std::string::npos);
+    }
+    CHECK(slurp(other) == before);
+  }
+  const Run rows = run_vmap({"memory", "info", user});
+  CHECK(rows.code == 4);
+  CHECK(rows.err.find("is not a vmap memory") != std::string::npos);
+}
+
+TEST_CASE("cli: a new memory store appears whole, and the files of runs killed before are removed by the next") {
+  const fs::path dir = fresh_dir("whole_new");
+  const std::string a = (dir / "a.vmdb").string();
+  REQUIRE(run_vmap({"build", sample, "--memory", a, "--end", "30"}).code == 0);
+  const auto whole = nlohmann::json::parse(run_vmap({"memory", "info", a, "--json"}).out);
+  // The leftovers of a killed run (a process that has ended) beside the memory.
+  const std::string pid = dead_pid();
+  for (const std::string suffix : {"-0", "-0-wal", "-0-shm", "-1", "-1-journal"})
+    write(dir / (".m.vmdb.vmap-new-" + pid + suffix), "left by a killed run");
+  const std::string m = (dir / "m.vmdb").string();
+  REQUIRE(run_vmap({"memory", "convert", a, m}).code == 0);
+  CHECK(replacement_files(dir).empty());
+  const auto converted = nlohmann::json::parse(run_vmap({"memory", "info", m, "--json"}).out);
+  CHECK(converted["key_images"] == whole["key_images"]);
+  write(dir / (".m.vmdb.vmap-new-" + pid + "-2"), "left by a killed run");
+  REQUIRE(run_vmap({"build", sample, "--memory", m, "--end", "10", "--force"}).code == 0);
+  CHECK(replacement_files(dir).empty());
+
+  // Killed at each of its flushes to disk (SQLite's fdatasync, vmap's fsync), a convert
+  // to a new output leaves no file there or the whole memory, never an empty or broken
+  // one (strace injects the kill).
+  if (std::system("strace -f -o /dev/null true >/dev/null 2>&1") != 0) {
+    MESSAGE("skipped: strace cannot trace here (the kills at each flush)");
+    return;
+  }
+  int absent = 0, complete = 0;
+  for (const std::string call : {"fdatasync", "fsync"}) {
+    const std::string count_cmd = "cd " + quote(VMAP_TEST_SOURCE_DIR) + " && strace -f -c -e trace=" + call + " " +
+                                  quote(VMAP_CLI_BINARY) + " memory convert " + quote(a) + " " +
+                                  quote((dir / ("count-" + call + ".vmdb")).string()) +
+                                  " 2>&1 >/dev/null | awk '$NF == \"" + call + "\" { print $4 }' > " +
+                                  quote((dir / "calls").string());
+    REQUIRE(std::system(count_cmd.c_str()) == 0);
+    const int calls = std::atoi(slurp(dir / "calls").c_str());
+    CAPTURE(call);
+    REQUIRE(calls >= 1);
+    for (int n = 1; n <= std::min(calls, 12); ++n) {
+      CAPTURE(n);
+      const fs::path trial = dir / (call + std::to_string(n));
+      fs::create_directories(trial);
+      const std::string out = (trial / "new.vmdb").string();
+      const std::string cmd = "cd " + quote(VMAP_TEST_SOURCE_DIR) + " && strace -f -o /dev/null -e trace=" + call +
+                              " -e inject=" + call + ":signal=KILL:when=" + std::to_string(n) + " " +
+                              quote(VMAP_CLI_BINARY) + " memory convert " + quote(a) + " " + quote(out) + " >/dev/null 2>&1";
+      (void)std::system(cmd.c_str());
+      if (!fs::exists(out)) {
+        ++absent;
+        continue;
+      }
+      const Run info = run_vmap({"memory", "info", out, "--json"});
+      INFO(info.err);
+      REQUIRE(info.code == 0);
+      CHECK(nlohmann::json::parse(info.out)["key_images"] == whole["key_images"]);
+      ++complete;
+    }
+  }
+  CHECK(absent > 0);
+  CHECK(absent + complete > 2);
+}
+
+TEST_CASE("cli: a password of a fleet's URI is never printed, in --json's options nor anywhere else") {
+  auto* server = vmap::test::test_server();
+  if (!server) return;
+  const std::string plain = server->uri("cli_secret");
+  // The test server trusts loopback: the password is given and never checked.
+  const std::string uri = "postgresql://vmap:pass%2Fword@" + plain.substr(plain.find('@') + 1);
+  const std::string secret = "pass";
+  const fs::path dir = fresh_dir("secret");
+  const auto no_secret = [&](const Run& r) {
+    INFO(r.err);
+    CHECK(r.code == 0);
+    CHECK(r.out.find(secret) == std::string::npos);
+    CHECK(r.err.find(secret) == std::string::npos);
+  };
+  const Run build = run_vmap({"build", sample, "--end", "20", "--memory", uri, "--robot", "x", "--json"});
+  no_secret(build);
+  const auto bj = nlohmann::json::parse(build.out);
+  CHECK(bj["options"]["memory"] == "postgresql://vmap@" + plain.substr(plain.find('@') + 1));
+  no_secret(run_vmap({"loops", "--memory", uri, "--robot", "x", "--json"}));
+  no_secret(run_vmap({"memory", "localize", uri, frame_a, "--robot", "x", "--json"}));
+  no_secret(run_vmap({"localize", "--memory", uri, "--robot", "x", frame_a, "--json"}));
+  no_secret(run_vmap({"localize", "--memory", uri, frame_a, "--json"}));
+  no_secret(run_vmap({"memory", "export", uri, "--robot", "x", "--out", (dir / "export").string(), "--json"}));
+  no_secret(run_vmap({"memory", "info", uri, "--robot", "x", "--json"}));
+  no_secret(run_vmap({"memory", "info", uri, "--json"}));
+  // Unescaped, a password holding '/', '?' or '@' cannot be parsed: refused, not shown.
+  for (const std::string bad : {"postgresql://vmap:pa/ss@127.0.0.1:1/db", "postgresql://vmap:pa?ss@127.0.0.1:1/db"}) {
+    const Run r = run_vmap_with("PGCONNECT_TIMEOUT=2", {"memory", "info", bad, "--robot", "x", "--json"});
+    CHECK(r.code != 0);
+    CHECK(r.out.find("ss") == std::string::npos);
+    CHECK(r.err.find("pa/ss") == std::string::npos);
+    CHECK(r.err.find("pa?ss") == std::string::npos);
+  }
+}
+
+TEST_CASE("cli: a fleet's server that stops answering ends a command with exit 9 within the timeouts") {
+  auto* server = vmap::test::test_server();
+  if (!server) return;
+  const std::string uri = server->uri("cli_hung");
+  REQUIRE(run_vmap({"build", sample, "--end", "20", "--memory", uri, "--robot", "a"}).code == 0);
+  server->pause();
+  struct Resume {
+    vmap::test::TestPostgres* server;
+    ~Resume() { server->resume(); }
+  } resume{server};
+  const auto t0 = std::chrono::steady_clock::now();
+  const Run hung = run_vmap_with("VMAP_PG_QUERY_TIMEOUT=2 PGCONNECT_TIMEOUT=2", {"memory", "info", uri, "--robot", "a"});
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  INFO(hung.err);
+  CHECK(hung.code == 9);
+  CHECK(hung.err.find("try again when it is back") != std::string::npos);
+  CHECK(seconds < 15.0);
+  const Run bad = run_vmap_with("VMAP_PG_QUERY_TIMEOUT=soon", {"memory", "info", uri, "--robot", "a"});
+  CHECK(bad.code == 1);
+  CHECK(bad.err.find("VMAP_PG_QUERY_TIMEOUT: expected a number of seconds") != std::string::npos);
+}
+
+TEST_CASE("cli: an output folder that cannot be written exits 8; an output that is its input exits 2") {
+  const fs::path dir = fresh_dir("exit_codes");
+  // /proc refuses new files and folders to everyone, root included.
+  fails_with({"build", sample, "--end", "8", "--out", "/proc/vmap-test-out"}, 8, "/proc/vmap-test-out");
+  fails_with({"build", sample, "--end", "8", "--memory", "/proc/vmap-test/m.vmdb"}, 8, "/proc/vmap-test");
+  const std::string m = (dir / "m.vmdb").string();
+  REQUIRE(run_vmap({"build", sample, "--memory", m, "--end", "10"}).code == 0);
+  fails_with({"memory", "export", m, "--out", "/proc/vmap-test-export"}, 8, "/proc/vmap-test-export");
+  fails_with({"memory", "convert", m, m, "--force"}, 2, "is also an input");
+  fails_with({"build", sample, "--memory", sample, "--force"}, 2, "is also an input");
+  fails_with({"vocabulary", sample, "--out", sample, "--words", "8", "--depth", "1"}, 2, "is also an input");
+}
+
+TEST_CASE("cli: a new robot's name that begins or ends with a space is refused") {
+  auto* server = vmap::test::test_server();
+  if (!server) return;
+  const std::string uri = server->uri("cli_names");
+  fails_with({"build", sample, "--end", "8", "--memory", uri, "--robot", "r1 "}, 1, "begins or ends with a space");
+  fails_with({"build", sample, "--end", "8", "--memory", uri, "--robot", " r1"}, 1, "begins or ends with a space");
+}
+
+TEST_CASE("cli: memory info refuses a sessions table changed behind the memory's back") {
+  const fs::path dir = fresh_dir("sessions_rows");
+  const std::string m = (dir / "m.vmdb").string();
+  REQUIRE(run_vmap({"build", sample, "--memory", m, "--end", "30"}).code == 0);
+  REQUIRE(run_vmap({"build", sample, "--memory", m, "--start", "30", "--session", "new"}).code == 0);
+  const auto whole = nlohmann::json::parse(run_vmap({"memory", "info", m, "--json"}).out);
+  REQUIRE(whole["sessions"].size() == 2);
+  const std::string damaged = (dir / "d.vmdb").string();
+  fs::copy_file(m, damaged);
+  REQUIRE(std::system(("sqlite3 " + quote(damaged) + " \"update sessions set first_frame = 35 where id = 1\"").c_str()) == 0);
+  const Run r = fails_with({"memory", "info", damaged}, 4, "is corrupt: session 1 starts at key image ");
+  CHECK(r.err.find("and frame 35 in its sessions table") != std::string::npos);
+}
 
 TEST_CASE("cli: inputs that are FIFOs are refused at once by name (exit 1), bags listing one too; empty bags exit 4") {
   const fs::path dir = work_dir() / "fifo_inputs";

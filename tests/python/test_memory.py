@@ -417,3 +417,105 @@ def test_fleet_robots_share_a_memory_on_postgresql(fleet_server, sample_frames, 
         vmap.VisualMemory.open(uri, robot="zed")
     with pytest.raises(vmap.UnavailableError):
         vmap.VisualMemory.open("postgresql://vmap@127.0.0.1:1/x?connect_timeout=2", robot="a")
+
+
+def test_force_replaces_only_memories(tmp_path, sample_frames):
+    # A user's SQLite database and a rosbag2 .db3 are SQLite files, not memories: never
+    # replaced, with force or without (and without force, not called "the memory").
+    import sqlite3
+
+    for name in ("p.db", "bag.db3"):
+        path = tmp_path / name
+        con = sqlite3.connect(path)
+        con.execute("create table t(x)")
+        con.execute("insert into t values('mine')")
+        con.commit()
+        con.close()
+        before = path.read_bytes()
+        with pytest.raises(vmap.Error, match="is not a vmap memory") as raised:
+            vmap.VisualMemory.create(str(path), force=True)
+        assert "refusing to replace it" in str(raised.value)
+        with pytest.raises(vmap.Error, match="exists and is not a vmap memory") as raised:
+            vmap.VisualMemory.create(str(path))
+        # Not called a memory, and force= not suggested (the whole message; the path
+        # itself holds the test's name).
+        assert str(raised.value) == f"'{path}' exists and is not a vmap memory; refusing to replace it"
+        assert path.read_bytes() == before
+    # An empty file has no records of a memory either.
+    empty = tmp_path / "empty.vmdb"
+    empty.write_bytes(b"")
+    with pytest.raises(vmap.Error, match="is not a vmap memory"):
+        vmap.VisualMemory.create(str(empty), force=True)
+    assert empty.read_bytes() == b""
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bag.db3", "empty.vmdb", "p.db"]
+
+
+def test_save_replaces_only_a_memory_file(tmp_path, sample_frames):
+    mem = vmap.VisualMemory(vocabulary_after=5)
+    for img, t, _ in sample_frames[:12]:
+        mem.push(img, timestamp=t)
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine\n")
+    with pytest.raises(vmap.Error, match="notes.txt' exists and is not a .vmem memory file; refusing to replace it"):
+        mem.save(str(notes))
+    assert notes.read_text() == "mine\n"
+    store = tmp_path / "s.vmdb"
+    with vmap.VisualMemory.create(str(store)) as s:
+        for img, t, _ in sample_frames[:12]:
+            s.push(img, timestamp=t)
+    before = store.read_bytes()
+    with pytest.raises(vmap.Error, match="s.vmdb' is a memory store"):
+        mem.save(str(store))
+    assert store.read_bytes() == before
+    # A .vmem file is replaced, atomically.
+    mem.save(str(tmp_path / "m.vmem"))
+    mem.push(sample_frames[12][0], timestamp=sample_frames[12][1])
+    mem.save(str(tmp_path / "m.vmem"))
+    assert vmap.VisualMemory.open(str(tmp_path / "m.vmem")).frames == 13
+
+
+def test_saving_an_open_store_over_itself_is_refused_and_later_pushes_stay(tmp_path, sample_frames):
+    path = str(tmp_path / "s.vmdb")
+    with vmap.VisualMemory.create(path) as s:
+        for img, t, _ in sample_frames[:10]:
+            s.push(img, timestamp=t)
+    m = vmap.VisualMemory.open(path)
+    with pytest.raises(vmap.Error, match="is a memory store"):
+        m.save(path)
+    for img, t, _ in sample_frames[10:13]:
+        m.push(img, timestamp=t)
+    m.close()
+    again = vmap.VisualMemory.open(path, read_only=True)
+    assert again.frames == 13 and again.path == path
+
+
+def test_export_replaces_only_its_own_folder(tmp_path, sample_frames):
+    mem = vmap.VisualMemory(vocabulary_after=5)
+    for img, t, _ in sample_frames[:12]:
+        mem.push(img, timestamp=t)
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "key_images.txt").write_text("my list\n")
+    (folder / "notes.txt").write_text("mine\n")
+    with pytest.raises(vmap.Error, match="holds files vmap did not write"):
+        mem.export(str(folder))
+    assert (folder / "key_images.txt").read_text() == "my list\n"
+    assert sorted(p.name for p in folder.iterdir()) == ["key_images.txt", "notes.txt"]
+    # A new folder, then the same again: an earlier export is replaced whole.
+    out = tmp_path / "out"
+    assert "key_images.txt" in mem.export(str(out))
+    assert "key_images.txt" in mem.export(str(out))
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["key_images.txt", "loops.txt"]
+
+
+def test_a_4x4_pose_must_be_homogeneous(sample_frames):
+    mem = vmap.VisualMemory()
+    bad = np.eye(4)
+    bad[3] = [0.0, 0.0, 1.0, 1.0]
+    with pytest.raises(vmap.Error, match="the last row of a 4 x 4 pose must be 0 0 0 1"):
+        mem.push(sample_frames[0][0], pose=bad)
+    assert mem.frames == 0
+    good = np.eye(4)
+    good[:3, 3] = [1.0, 2.0, 3.0]
+    mem.push(sample_frames[0][0], pose=good)
+    assert np.allclose(mem.keys[0]["pose"], good)

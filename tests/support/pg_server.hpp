@@ -10,9 +10,11 @@
 #include <doctest/doctest.h>
 
 #include <netinet/in.h>
+#include <signal.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -20,6 +22,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #ifndef VMAP_PG_BIN
 #define VMAP_PG_BIN ""
@@ -67,10 +70,44 @@ class TestPostgres {
         "pg_ctl start");
   }
 
+  /// Stops every process of this server (SIGSTOP: the postmaster and its children), so
+  /// that it answers nothing while the kernel still accepts and acknowledges connections:
+  /// a server that hangs. resume() lets them go on (SIGCONT).
+  void pause() { signal_all(SIGSTOP); }
+  void resume() { signal_all(SIGCONT); }
+
   /// Whether this build found PostgreSQL's server programs.
   [[nodiscard]] static bool available() { return std::string(VMAP_PG_BIN).size() > 0; }
 
  private:
+  /// The server's processes: its postmaster (data/postmaster.pid's first line) and the
+  /// processes whose parent it is.
+  [[nodiscard]] std::vector<pid_t> processes() const {
+    std::ifstream pid_file(dir_ / "data" / "postmaster.pid");
+    long postmaster = 0;
+    if (!(pid_file >> postmaster) || postmaster <= 0) throw std::runtime_error("the test server has no postmaster.pid");
+    std::vector<pid_t> out{static_cast<pid_t>(postmaster)};
+    for (const auto& e : std::filesystem::directory_iterator("/proc")) {
+      const std::string name = e.path().filename().string();
+      if (name.find_first_not_of("0123456789") != std::string::npos) continue;
+      std::ifstream stat(e.path() / "stat");
+      std::string line;
+      if (!std::getline(stat, line)) continue;
+      // pid (comm) state ppid ...: the command may hold spaces and parentheses.
+      const std::size_t close = line.rfind(')');
+      if (close == std::string::npos) continue;
+      std::istringstream rest(line.substr(close + 1));
+      std::string state;
+      long parent = 0;
+      if (rest >> state >> parent && parent == postmaster) out.push_back(static_cast<pid_t>(std::stol(name)));
+    }
+    return out;
+  }
+  void signal_all(int sig) const {
+    for (const pid_t p : processes())
+      if (::kill(p, sig) != 0 && errno != ESRCH) throw std::runtime_error("cannot signal the test server's process " + std::to_string(p));
+  }
+
   [[nodiscard]] std::string data() const { return (dir_ / "data").string(); }
   [[nodiscard]] static std::string bin(const char* name) { return std::string(VMAP_PG_BIN) + "/" + name; }
   [[nodiscard]] std::string as_server() const {

@@ -55,9 +55,11 @@ inline constexpr std::array<std::uint32_t, 256> crc32_table = [] {
   return t;
 }();
 
-/// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320) as in zlib and PNG.
-inline std::uint32_t crc32(std::string_view bytes) noexcept {
-  std::uint32_t c = 0xFFFFFFFFU;
+/// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320) as in zlib and PNG; given the
+/// CRC-32 of bytes before (`before`), that of those bytes followed by `bytes` (zlib's
+/// crc32(crc, buf, len)), so that two blobs are checked as one without joining them.
+inline std::uint32_t crc32(std::string_view bytes, std::uint32_t before = 0) noexcept {
+  std::uint32_t c = before ^ 0xFFFFFFFFU;
   for (char ch : bytes) c = crc32_table[(c ^ static_cast<unsigned char>(ch)) & 0xFFU] ^ (c >> 8);
   return c ^ 0xFFFFFFFFU;
 }

@@ -19,6 +19,7 @@
 // text, do not.
 
 #include <vmap/core/error.hpp>
+#include <vmap/io/database_files.hpp>
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -79,16 +80,16 @@ inline struct stat require_file_or_folder(const std::filesystem::path& path, con
   return st;
 }
 
-/// Closes a file descriptor on scope exit.
+/// Closes a file descriptor on scope exit, through io/database_files.hpp: the file read
+/// may be a memory store this process has open, whose SQLite locks a plain close() would
+/// drop.
 struct FdGuard {
   int fd = -1;
   FdGuard() = default;
   explicit FdGuard(int f) : fd(f) {}
   FdGuard(const FdGuard&) = delete;
   FdGuard& operator=(const FdGuard&) = delete;
-  ~FdGuard() {
-    if (fd >= 0) ::close(fd);
-  }
+  ~FdGuard() { close_descriptor(fd); }
 };
 
 }  // namespace detail

@@ -25,19 +25,35 @@
 // broke is made again by reconnect() (the caller then sets its session up again: its
 // prepared statements are prepared again by themselves).
 //
+// Timeouts: a server that stops answering (a stopped or hung server, a network that
+// drops packets without a reset) never stalls a caller without bound. Connecting waits at
+// most libpq's connect_timeout (a URI parameter, `?connect_timeout=N`, or the environment
+// variable PGCONNECT_TIMEOUT; 10 s when neither gives one), and each statement's answer
+// (a query, a sync's INSERT, its COMMIT) at most the environment variable
+// VMAP_PG_QUERY_TIMEOUT seconds (30 by default). Either ends in ErrorKind::unavailable;
+// the connection is then closed (a statement whose answer never came may still run on the
+// server), so it counts as broken and reconnect() makes it again.
+//
 // Threads: as io/sqlite.hpp, one thread at a time per connection.
 
 #include <vmap/core/error.hpp>
 
 #include <libpq-fe.h>
 
+#include <poll.h>
+
 #include <bit>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <string>
 #include <string_view>
 #include <type_traits>
+#include <algorithm>
 #include <utility>
 #include <vector>
 
@@ -50,39 +66,59 @@ namespace vmap::pg {
 }
 
 /// `uri` without its password: "user:secret@" becomes "user@", and a "password=" query
-/// parameter is dropped. What messages and stores show of a connection string.
+/// parameter is dropped. What messages and stores show of a connection string. A password
+/// written without percent-escapes may hold '/', '?' or '@', which end the user part of a
+/// URI: the user part is taken to end at the last '@' before the first '/' or '?' that
+/// follows an '@', so such a password is removed whole too.
 [[nodiscard]] inline std::string redacted(std::string_view uri) {
-  std::string out(uri);
-  const std::size_t scheme = out.find("://");
-  if (scheme != std::string::npos) {
+  // What to remove, marked on the URI as given: the user part's password and every
+  // password parameter (with a separator), both found on the original, so that neither
+  // removal can hide the other's end.
+  std::vector<bool> drop(uri.size(), false);
+  const auto mark = [&](std::size_t from, std::size_t to) {
+    for (std::size_t i = from; i < to && i < drop.size(); ++i) drop[i] = true;
+  };
+  const std::size_t scheme = uri.find("://");
+  if (scheme != std::string_view::npos) {
     const std::size_t start = scheme + 3;
-    const std::size_t end = out.find_first_of("/?", start);
-    const std::size_t at = out.rfind('@', end == std::string::npos ? out.size() : end);
-    if (at != std::string::npos && at >= start) {
-      const std::size_t colon = out.find(':', start);
-      if (colon != std::string::npos && colon < at) out.erase(colon, at - colon);
+    const std::size_t first_at = uri.find('@', start);
+    if (first_at != std::string_view::npos) {
+      const std::size_t stop = uri.find_first_of("/?", first_at);
+      const std::size_t at = uri.rfind('@', stop);
+      const std::size_t colon = uri.find(':', start);
+      if (colon < at) mark(colon, at);
     }
   }
-  const std::size_t query = out.find('?');
-  if (query != std::string::npos) {
-    std::string kept = out.substr(0, query);
-    std::string_view rest = std::string_view(out).substr(query + 1);
-    char sep = '?';
-    while (!rest.empty()) {
-      const std::size_t amp = rest.find('&');
-      const std::string_view param = rest.substr(0, amp);
-      if (!param.starts_with("password=")) {
-        kept += sep;
-        kept += param;
-        sep = '&';
-      }
-      if (amp == std::string_view::npos) break;
-      rest.remove_prefix(amp + 1);
-    }
-    out = std::move(kept);
+  for (std::size_t at = uri.find("password="); at != std::string_view::npos; at = uri.find("password=", at + 1)) {
+    if (at == 0 || (uri[at - 1] != '?' && uri[at - 1] != '&')) continue;
+    const std::size_t end = std::min(uri.find('&', at), uri.size());
+    if (uri[at - 1] == '&')
+      mark(at - 1, end);  // "&password=..."
+    else
+      mark(at, end < uri.size() ? end + 1 : end);  // "?password=...&" keeps the '?'
   }
+  std::string out;
+  for (std::size_t i = 0; i < uri.size(); ++i)
+    if (!drop[i]) out += uri[i];
+  if (!out.empty() && (out.back() == '?' || out.back() == '&')) out.pop_back();
   return out;
 }
+
+/// The longest wait for one answer of the server (VMAP_PG_QUERY_TIMEOUT, seconds; 30 by
+/// default); an Error naming the variable when it holds no number of seconds in
+/// (0, 86400].
+[[nodiscard]] inline std::chrono::milliseconds query_timeout() {
+  const char* given = std::getenv("VMAP_PG_QUERY_TIMEOUT");
+  if (!given || !*given) return std::chrono::seconds(30);
+  char* end = nullptr;
+  const double seconds = std::strtod(given, &end);
+  if (end == given || *end != '\0' || !std::isfinite(seconds) || seconds <= 0.0 || seconds > 86400.0)
+    vmap::detail::fail("VMAP_PG_QUERY_TIMEOUT: expected a number of seconds in (0, 86400], got '" + std::string(given) + "'");
+  return std::chrono::milliseconds(static_cast<std::int64_t>(std::ceil(seconds * 1000.0)));
+}
+
+/// connect_timeout's value when neither the URI nor PGCONNECT_TIMEOUT gives one (seconds).
+inline constexpr int default_connect_timeout = 10;
 
 namespace detail {
 
@@ -142,12 +178,16 @@ using Result = std::unique_ptr<PGresult, ResultDeleter>;
 struct Session {
   PGconn* conn = nullptr;
   std::string what;
-  std::uint64_t generation = 0;  ///< bumped by each reconnect: statements prepared before are gone
-  std::uint64_t statements = 0;  ///< names of prepared statements
-  ~Session() {
-    if (conn) PQfinish(conn);
-  }
+  std::string conninfo;               ///< as given, with its password if any: never shown
+  std::chrono::milliseconds timeout;  ///< the longest wait for one answer (query_timeout)
+  std::uint64_t generation = 0;       ///< bumped by each reconnect: statements prepared before are gone
+  std::uint64_t statements = 0;       ///< names of prepared statements
+  ~Session() { drop(); }
   [[nodiscard]] bool broken() const noexcept { return !conn || PQstatus(conn) != CONNECTION_OK; }
+  /// Closes the connection (it is broken() from then on).
+  void drop() noexcept {
+    if (conn) PQfinish(std::exchange(conn, nullptr));
+  }
   /// The server's message, one line.
   [[nodiscard]] std::string message() const {
     std::string m = conn ? PQerrorMessage(conn) : "not connected";
@@ -170,6 +210,95 @@ struct Session {
     const ErrorKind kind = kind_of_state(state, broken());
     fail(doing, kind == ErrorKind::unavailable ? m + " (the database server is unavailable; try again when it is back)" : m,
          kind);
+  }
+
+  /// Connects (again): libpq's connect_timeout bounds it (see the top of this file). An
+  /// Error of kind unavailable when the server cannot be reached or does not answer in
+  /// time; invalid_argument for an option value libpq refuses.
+  void connect(std::string_view doing) {
+    drop();
+    // Before the URI: a connect_timeout of the URI wins, and PGCONNECT_TIMEOUT when set.
+    const std::string fallback = std::to_string(default_connect_timeout);
+    const char* env = std::getenv("PGCONNECT_TIMEOUT");
+    const char* keywords[] = {"connect_timeout", "dbname", nullptr};
+    const char* values[] = {env && *env ? nullptr : fallback.c_str(), conninfo.c_str(), nullptr};
+    conn = PQconnectdbParams(keywords, values, 1);
+    if (!conn) fail(doing, "out of memory", ErrorKind::io);
+    if (PQstatus(conn) != CONNECTION_OK) {
+      // libpq checks the options' values (a port that is no number, an unknown sslmode)
+      // when it connects; its messages for them begin with "invalid".
+      const std::string why = message();
+      drop();
+      if (why.starts_with("invalid ")) fail(doing, why, ErrorKind::invalid_argument);
+      fail(doing, why + " (the database server is unavailable; try again when it is back)", ErrorKind::unavailable);
+    }
+    // Notices (e.g. "relation exists, skipping") are not printed on the caller's stderr.
+    PQsetNoticeProcessor(conn, [](void*, const char*) {}, nullptr);
+    // Sends and waits are ours (wait()), bounded by the timeout.
+    if (PQsetnonblocking(conn, 1) != 0) fail(doing, message(), ErrorKind::unavailable);
+  }
+
+  /// Waits until the query sent is flushed and its answer is in, at most `timeout`
+  /// (see the top of this file): an Error of kind unavailable when the server does not
+  /// answer in time (the connection is then dropped), or when the connection broke.
+  void wait(std::string_view doing) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    const auto wait_for = [&](short events) {
+      for (;;) {
+        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+        pollfd p{PQsocket(conn), events, 0};
+        const int n = left.count() > 0 ? ::poll(&p, 1, static_cast<int>(std::min<std::int64_t>(left.count(), 1 << 30))) : 0;
+        if (n > 0) return;
+        if (n < 0 && errno == EINTR) continue;
+        if (n < 0) fail(doing, std::string("poll: ") + std::strerror(errno), ErrorKind::unavailable);
+        const auto ms = timeout.count();
+        drop();
+        fail(doing,
+             "the database server did not answer within " + std::to_string(ms / 1000) + (ms % 1000 ? "." + std::to_string(ms % 1000) : "") +
+                 " s (VMAP_PG_QUERY_TIMEOUT); the connection was closed (the database server is unavailable; try "
+                 "again when it is back)",
+             ErrorKind::unavailable);
+      }
+    };
+    for (;;) {
+      const int flushed = PQflush(conn);
+      if (flushed < 0) fail_result(doing, nullptr);
+      if (flushed == 0) break;
+      wait_for(POLLIN | POLLOUT);
+      if (PQconsumeInput(conn) == 0) fail_result(doing, nullptr);
+    }
+    while (PQisBusy(conn)) {
+      wait_for(POLLIN);
+      if (PQconsumeInput(conn) == 0) fail_result(doing, nullptr);
+    }
+  }
+
+  /// Sends a query (`send` returns libpq's PQsend* result) and returns its answer: the
+  /// first failed result, or the last one. Bounded by the timeout.
+  template <class Send>
+  [[nodiscard]] Result run(std::string_view doing, Send&& send) {
+    if (broken()) fail_result(doing, nullptr);
+    if (send() == 0) fail_result(doing, nullptr);
+    Result kept;
+    bool kept_failed = false;
+    for (;;) {
+      wait(doing);
+      Result r(PQgetResult(conn));
+      if (!r) break;
+      if (kept_failed) continue;  // the first failure is the answer
+      const ExecStatusType st = PQresultStatus(r.get());
+      kept_failed = st != PGRES_COMMAND_OK && st != PGRES_TUPLES_OK;
+      kept = std::move(r);
+    }
+    return kept;
+  }
+
+  /// run() of `sql` whose failure is not reported (a cleanup: ROLLBACK, DEALLOCATE).
+  void run_quietly(const std::string& sql) noexcept {
+    try {
+      if (!broken()) (void)run("", [&] { return PQsendQuery(conn, sql.c_str()); });
+    } catch (...) {
+    }
   }
 };
 
@@ -217,15 +346,9 @@ class Connection {
       session_->fail("connect", why, ErrorKind::invalid_argument);
     }
     PQconninfoFree(options);
-    session_->conn = PQconnectdb(uri.c_str());
-    if (!session_->conn) session_->fail("connect", "out of memory", ErrorKind::io);
-    if (PQstatus(session_->conn) != CONNECTION_OK) {
-      // libpq checks the options' values (a port that is no number, an unknown sslmode)
-      // when it connects; its messages for them begin with "invalid".
-      const std::string why = session_->message();
-      session_->fail("connect", why, why.starts_with("invalid ") ? ErrorKind::invalid_argument : ErrorKind::unavailable);
-    }
-    quiet();
+    session_->conninfo = uri;
+    session_->timeout = query_timeout();
+    session_->connect("connect");
   }
 
   [[nodiscard]] bool is_open() const noexcept { return session_ && session_->conn; }
@@ -237,17 +360,13 @@ class Connection {
   /// unavailable while the server is still away. The session's settings, locks and
   /// prepared statements are gone: the caller sets them up again.
   void reconnect() {
-    PQreset(session_->conn);
     ++session_->generation;
-    if (PQstatus(session_->conn) != CONNECTION_OK)
-      session_->fail("connect again", session_->message() + " (the database server is unavailable; try again when it is back)",
-                     ErrorKind::unavailable);
-    quiet();
+    session_->connect("connect again");
   }
 
   /// Runs `sql` (one or more statements without parameters, e.g. DDL or BEGIN).
   void exec(const std::string& sql, std::string_view doing) {
-    detail::Result r(PQexec(session_->conn, sql.c_str()));
+    detail::Result r = session_->run(doing, [&] { return PQsendQuery(session_->conn, sql.c_str()); });
     const ExecStatusType s = r ? PQresultStatus(r.get()) : PGRES_FATAL_ERROR;
     if (s != PGRES_COMMAND_OK && s != PGRES_TUPLES_OK) session_->fail_result(doing, r.get());
   }
@@ -260,10 +379,7 @@ class Connection {
 
  private:
   friend class Statement;
-  /// Notices (e.g. "relation exists, skipping") are not printed on the caller's stderr.
-  void quiet() {
-    PQsetNoticeProcessor(session_->conn, [](void*, const char*) {}, nullptr);
-  }
+  friend class Transaction;
   std::shared_ptr<detail::Session> session_;
 };
 
@@ -292,8 +408,7 @@ class Statement {
   /// Frees the statement on the server (a long-lived connection prepares many).
   ~Statement() {
     if (!session_ || prepared_ != session_->generation + 1 || session_->broken()) return;
-    const std::string sql = "DEALLOCATE " + name_;
-    PQclear(PQexec(session_->conn, sql.c_str()));
+    session_->run_quietly("DEALLOCATE " + name_);
   }
 
   Statement& bind(int i, std::int64_t v) {
@@ -401,7 +516,8 @@ class Statement {
       name_ = "vmap_s" + std::to_string(++s.statements);
       std::vector<Oid> types;
       for (const Value& v : values_) types.push_back(v.type);
-      detail::Result r(PQprepare(s.conn, name_.c_str(), sql_.c_str(), params_, types.data()));
+      detail::Result r =
+          s.run(doing_, [&] { return PQsendPrepare(s.conn, name_.c_str(), sql_.c_str(), params_, types.data()); });
       if (!r || PQresultStatus(r.get()) != PGRES_COMMAND_OK) s.fail_result(doing_, r.get());
       prepared_ = s.generation + 1;
       prepared_types_ = std::move(types);
@@ -413,7 +529,9 @@ class Statement {
       lengths.push_back(static_cast<int>(v.bytes.size()));
       formats.push_back(1);
     }
-    result_.reset(PQexecPrepared(s.conn, name_.c_str(), params_, data.data(), lengths.data(), formats.data(), 1));
+    result_ = s.run(doing_, [&] {
+      return PQsendQueryPrepared(s.conn, name_.c_str(), params_, data.data(), lengths.data(), formats.data(), 1);
+    });
     const ExecStatusType st = result_ ? PQresultStatus(result_.get()) : PGRES_FATAL_ERROR;
     if (st != PGRES_TUPLES_OK && st != PGRES_COMMAND_OK) {
       detail::Result failed = std::move(result_);
@@ -465,7 +583,7 @@ class Transaction {
   Transaction(const Transaction&) = delete;
   Transaction& operator=(const Transaction&) = delete;
   ~Transaction() {
-    if (c_ && !c_->broken()) PQclear(PQexec(c_->handle(), "ROLLBACK"));
+    if (c_) c_->session_->run_quietly("ROLLBACK");
   }
   void commit() {
     c_->exec("COMMIT", doing_ + ": commit");

@@ -11,13 +11,17 @@
 // transaction survives a power cut), and takes an advisory lock (flock) on the file for
 // as long as it is open, so a second writer is refused at open with a message naming
 // the file, whichever process it is in. flock and SQLite's own POSIX locks do not
-// interact on Linux; the descriptor holding the flock stays open until after SQLite
-// closed the file, so SQLite's locks are never dropped by a close() of ours. Readers
-// (Access::read) take no lock and see the last committed transaction; where they cannot
-// create SQLite's index file beside the database (read-only media), they read it as
-// immutable, which nothing can then change either. The same lock (WriterLock) is what a
-// replacement of the file takes (memory/replace.hpp): a file being written is never
-// replaced, nor written while it is replaced.
+// interact on Linux, but closing any descriptor of a file drops every POSIX lock the
+// process holds on it: so no descriptor this layer opens on a database file is closed
+// while a connection of this process has the file open (io/database_files.hpp: each
+// connection registers its file before it opens it; the writer's flock is released
+// when the writer closes, and its descriptor closed once the last connection to the file
+// is closed). Readers (Access::read) take no lock and see the last committed
+// transaction; where they cannot create SQLite's index file beside the database
+// (read-only media), they read it as immutable, which nothing can then change either.
+// The same lock (WriterLock) is what a replacement of the file takes
+// (memory/replace.hpp): a file being written is never replaced, nor written while it is
+// replaced.
 //
 // Threads: a Database and the Statements prepared on it may be used from any thread, by
 // one thread at a time. The connection is opened with SQLITE_OPEN_NOMUTEX (SQLite's
@@ -26,6 +30,7 @@
 // memory store's writer thread does (memory/store.hpp).
 
 #include <vmap/core/error.hpp>
+#include <vmap/io/database_files.hpp>
 
 #include <sqlite3.h>
 
@@ -40,6 +45,7 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -120,7 +126,8 @@ class Statement;
 /// The writer's lock of a database file: an flock on a descriptor of its own, held until
 /// release() or destruction. flock locks belong to the open file description, so a second
 /// WriterLock of one file is refused also within one process. `what` names the file in
-/// messages (e.g. "memory 'm.vmdb'").
+/// messages (e.g. "memory 'm.vmdb'"). Its descriptor is closed through
+/// io/database_files.hpp, never while a connection of this process has the file open.
 class WriterLock {
  public:
   WriterLock() = default;
@@ -152,17 +159,19 @@ class WriterLock {
                                     "localize while it maps)");
         vmap::detail::fail(ErrorKind::io, what + " cannot be locked: " + std::strerror(err));
       }
+      id_ = {st.st_dev, st.st_ino};
       struct stat now{};
       if (create || (::stat(path.c_str(), &now) == 0 && now.st_dev == st.st_dev && now.st_ino == st.st_ino)) return;
       release();
     }
     vmap::detail::fail(ErrorKind::busy, what + " cannot be locked: it was replaced again and again while being opened");
   }
-  WriterLock(WriterLock&& o) noexcept : fd_(std::exchange(o.fd_, -1)) {}
+  WriterLock(WriterLock&& o) noexcept : fd_(std::exchange(o.fd_, -1)), id_(o.id_) {}
   WriterLock& operator=(WriterLock&& o) noexcept {
     if (this != &o) {
       release();
       fd_ = std::exchange(o.fd_, -1);
+      id_ = o.id_;
     }
     return *this;
   }
@@ -171,42 +180,20 @@ class WriterLock {
   ~WriterLock() { release(); }
 
   [[nodiscard]] bool held() const noexcept { return fd_ >= 0; }
+  /// The locked file's identity (while held).
+  [[nodiscard]] vmap::detail::FileId file() const noexcept { return id_; }
+  /// Unlocks; the descriptor is closed once no connection of this process has the file
+  /// open (io/database_files.hpp).
   void release() noexcept {
-    if (fd_ >= 0) ::close(std::exchange(fd_, -1));
+    if (fd_ < 0) return;
+    (void)::flock(fd_, LOCK_UN);
+    vmap::detail::close_descriptor(std::exchange(fd_, -1));
   }
 
  private:
   int fd_ = -1;
+  vmap::detail::FileId id_;
 };
-
-/// Moves the write-ahead log of the database at `path` into the file and truncates the
-/// log to nothing (PRAGMA wal_checkpoint(TRUNCATE)), through a connection of its own that
-/// takes no WriterLock: for a caller that holds the file's WriterLock already (a second
-/// flock of the same file from this process would conflict with it). A reader that holds
-/// an older snapshot for longer than SQLite's 5 s wait makes it an Error: the log was not
-/// emptied. A database that is not in WAL mode is left as it is.
-inline void checkpoint_locked(const std::filesystem::path& path, const std::string& what) {
-  sqlite3* db = nullptr;
-  const int rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOMUTEX, nullptr);
-  struct Close {
-    sqlite3* db;
-    ~Close() { sqlite3_close_v2(db); }
-  } close{db};
-  if (rc != SQLITE_OK)
-    vmap::detail::fail(detail::kind_of(rc), what + " cannot be opened: " + (db ? sqlite3_errmsg(db) : sqlite3_errstr(rc)));
-  sqlite3_busy_timeout(db, 5000);
-  sqlite3_stmt* s = nullptr;
-  if (sqlite3_prepare_v2(db, "PRAGMA wal_checkpoint(TRUNCATE)", -1, &s, nullptr) != SQLITE_OK)
-    vmap::detail::fail(detail::kind_of(db), what + " checkpoint its write-ahead log: " + sqlite3_errmsg(db));
-  const int step = sqlite3_step(s);
-  const bool busy = step == SQLITE_ROW && sqlite3_column_int(s, 0) != 0;
-  const std::string why = step == SQLITE_ROW ? std::string() : sqlite3_errmsg(db);
-  const ErrorKind kind = detail::kind_of(db);
-  sqlite3_finalize(s);
-  if (step != SQLITE_ROW) vmap::detail::fail(kind, what + " checkpoint its write-ahead log: " + why);
-  if (busy)
-    vmap::detail::fail(ErrorKind::busy, what + " checkpoint its write-ahead log: a reader held an older snapshot for 5 s; try again");
-}
 
 /// One connection to a database file.
 class Database {
@@ -240,29 +227,43 @@ class Database {
         flags |= SQLITE_OPEN_URI;
       }
     }
-    sqlite3* db = nullptr;
-    const int rc = sqlite3_open_v2(name.c_str(), &db, flags | SQLITE_OPEN_NOMUTEX, nullptr);
-    db_ = db;
-    if (rc != SQLITE_OK) {
-      const std::string why = db ? detail::message_of(db) : sqlite3_errstr(rc);
-      close();
-      fail("cannot be opened: " + why, detail::kind_of(rc));
-    }
-    sqlite3_extended_result_codes(db_, 1);
-    // A reader waits up to 5 s for a writer's checkpoint instead of failing at once.
-    sqlite3_busy_timeout(db_, 5000);
-    if (access != Access::read) {
-      exec("PRAGMA journal_mode=WAL", "use a write-ahead log");
-      exec("PRAGMA synchronous=FULL", "set synchronous=FULL");
-    }
+    connect(path, name, flags, lock_.held() ? std::optional<vmap::detail::FileId>(lock_.file()) : std::nullopt);
+    if (access != Access::read) write_ahead();
+  }
+
+  /// Opens `path` to write under `lock`, the WriterLock of that file the caller took (a
+  /// new file renamed into place while locked, memory/store.hpp). An Error when `path`
+  /// does not name the locked file.
+  Database(const std::filesystem::path& path, WriterLock lock, std::string what)
+      : lock_(std::move(lock)), what_(std::move(what)) {
+    if (!lock_.held()) fail("cannot be opened for writing: no writer's lock was given");
+    if (vmap::detail::file_id(path) != std::optional<vmap::detail::FileId>(lock_.file()))
+      fail("was replaced by another program while it was being made", ErrorKind::busy);
+    connect(path, path.string(), SQLITE_OPEN_READWRITE, lock_.file());
+    write_ahead();
+  }
+
+  /// A connection to write `path` without taking its WriterLock, for a caller that holds
+  /// it already (a second flock of the same file from this process would conflict with it).
+  [[nodiscard]] static Database under_lock_held(const std::filesystem::path& path, std::string what) {
+    Database db;
+    db.what_ = std::move(what);
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec)) db.fail("is not a regular file");
+    db.connect(path, path.string(), SQLITE_OPEN_READWRITE, std::nullopt);
+    return db;
   }
 
   Database(Database&& o) noexcept
-      : db_(std::exchange(o.db_, nullptr)), lock_(std::move(o.lock_)), what_(std::move(o.what_)) {}
+      : db_(std::exchange(o.db_, nullptr)),
+        file_(std::exchange(o.file_, std::nullopt)),
+        lock_(std::move(o.lock_)),
+        what_(std::move(o.what_)) {}
   Database& operator=(Database&& o) noexcept {
     if (this != &o) {
       close();
       db_ = std::exchange(o.db_, nullptr);
+      file_ = std::exchange(o.file_, std::nullopt);
       lock_ = std::move(o.lock_);
       what_ = std::move(o.what_);
     }
@@ -275,6 +276,13 @@ class Database {
   [[nodiscard]] bool is_open() const noexcept { return db_ != nullptr; }
   [[nodiscard]] const std::string& what() const noexcept { return what_; }
   [[nodiscard]] sqlite3* handle() const noexcept { return db_; }
+
+  /// Closes the connection and hands over the writer's lock it held (still held), for a
+  /// file to be renamed while locked; an empty lock for a reader.
+  [[nodiscard]] WriterLock close_keeping_lock() noexcept {
+    close_connection();
+    return std::move(lock_);
+  }
 
   /// Runs SQL without results (several statements allowed); `doing` names it in errors.
   void exec(const std::string& sql, std::string_view doing) {
@@ -310,15 +318,86 @@ class Database {
     return ::access(folder.c_str(), W_OK) == 0;
   }
 
+  /// Opens the connection to `path` (as `name`, a path or an SQLite URI, with `flags`),
+  /// its file registered first (io/database_files.hpp). `locked`: the identity of the file
+  /// a held WriterLock has (nothing can replace it meanwhile); without one, a file renamed
+  /// over `path` while it was being opened is opened again.
+  void connect(const std::filesystem::path& path, const std::string& name, int flags,
+               std::optional<vmap::detail::FileId> locked) {
+    auto& files = vmap::detail::OpenDatabases::instance();
+    for (int attempt = 0; attempt < 8; ++attempt) {
+      const auto id = locked ? locked : vmap::detail::file_id(path);
+      if (!id) fail("does not exist", ErrorKind::not_found);
+      files.opened_connection(*id);
+      file_ = id;
+      sqlite3* db = nullptr;
+      const int rc = sqlite3_open_v2(name.c_str(), &db, flags | SQLITE_OPEN_NOMUTEX, nullptr);
+      db_ = db;
+      if (rc != SQLITE_OK) {
+        const std::string why = db ? detail::message_of(db) : sqlite3_errstr(rc);
+        close();
+        fail("cannot be opened: " + why, detail::kind_of(rc));
+      }
+      if (locked || vmap::detail::file_id(path) == id) {
+        sqlite3_extended_result_codes(db_, 1);
+        // A reader waits up to 5 s for a writer's checkpoint instead of failing at once.
+        sqlite3_busy_timeout(db_, 5000);
+        return;
+      }
+      close_connection();
+    }
+    fail("cannot be opened: it was replaced again and again while being opened", ErrorKind::busy);
+  }
+
+  /// A writer's settings: a write-ahead log, each commit flushed to disk.
+  void write_ahead() {
+    exec("PRAGMA journal_mode=WAL", "use a write-ahead log");
+    exec("PRAGMA synchronous=FULL", "set synchronous=FULL");
+  }
+
+  /// Closes the connection and unregisters its file; the writer's lock stays.
+  void close_connection() noexcept {
+    if (db_) {
+      // With statements still alive SQLite keeps the file open until they are finalized:
+      // its file stays registered (the descriptors kept for it stay open).
+      if (sqlite3_close(db_) != SQLITE_OK) {
+        sqlite3_close_v2(db_);
+        file_.reset();
+      }
+      db_ = nullptr;
+    }
+    if (file_) vmap::detail::OpenDatabases::instance().closed_connection(*std::exchange(file_, std::nullopt));
+  }
+
   void close() noexcept {
-    if (db_) sqlite3_close_v2(std::exchange(db_, nullptr));
+    close_connection();
     lock_.release();
   }
 
   sqlite3* db_ = nullptr;
-  WriterLock lock_;  ///< the writer's flock; released after the database closed
+  std::optional<vmap::detail::FileId> file_;  ///< the registered file, while the connection has it open
+  WriterLock lock_;                           ///< the writer's flock; released after the database closed
   std::string what_;
 };
+
+/// Moves the write-ahead log of the database at `path` into the file and truncates the
+/// log to nothing (PRAGMA wal_checkpoint(TRUNCATE)), through a connection of its own that
+/// takes no WriterLock: for a caller that holds the file's WriterLock already. A reader
+/// that holds an older snapshot for longer than SQLite's 5 s wait makes it an Error: the
+/// log was not emptied. A database that is not in WAL mode is left as it is.
+inline void checkpoint_locked(const std::filesystem::path& path, const std::string& what) {
+  Database db = Database::under_lock_held(path, what);
+  sqlite3_stmt* s = nullptr;
+  if (sqlite3_prepare_v2(db.handle(), "PRAGMA wal_checkpoint(TRUNCATE)", -1, &s, nullptr) != SQLITE_OK)
+    db.fail_sqlite("checkpoint its write-ahead log");
+  const int step = sqlite3_step(s);
+  const bool busy = step == SQLITE_ROW && sqlite3_column_int(s, 0) != 0;
+  const std::string why = step == SQLITE_ROW ? std::string() : sqlite3_errmsg(db.handle());
+  const ErrorKind kind = detail::kind_of(db.handle());
+  sqlite3_finalize(s);
+  if (step != SQLITE_ROW) db.fail("checkpoint its write-ahead log: " + why, kind);
+  if (busy) db.fail("checkpoint its write-ahead log: a reader held an older snapshot for 5 s; try again", ErrorKind::busy);
+}
 
 /// A prepared statement: bind parameters (1-based), step through rows, read columns
 /// (0-based). Reset before it runs again. It keeps the connection's handle, not the

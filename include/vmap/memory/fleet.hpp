@@ -117,19 +117,27 @@ class FleetIndex {
     auto it = read_key_.find(id);
     if (it == read_key_.end())
       it = read_key_
-               .emplace(id, db_.prepare("SELECT record, detections, crc FROM " + detail::robot_schema(id) +
+               .emplace(id, db_.prepare("SELECT CASE WHEN length(record) <= ? THEN record END, CASE WHEN "
+                                            "length(detections) <= ? THEN detections END, crc, length(record), "
+                                            "length(detections) FROM " + detail::robot_schema(id) +
                                             ".key_images WHERE id = ?",
                                         "read another robot's key image"))
                .first;
     StoreQuery& q = it->second;
     q.reset();
-    q.bind(1, static_cast<std::int64_t>(c.key));
+    // Each blob read only within its limit, as MemoryStore reads its own rows.
+    MapLoadOptions limits;
+    q.bind(1, static_cast<std::int64_t>(limits.max_file_bytes))
+        .bind(2, static_cast<std::int64_t>(detail::detections_limit))
+        .bind(3, static_cast<std::int64_t>(c.key));
     const std::string who = db_.what() + ": robot '" + c.robot + "' key image " + std::to_string(c.key);
     if (!q.step()) detail::fail(ErrorKind::corrupt, who + " is missing");
+    if (q.is_null(0) || q.is_null(1))
+      detail::fail(ErrorKind::corrupt, who + ": its record (" + std::to_string(q.integer(3)) + " bytes) or detections (" +
+                                           std::to_string(q.integer(4)) + " bytes) are longer than they can be");
     if (detail::row_crc(q.blob(0), q.blob(1)) != q.integer(2))
       detail::fail(ErrorKind::corrupt, who + ": checksum mismatch (the store is corrupt)");
     detail::BinaryReader r(q.blob(0), who);
-    MapLoadOptions limits;
     limits.decode_images = false;
     std::uint64_t pixels = 0;
     Features f = detail::read_key_record(r, 5, {limits, pixels, nullptr, true}).key.features;
@@ -251,8 +259,10 @@ struct FleetRobotSummary {
     r.loops = count("SELECT count(*) FROM " + schema + ".loops", id);
     r.sessions = count("SELECT count(*) FROM " + schema + ".sessions", id);
     r.fleet_loops = count("SELECT count(*) FROM vmap.fleet_loops WHERE a_robot = ? OR b_robot = ?", id);
-    auto q = db.prepare("SELECT value, crc FROM " + schema + ".meta WHERE name = 'frames'", "read a robot's frame count");
+    auto q = db.prepare("SELECT CASE WHEN length(value) = 8 THEN value END, crc FROM " + schema + ".meta WHERE name = 'frames'",
+                        "read a robot's frame count");
     if (q.step()) {
+      if (q.is_null(0)) db.fail("is corrupt: robot '" + r.robot + "''s frame count is not 8 bytes long", ErrorKind::corrupt);
       if (detail::row_crc(q.blob(0)) != q.integer(1))
         db.fail("is corrupt: robot '" + r.robot + "''s frame count does not match its checksum", ErrorKind::corrupt);
       detail::BinaryReader f(q.blob(0), db.what() + " robot '" + r.robot + "' state 'frames'");
@@ -269,7 +279,9 @@ struct FleetRobotSummary {
   detail::StoreDb db(pg::Connection(uri, "memory '" + pg::redacted(uri) + "'"));
   if (!detail::fleet_present(db, detail::fleet_version)) return {};
   auto q = db.prepare(
-      "SELECT f.name, l.from_robot = l.a_robot, a.name, l.a_key, b.name, l.b_key, l.record, l.crc, l.inliers, l.confidence "
+      "SELECT f.name, l.from_robot = l.a_robot, a.name, l.a_key, b.name, l.b_key, "
+      "CASE WHEN length(l.record) <= " + std::to_string(detail::small_record_limit) + " THEN l.record END, l.crc, l.inliers, "
+      "l.confidence "
       "FROM vmap.fleet_loops l JOIN vmap.robots a ON a.id = l.a_robot JOIN vmap.robots b ON b.id = l.b_robot "
       "JOIN vmap.robots f ON f.id = l.from_robot ORDER BY l.a_robot, l.a_key, l.b_robot, l.b_key",
       "read the loops between robots");
@@ -277,6 +289,7 @@ struct FleetRobotSummary {
   while (q.step()) {
     const bool from_a = q.integer(1) != 0;
     const std::string who = db.what() + " loop between robots";
+    if (q.is_null(6)) detail::fail(ErrorKind::corrupt, who + ": its record is longer than a loop edge's can be");
     if (detail::row_crc(q.blob(6)) != q.integer(7)) detail::fail(ErrorKind::corrupt, who + ": checksum mismatch");
     detail::BinaryReader r(q.blob(6), who);
     FleetLoop l;

@@ -15,7 +15,13 @@
 // commit() (a failed run, an exception) removes what it built; the old memory is never
 // touched before the rename, so a program killed at any point leaves either the old
 // memory or the new one (and possibly a file ".NAME.vmap-new-PID-N" beside it, which
-// nothing reads).
+// nothing reads, and which the next replacement or new store there removes once the
+// process PID has ended: remove_dead_leftovers).
+//
+// A memory is recognised by its own records, never by being an SQLite file: a store by
+// the application id its creation writes ("VMAP", memory/store.hpp), a .vmem file by its
+// magic bytes. Any other file (a user's SQLite database, a rosbag2 .db3, a note, an empty
+// file) is never replaced.
 //
 // A memory made where no file is can be built so too (MemoryReplacement(path, true)):
 // it appears whole at commit(), which refuses a file made there meanwhile.
@@ -27,13 +33,16 @@
 
 #include <vmap/core/error.hpp>
 #include <vmap/io/atomic_file.hpp>
+#include <vmap/io/database_files.hpp>
 #include <vmap/io/postgres.hpp>
 #include <vmap/io/sqlite.hpp>
 #include <vmap/memory/detail/format.hpp>
 #include <vmap/memory/types.hpp>
 
 #include <fcntl.h>
+#include <signal.h>
 #include <stdio.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -43,30 +52,145 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
+#include <limits>
+#include <map>
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <vector>
 
 namespace vmap {
 
-/// The kind of memory `file` holds. A path that is not a regular file (a folder, a FIFO,
-/// a device or a socket; a symbolic link is followed) is `other` without being opened:
-/// opening a FIFO would wait for a writer. A PostgreSQL URI (a fleet's memory) is a
-/// store, without connecting.
+/// The kind of memory `file` holds, by its own records: a store by the application id
+/// in its header ("VMAP"), a .vmem file by its magic bytes; anything else (another SQLite
+/// database, an empty file) is `other`. A path that is not a regular file (a folder, a
+/// FIFO, a device or a socket; a symbolic link is followed) is `other` without being
+/// opened: opening a FIFO would wait for a writer. A PostgreSQL URI (a fleet's memory) is
+/// a store, without connecting. The file is read through io/database_files.hpp, so a
+/// look at a store this process has open drops none of its connections' locks.
 [[nodiscard]] inline MemoryKind memory_kind(const std::filesystem::path& file) {
   if (pg::is_uri(file.native())) return MemoryKind::store;
+  const auto head = detail::read_head(file, 100);
+  if (!head) return MemoryKind::other;
+  const std::string_view h = *head;
+  if (h.starts_with(std::string_view(detail::memory_magic, 8))) return MemoryKind::file;
+  if (h.size() < 100 || !h.starts_with(std::string_view("SQLite format 3\0", 16))) return MemoryKind::other;
+  // The header's application id (bytes 68..71, big-endian).
+  std::uint32_t id = 0;
+  for (std::size_t i = 68; i < 72; ++i) id = (id << 8) | static_cast<unsigned char>(h[i]);
+  if (id == detail::memory_application_id) return MemoryKind::store;
+  if (id != 0) return MemoryKind::other;
+  // A store made by an older vmap in place holds its id in its first transaction, which
+  // stays in the write-ahead log until a checkpoint (while its writer runs, or after that
+  // writer was killed): read it through SQLite there. A file that SQLite cannot read so
+  // is not known to be a memory.
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(file, ec)) return MemoryKind::other;
-  if (std::filesystem::file_size(file, ec) == 0 && !ec) return MemoryKind::store;
-  std::ifstream f(file, std::ios::binary);
-  char head[16] = {};
-  f.read(head, sizeof head);
-  const std::string_view h(head, static_cast<std::size_t>(std::max<std::streamsize>(f.gcount(), 0)));
-  if (h == std::string_view("SQLite format 3\0", 16)) return MemoryKind::store;
-  if (h.size() >= 8 && h.substr(0, 8) == std::string_view(detail::memory_magic, 8)) return MemoryKind::file;
+  const auto log = std::filesystem::file_size(file.string() + "-wal", ec);
+  if (ec || log == 0) return MemoryKind::other;
+  try {
+    sqlite::Database db(file, sqlite::Access::read, "file '" + file.string() + "'");
+    auto q = db.prepare("PRAGMA application_id", "read its application id");
+    if (q.step() && q.integer(0) == detail::memory_application_id) return MemoryKind::store;
+  } catch (const Error&) {
+  }
   return MemoryKind::other;
 }
+
+namespace detail {
+
+/// The pattern of the names new stores are built under beside `target`
+/// (".NAME.vmap-new-"), before the process id and a counter.
+[[nodiscard]] inline std::string new_memory_prefix(const std::filesystem::path& target) {
+  return "." + target.filename().string() + ".vmap-new-";
+}
+
+/// A unique name beside `target` for a new store (".NAME.vmap-new-PID-N"); the store's
+/// creation (O_EXCL) makes sure it is no other program's file.
+[[nodiscard]] inline std::filesystem::path new_memory_path(const std::filesystem::path& target) {
+  static std::atomic<std::uint64_t> counter{0};
+  const std::filesystem::path dir = folder_of(target);
+  const std::string prefix = new_memory_prefix(target) + std::to_string(::getpid()) + "-";
+  std::error_code ec;
+  for (;;) {
+    std::filesystem::path p = dir / (prefix + std::to_string(counter++));
+    if (!std::filesystem::exists(std::filesystem::symlink_status(p, ec))) return p;
+  }
+}
+
+/// Removes the files new stores of `target` left beside it (".NAME.vmap-new-PID-N" and
+/// their -wal, -shm and -journal files) when process PID has ended: a run killed before
+/// it renamed its new store into place. Only such names are touched; a file of this
+/// process, of a process still running (or of another user's, which kill(PID, 0) cannot
+/// tell apart), or one whose store another program has open to write (its flock; a
+/// process of another PID namespace) is kept. Returns the names removed.
+inline std::vector<std::string> remove_dead_leftovers(const std::filesystem::path& target) noexcept {
+  std::vector<std::string> removed;
+  try {
+    const std::filesystem::path dir = folder_of(target);
+    const std::string prefix = new_memory_prefix(target);
+    // Each new store's files ("PID-N" and its suffixes), by store.
+    std::map<std::string, std::vector<std::string>> stores;
+    std::error_code ec;
+    for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
+      const std::string name = e.path().filename().string();
+      if (!name.starts_with(prefix)) continue;
+      std::string_view rest = std::string_view(name).substr(prefix.size());
+      for (const std::string_view suffix : {"-wal", "-shm", "-journal"})
+        if (rest.ends_with(suffix)) {
+          rest.remove_suffix(suffix.size());
+          break;
+        }
+      const std::size_t dash = rest.find('-');
+      const auto digits = [](std::string_view d) {
+        return !d.empty() && d.size() <= 18 && d.find_first_not_of("0123456789") == std::string_view::npos;
+      };
+      if (dash == std::string_view::npos || !digits(rest.substr(0, dash)) || !digits(rest.substr(dash + 1))) continue;
+      stores[std::string(rest)].push_back(name);
+    }
+    for (auto& [key, names] : stores) {
+      const long long pid = std::stoll(key.substr(0, key.find('-')));
+      if (pid <= 0 || pid == ::getpid() || pid > std::numeric_limits<pid_t>::max()) continue;
+      if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // running, or not ours to ask
+      // A store being made is flocked by its maker (also one of another PID namespace):
+      // kept whole. Its log files go with it; those whose store is gone, alone.
+      const std::filesystem::path store = dir / (prefix + key);
+      FileDescriptor fd;
+      if (std::filesystem::exists(std::filesystem::symlink_status(store, ec))) {
+        fd = FileDescriptor(::open(store.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOFOLLOW));
+        struct stat st {};
+        if (!fd.valid() || ::fstat(fd.get(), &st) != 0 || !S_ISREG(st.st_mode) || ::flock(fd.get(), LOCK_EX | LOCK_NB) != 0)
+          continue;
+      }
+      std::sort(names.begin(), names.end(), [](const std::string& a, const std::string& b) { return a.size() > b.size(); });
+      for (const std::string& name : names)  // the log files before the store
+        if (::unlink((dir / name).c_str()) == 0) removed.push_back(name);
+      if (fd.valid()) (void)::flock(fd.get(), LOCK_UN);
+    }
+  } catch (...) {
+    // A folder that cannot be listed: nothing removed.
+  }
+  return removed;
+}
+
+/// Renames the finished file `from` to `to` only where no file is (never over one another
+/// program made meanwhile), flushed to disk first, the folder after; removes the leftovers
+/// of dead runs beside `to` (remove_dead_leftovers). `who` names `to` in errors.
+inline void publish_new_file(const std::filesystem::path& from, const std::filesystem::path& to, const std::string& who) {
+  if (const int err = fsync_file(from); err != 0)
+    fail(ErrorKind::io, who + ": cannot flush '" + from.string() + "': " + std::strerror(err));
+  int err = ::renameat2(AT_FDCWD, from.c_str(), AT_FDCWD, to.c_str(), RENAME_NOREPLACE) == 0 ? 0 : errno;
+  if (err == EINVAL) {
+    // A file system without renameat2's flags: a hard link is refused over a file too.
+    err = ::link(from.c_str(), to.c_str()) == 0 ? 0 : errno;
+    if (err == 0) ::unlink(from.c_str());
+  }
+  if (err == EEXIST) fail(who + " was created by another program while this one was written; refusing to replace it");
+  if (err != 0) fail(ErrorKind::io, who + ": cannot rename '" + from.string() + "' to it: " + std::strerror(err));
+  sync_folder(folder_of(to));
+  (void)remove_dead_leftovers(to);
+}
+
+}  // namespace detail
 
 /// The replacement of the memory at a path by a new memory store (see the top of this
 /// file); commit() publishes the new store, destruction without it discards it. Not
@@ -88,7 +212,7 @@ class MemoryReplacement {
       if (std::filesystem::exists(std::filesystem::symlink_status(target, ec))) detail::fail(who + " exists already");
       target_ = target;
       fresh_ = true;
-      path_ = unique_path();
+      path_ = detail::new_memory_path(target_);
       return;
     }
     target_ = std::filesystem::is_symlink(std::filesystem::symlink_status(target, ec))
@@ -107,7 +231,7 @@ class MemoryReplacement {
     if (std::filesystem::file_size(target_.string() + "-wal", ec) > 0 && !ec)
       detail::fail(who + ": '" + target_.string() + "-wal' is not empty (a write-ahead log of another program); "
                    "refusing to replace the memory under it");
-    path_ = unique_path();
+    path_ = detail::new_memory_path(target_);
   }
 
   MemoryReplacement(MemoryReplacement&&) = delete;
@@ -129,39 +253,24 @@ class MemoryReplacement {
   void commit() {
     const std::string who = "memory '" + target_.string() + "'";
     if (path_.empty()) detail::fail(who + ": the replacement was committed or discarded already");
-    const int fd = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0 || ::fsync(fd) != 0) {
-      const int err = errno;
-      if (fd >= 0) ::close(fd);
-      detail::fail(who + ": cannot flush its replacement '" + path_.string() + "': " + std::strerror(err));
-    }
-    ::close(fd);
     std::error_code ec;
     if (fresh_) {
-      // Renamed only where no file is: never over one another program made meanwhile.
-      int err = ::renameat2(AT_FDCWD, path_.c_str(), AT_FDCWD, target_.c_str(), RENAME_NOREPLACE) == 0 ? 0 : errno;
-      if (err == EINVAL) {
-        // A file system without renameat2's flags: a hard link is refused over a file too.
-        err = ::link(path_.c_str(), target_.c_str()) == 0 ? 0 : errno;
-        if (err == 0) ::unlink(path_.c_str());
-      }
-      if (err != 0) {
-        if (err == EEXIST)
-          detail::fail(who + " was created by another program while this one was written; refusing to replace it");
-        detail::fail(who + ": cannot rename '" + path_.string() + "' to it: " + std::strerror(err));
-      }
+      detail::publish_new_file(path_, target_, who);
     } else {
+      if (const int err = detail::fsync_file(path_); err != 0)
+        detail::fail(ErrorKind::io, who + ": cannot flush its replacement '" + path_.string() + "': " + std::strerror(err));
       for (const char* suffix : {"-wal", "-shm"}) {
         std::filesystem::remove(target_.string() + suffix, ec);
-        if (ec) detail::fail(who + ": cannot remove its '" + suffix + "' file: " + ec.message());
+        if (ec) detail::fail(ErrorKind::io, who + ": cannot remove its '" + suffix + "' file: " + ec.message());
       }
       std::filesystem::rename(path_, target_, ec);
-      if (ec) detail::fail(who + ": cannot rename its replacement '" + path_.string() + "' over it: " + ec.message());
+      if (ec) detail::fail(ErrorKind::io, who + ": cannot rename its replacement '" + path_.string() + "' over it: " + ec.message());
+      detail::sync_folder(detail::folder_of(target_));
+      (void)detail::remove_dead_leftovers(target_);
     }
     // A connection still open on the new store (a reader of released features) may have
     // left its empty log files under the temporary name.
     for (const char* suffix : {"-wal", "-shm"}) std::filesystem::remove(path_.string() + suffix, ec);
-    detail::sync_folder(detail::folder_of(target_));
     path_.clear();
     lock_.release();
   }
@@ -174,19 +283,6 @@ class MemoryReplacement {
       path_.clear();
     }
     lock_.release();
-  }
-
-  /// A unique name beside the target for the new store (".NAME.vmap-new-PID-N"); the
-  /// store's creation (O_EXCL) makes sure it is no other program's file.
-  [[nodiscard]] std::filesystem::path unique_path() const {
-    static std::atomic<std::uint64_t> counter{0};
-    const std::filesystem::path dir = detail::folder_of(target_);
-    const std::string prefix = "." + target_.filename().string() + ".vmap-new-" + std::to_string(::getpid()) + "-";
-    std::error_code ec;
-    for (;;) {
-      std::filesystem::path p = dir / (prefix + std::to_string(counter++));
-      if (!std::filesystem::exists(std::filesystem::symlink_status(p, ec))) return p;
-    }
   }
 
   std::filesystem::path target_, path_;

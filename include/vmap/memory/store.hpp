@@ -79,6 +79,7 @@
 #include <vmap/memory/detail/store_db.hpp>
 #include <vmap/memory/detail/record_codecs.hpp>
 #include <vmap/memory/records.hpp>
+#include <vmap/memory/replace.hpp>
 #include <vmap/memory/visual_memory.hpp>
 #include <vmap/place/database.hpp>
 
@@ -105,17 +106,15 @@ namespace vmap {
 
 /// The store's schema version (PRAGMA user_version).
 inline constexpr std::int64_t memory_store_version = 4;
-/// PRAGMA application_id of a memory store: "VMAP".
-inline constexpr std::int64_t memory_store_application_id = 0x564D4150;
+/// PRAGMA application_id of a memory store: "VMAP" (what memory_kind recognises it by).
+inline constexpr std::int64_t memory_store_application_id = detail::memory_application_id;
 
 namespace detail {
 
-/// The CRC-32 of a row's blobs, as the store records it.
+/// The CRC-32 of a row's blobs, as the store records it (of their bytes one after the
+/// other, computed without joining them).
 inline std::int64_t row_crc(std::string_view a, std::string_view b = {}) {
-  std::string joined;
-  joined.reserve(a.size() + b.size());
-  joined.append(a).append(b);
-  return static_cast<std::int64_t>(crc32(joined));
+  return static_cast<std::int64_t>(crc32(b, crc32(a)));
 }
 
 /// One sync's rows, encoded in the caller's thread for the store's writer thread.
@@ -169,9 +168,50 @@ inline std::string store_counts(std::size_t keys, std::size_t loops, std::size_t
   return std::move(w).take();
 }
 
+/// The state row "sessions": every session's first key image and first frame, what the
+/// sessions table repeats (checked against it when the store is read).
+inline std::string store_sessions(const std::vector<MemorySession>& sessions) {
+  BinaryWriter w;
+  w.u64(sessions.size());
+  for (const MemorySession& s : sessions) {
+    w.u64(s.first_key);
+    w.u64(s.first_frame);
+  }
+  return std::move(w).take();
+}
+
+/// The most bytes a link's or a loop edge's record may hold (a few fixed fields).
+inline constexpr std::uint64_t small_record_limit = 4096;
+/// The most bytes a key image's detections may hold (memory_max_detections of 24 bytes).
+inline constexpr std::uint64_t detections_limit = 4 + std::uint64_t{24} * memory_max_detections;
+
+/// SQL that selects the state row `name = ?` of the meta table without searching its
+/// key: the meta table is WITHOUT ROWID, where SQLite's search of a key loads the whole
+/// row of every key it compares with that holds more than a page, so a row padded to a
+/// GB would be read before its length is checked. A scan of its few rows reads each
+/// name only ("name || ''" is an expression SQLite cannot search by; PostgreSQL reads
+/// it the same).
+inline constexpr const char* meta_row_unsearched = "name || '' = ?";
+
+/// The most bytes a state row may hold, by its name: its size where it has one, the
+/// limits of its contents where they bound it, and `large` (MapLoadOptions::
+/// max_file_bytes) for the rows of features, pixels or a vocabulary, as a single-file
+/// memory is bounded whole. A row is refused by its length before it is read.
+inline std::uint64_t state_row_limit(std::string_view name, std::uint64_t large) {
+  constexpr std::uint64_t small = std::uint64_t{1} << 20;
+  if (name == "counts") return 32;                        // four u64
+  if (name == "frames") return 8;                         // one u64
+  if (name == "database") return 9;                       // u8 scoring, u64 words
+  if (name == "decision") return 4096;                    // LoopEngineState: a few counts
+  if (name == "policies") return 4 * (4 + memory_max_policy);
+  if (name == "previous_detections") return detections_limit;
+  if (name == "options" || name == "labels") return small;  // fixed fields and label lists
+  return large;                                             // selector, vocabulary, gcs, sessions
+}
+
 /// The rows of the records a memory made since the store's last sync (a delta: the
-/// lists start where the store's rows end).
-inline MemoryStoreRows store_rows(const MemoryRecords& r) {
+/// lists start where the store's rows end); `sessions` are all of the memory's sessions.
+inline MemoryStoreRows store_rows(const MemoryRecords& r, const std::vector<MemorySession>& sessions) {
   const ImageStorage storage = r.options.images;
   const int quality = r.options.jpeg_quality;
   MemoryStoreRows rows;
@@ -267,6 +307,7 @@ inline MemoryStoreRows store_rows(const MemoryRecords& r) {
   }
   meta.emplace_back("counts", store_counts(r.key_count(), r.first_loop + r.loops.size(), r.first_bow + r.bows.size(),
                                            r.first_session + r.sessions.size()));
+  meta.emplace_back("sessions", store_sessions(sessions));
   if (r.vocabulary) {
     BinaryWriter w;
     write_vocabulary_record(w, *r.vocabulary);
@@ -485,9 +526,13 @@ class MemoryStoreConnection {
 
 class MemoryStore {
  public:
-  /// A new, empty store at `path`; refused when the file exists. `what` names it in
-  /// messages (default "memory '<path>'"; a store built to replace another under a
-  /// temporary name is named as the memory it replaces).
+  /// A new, empty store at `path`; refused when a file is there. `what` names it in
+  /// messages (default "memory '<path>'"). The store is made under a temporary name beside
+  /// `path` (".NAME.vmap-new-PID-N": its tables written and flushed to disk) and renamed
+  /// there while its writer's lock is held, so `path` never holds a partial store: a run
+  /// killed while making it leaves no file at `path` (at most the temporary file, which
+  /// the next store made there removes once its process has ended). From then on it is
+  /// written in place, sync by sync, and readers can follow it.
   ///
   /// A PostgreSQL connection URI (pg::is_uri) instead of a path is a fleet's memory on
   /// that server: the store is robot `robot`'s memory there, new (refused when the fleet
@@ -495,11 +540,40 @@ class MemoryStore {
   [[nodiscard]] static MemoryStore create(const std::filesystem::path& path, std::string what = {},
                                           const std::string& robot = {}) {
     if (pg::is_uri(path.native())) return open_on_server(path.native(), robot, sqlite::Access::create);
-    MemoryStore s(path, sqlite::Access::create, std::move(what));
+    const std::string name = what.empty() ? "memory '" + path.string() + "'" : std::move(what);
+    std::error_code ec;
+    if (std::filesystem::exists(std::filesystem::symlink_status(path, ec))) detail::fail(name + " exists already");
+    const std::filesystem::path temp = detail::new_memory_path(path);
+    sqlite::WriterLock lock;
     try {
-      detail::StoreTransaction t(s.db(), "create the tables");
-      s.db().exec(schema_sql(), "create the tables");
-      t.commit();
+      detail::StoreDb db(sqlite::Database(temp, sqlite::Access::create, name));
+      make_tables(db);
+      // The tables (and the application id memory_kind knows a store by) in the file
+      // itself: its log stays beside the temporary name.
+      db.exec("PRAGMA wal_checkpoint(TRUNCATE)", "move the new tables into the file");
+      lock = db.sqlite().close_keeping_lock();
+      if (std::filesystem::file_size(temp.string() + "-wal", ec) > 0 && !ec)
+        detail::fail(ErrorKind::io, name + ": its new tables stayed in the write-ahead log '" + temp.string() + "-wal'");
+      for (const char* suffix : {"-wal", "-shm"}) std::filesystem::remove(temp.string() + suffix, ec);
+      detail::publish_new_file(temp, path, name);
+    } catch (...) {
+      for (const char* suffix : {"", "-wal", "-shm", "-journal"}) std::filesystem::remove(temp.string() + suffix, ec);
+      throw;
+    }
+    MemoryStore s(path, std::move(lock), name);
+    s.connection_->start_writer();
+    return s;
+  }
+
+  /// The new store of `replacement` (memory/replace.hpp), made at its temporary path and
+  /// named as the memory it replaces (or `what`); close it before committing the
+  /// replacement.
+  [[nodiscard]] static MemoryStore create(const MemoryReplacement& replacement, std::string what = {}) {
+    const std::filesystem::path& path = replacement.path();
+    MemoryStore s(path, sqlite::Access::create,
+                  what.empty() ? "memory '" + replacement.target().string() + "'" : std::move(what));
+    try {
+      make_tables(s.db());
     } catch (...) {
       s.connection_.reset();
       std::error_code ec;
@@ -675,8 +749,11 @@ class MemoryStore {
       std::function<void()> revive;
     };
     auto connection = reader_connection();
-    auto query = connection.prepare(version_ >= 4 ? "SELECT record, detections, crc FROM key_images WHERE id = ?"
-                                                   : "SELECT record FROM key_images WHERE id = ?",
+    // The record read only within the limit of a row (read_records).
+    auto query = connection.prepare(version_ >= 4 ? "SELECT CASE WHEN length(record) <= ? THEN record END, detections, crc, "
+                                                     "length(record) FROM key_images WHERE id = ?"
+                                                   : "SELECT CASE WHEN length(record) <= ? THEN record END, x'', 0, "
+                                                     "length(record) FROM key_images WHERE id = ?",
                                     "read a key image's features");
     auto reader = std::make_shared<Reader>(Reader{std::move(connection), std::move(query), version_, {}});
     if (reader->db.postgres())
@@ -689,20 +766,24 @@ class MemoryStore {
     return [reader](std::uint32_t key) {
       if (reader->revive) reader->revive();
       detail::StoreQuery& q = reader->query;
-      q.bind(1, static_cast<std::int64_t>(key));
+      const MapLoadOptions limits;
+      q.bind(1, static_cast<std::int64_t>(limits.max_file_bytes)).bind(2, static_cast<std::int64_t>(key));
       struct Reset {
         detail::StoreQuery& q;
         ~Reset() { q.reset(); }
       } reset{q};
       if (!q.step()) reader->db.fail("holds no key image " + std::to_string(key));
       const std::string who = reader->db.what() + " key image " + std::to_string(key);
+      if (q.is_null(0))
+        detail::fail(ErrorKind::corrupt, who + ": its record is " + std::to_string(q.integer(3)) + " bytes long, more than "
+                                           "the " + std::to_string(limits.max_file_bytes) + " it can hold");
       if (reader->version >= 4 && detail::row_crc(q.blob(0), q.blob(1)) != q.integer(2))
         detail::fail(ErrorKind::corrupt, who + ": checksum mismatch (the store is corrupt)");
       detail::BinaryReader r(q.blob(0), who);
-      MapLoadOptions limits;
-      limits.decode_images = false;
+      MapLoadOptions unread = limits;
+      unread.decode_images = false;
       std::uint64_t pixels = 0;
-      Features f = detail::read_key_record(r, reader->version >= 4 ? 5 : 4, {limits, pixels, nullptr, true}).key.features;
+      Features f = detail::read_key_record(r, reader->version >= 4 ? 5 : 4, {unread, pixels, nullptr, true}).key.features;
       r.expect_end("the key image");  // a record is exactly as long as its contents
       return f;
     };
@@ -734,7 +815,8 @@ class MemoryStore {
   /// The note recorded under `name`, if any (flushes first).
   [[nodiscard]] std::optional<std::string> note(std::string_view name) {
     flush();
-    auto q = db().prepare("SELECT value FROM notes WHERE name = ?", "read a note");
+    // Not a search of the key (detail::meta_row_unsearched: notes is WITHOUT ROWID too).
+    auto q = db().prepare(std::string("SELECT value FROM notes WHERE ") + detail::meta_row_unsearched, "read a note");
     q.bind_text(1, name);
     if (!q.step()) return std::nullopt;
     return q.text(0);
@@ -826,7 +908,7 @@ class MemoryStore {
     check_holds(memory);
     memory.check_pixels_read(memory.options().images, "MemoryStore::sync");
     const MemoryRecords r = memory.records(held_, false);
-    detail::MemoryStoreRows rows = detail::store_rows(r);
+    detail::MemoryStoreRows rows = detail::store_rows(r, memory.sessions());
     // The writer thread is idle (flush() above): it reads the vocabulary's CRC only while
     // it writes the rows handed over next.
     for (const auto& [name, value] : rows.meta)
@@ -845,11 +927,24 @@ class MemoryStore {
         connection_(std::make_unique<detail::MemoryStoreConnection>(detail::StoreDb(
             sqlite::Database(path, access, what.empty() ? "memory '" + path.string() + "'" : std::move(what))))) {}
 
+  /// A new store renamed to `path` under its writer's `lock` (create), opened to write.
+  MemoryStore(const std::filesystem::path& path, sqlite::WriterLock lock, std::string what)
+      : path_(path),
+        connection_(std::make_unique<detail::MemoryStoreConnection>(
+            detail::StoreDb(sqlite::Database(path, std::move(lock), std::move(what))))) {}
+
+  /// The current schema's tables in a new file, in one transaction.
+  static void make_tables(detail::StoreDb& db) {
+    detail::StoreTransaction t(db, "create the tables");
+    db.exec(schema_sql(), "create the tables");
+    t.commit();
+  }
+
   /// Robot `robot`'s memory in the fleet's memory at `uri` (see create and open).
   static MemoryStore open_on_server(const std::string& uri, const std::string& robot, sqlite::Access access) {
     const std::string shown = pg::redacted(uri);
     const std::string who = "robot '" + robot + "' of memory '" + shown + "'";
-    detail::check_robot_name(robot, "memory '" + shown + "'");
+    detail::check_robot_name(robot, "memory '" + shown + "'", access == sqlite::Access::create);
     MemoryStore s(uri, shown, robot, detail::StoreDb(pg::Connection(uri, who)));
     detail::StoreDb& db = s.db();
     if (access == sqlite::Access::create) {
@@ -868,7 +963,8 @@ class MemoryStore {
       s.robot_id_ = *id;
     }
     const bool write = access != sqlite::Access::read;
-    detail::enter_fleet_robot(db, s.robot_id_, write);
+    // A robot just added is locked already (add_fleet_robot).
+    detail::enter_fleet_robot(db, s.robot_id_, write && access != sqlite::Access::create);
     s.count_rows();
     s.connection_->fleet_robot = s.robot_id_;
     if (s.synced_) s.connection_->vocabulary_crc = detail::row_crc(s.meta("vocabulary"));
@@ -987,7 +1083,7 @@ class MemoryStore {
     held_.keys = count("SELECT count(*) FROM key_images", "count the key images");
     held_.loops = count("SELECT count(*) FROM loops", "count the loop edges");
     held_.bows = count("SELECT count(bow) FROM key_images", "count the bags of words");
-    synced_ = count("SELECT count(*) FROM meta WHERE name = 'options'", "look for a sync") > 0;
+    synced_ = count("SELECT count(*) FROM meta WHERE name || '' = 'options'", "look for a sync") > 0;
     held_.sessions = version_ >= 2 ? count("SELECT count(*) FROM sessions", "count the sessions") : (synced_ ? 1 : 0);
     // A store written by an older version holds its vocabulary; whether it is a learned
     // one decides whether the next sync writes it again.
@@ -1027,16 +1123,37 @@ class MemoryStore {
                 std::to_string(map.keys[held_.keys - 1].frame_index));
   }
 
-  /// A state row's bytes, its checksum checked (version 4).
-  [[nodiscard]] std::string meta(const char* name) {
-    auto q = db().prepare(version_ >= 4 ? "SELECT value, crc FROM meta WHERE name = ?" : "SELECT value FROM meta WHERE name = ?",
+  /// A state row's bytes, its checksum checked (version 4); its length is checked against
+  /// its limit (detail::state_row_limit, `large` for the big ones) before it is read.
+  [[nodiscard]] std::string meta(const char* name, std::uint64_t large = default_max_file_bytes) {
+    auto value = meta_if(name, large);
+    if (!value) db().fail(std::string("holds no '") + name + "' state (an empty store, or not synced)");
+    return std::move(*value);
+  }
+
+  /// meta(), or nothing when the store has no such row.
+  [[nodiscard]] std::optional<std::string> meta_if(const char* name, std::uint64_t large = default_max_file_bytes) {
+    const std::uint64_t limit = detail::state_row_limit(name, large);
+    auto q = db().prepare(std::string("SELECT CASE WHEN length(value) <= ? THEN value END, length(value), ") +
+                              (version_ >= 4 ? "crc" : "0") + " FROM meta WHERE " + detail::meta_row_unsearched,
                           "read the state");
-    q.bind_text(1, name);
-    if (!q.step()) db().fail(std::string("holds no '") + name + "' state (an empty store, or not synced)");
+    q.bind(1, static_cast<std::int64_t>(limit)).bind_text(2, name);
+    if (!q.step()) return std::nullopt;
+    if (q.is_null(0))
+      db().fail(std::string("is corrupt: its '") + name + "' state is " + std::to_string(q.integer(1)) +
+                    " bytes long, more than the " + std::to_string(limit) + " it can hold",
+                ErrorKind::corrupt);
     std::string value(q.blob(0));
-    if (version_ >= 4 && detail::row_crc(value) != q.integer(1))
+    if (version_ >= 4 && detail::row_crc(value) != q.integer(2))
       db().fail(std::string("is corrupt: the checksum of its '") + name + "' state does not match", ErrorKind::corrupt);
     return value;
+  }
+
+  /// An Error for a blob of `row` that is longer than it can be (`length` > `limit`).
+  [[noreturn]] void too_long(const std::string& row, std::int64_t length, std::uint64_t limit) const {
+    db().fail("is corrupt: " + row + " is " + std::to_string(length) + " bytes long, more than the " +
+                  std::to_string(limit) + " it can hold",
+              ErrorKind::corrupt);
   }
 
   [[nodiscard]] detail::BinaryReader state_reader(const std::string& bytes, const char* name) const {
@@ -1059,21 +1176,22 @@ class MemoryStore {
   MemoryRecords read_records(std::size_t working_memory, const MapLoadOptions& limits, bool* pixels_skipped) {
     const bool v4 = version_ >= 4;
     const std::uint32_t format = v4 ? memory_format_version : 4;
+    const std::uint64_t large = limits.max_file_bytes;
     MemoryRecords r;
     r.version = format;
-    const std::string options = meta("options");
+    const std::string options = meta("options", large);
     {
       auto o = state_reader(options, "options");
       r.options = v4 ? detail::read_memory_options(o) : detail::read_options_v4(o, 4);
     }
     {
-      const std::string bytes = meta("policies");
+      const std::string bytes = meta("policies", large);
       auto p = state_reader(bytes, "policies");
       for (std::string& policy : r.policies) policy = p.str("policy record", detail::memory_max_policy);
       p.expect_end("the policies");
     }
     {
-      const std::string bytes = meta("frames");
+      const std::string bytes = meta("frames", large);
       auto f = state_reader(bytes, "frames");
       const std::uint64_t frames = f.u64("frame count");
       if (frames > detail::memory_max_frames) f.corrupt("frame count " + std::to_string(frames) + " is above 2^40");
@@ -1081,7 +1199,7 @@ class MemoryStore {
       r.frames = static_cast<std::size_t>(frames);
     }
     {
-      const std::string bytes = meta("database");
+      const std::string bytes = meta("database", large);
       auto d = state_reader(bytes, "database");
       const std::uint8_t scoring = d.u8("scoring");
       if (scoring != static_cast<std::uint8_t>(r.options.scoring)) d.corrupt("its scoring is not the memory's");
@@ -1091,7 +1209,7 @@ class MemoryStore {
       r.words = static_cast<std::size_t>(words);
     }
     {
-      const std::string bytes = meta("vocabulary");
+      const std::string bytes = meta("vocabulary", large);
       auto v = state_reader(bytes, "vocabulary");
       r.vocabulary = detail::read_vocabulary_record(v);
     }
@@ -1106,15 +1224,27 @@ class MemoryStore {
     const std::size_t released = working_memory > 0 && stored > working_memory ? stored - working_memory : 0;
     std::uint64_t total_pixels = 0;
     {
-      auto q = db().prepare(v4 ? "SELECT id, frame_index, timestamp, time_ns, name, keypoints, record, detections, crc, bow, "
-                                 "bow_crc FROM key_images ORDER BY id"
-                               : "SELECT id, frame_index, timestamp, 0, name, keypoints, record, detections, 0, bow, 0 "
-                                 "FROM key_images ORDER BY id",
-                            "read the key images");
+      // Each blob is read only when its length is within its limit (a record as large as
+      // a memory file may be; detections and a bag of words as many as they can hold).
+      const std::uint64_t detections_limit = detail::detections_limit;
+      const std::uint64_t bow_limit = 12 + std::uint64_t{8} * r.words;
+      auto q = db().prepare(
+          std::string("SELECT id, frame_index, timestamp, ") + (v4 ? "time_ns" : "0") +
+              ", name, keypoints, CASE WHEN length(record) <= ? THEN record END, "
+              "CASE WHEN length(detections) <= ? THEN detections END, " + (v4 ? "crc" : "0") +
+              ", CASE WHEN length(bow) <= ? THEN bow END, " + (v4 ? "bow_crc" : "0") +
+              ", length(record), length(detections), length(bow) FROM key_images ORDER BY id",
+          "read the key images");
+      q.bind(1, static_cast<std::int64_t>(large))
+          .bind(2, static_cast<std::int64_t>(detections_limit))
+          .bind(3, static_cast<std::int64_t>(bow_limit));
       std::size_t m = 0;
       while (q.step()) {
         expect_index(q.integer(0), m, "key image");
         const std::string row = "key image " + std::to_string(m);
+        if (q.is_null(6)) too_long(row + "'s record", q.integer(11), large);
+        if (q.is_null(7)) too_long(row + "'s detections", q.integer(12), detections_limit);
+        if (!q.is_null(13) && q.is_null(9)) too_long(row + "'s bag of words", q.integer(13), bow_limit);
         check_crc(detail::row_crc(q.blob(6), q.blob(7)), q.integer(8), row);
         detail::BinaryReader rec(q.blob(6), db().what() + " " + row);
         KeyImageRecord k = detail::read_key_record(rec, format, {limits, total_pixels, pixels_skipped, m >= released});
@@ -1142,12 +1272,14 @@ class MemoryStore {
     }
     const std::size_t m = r.keys.size();
     {
-      auto q = db().prepare(v4 ? "SELECT key, matches, inliers, similarity, record, crc FROM links ORDER BY key"
-                               : "SELECT key, matches, inliers, similarity, record, 0 FROM links ORDER BY key",
+      auto q = db().prepare(std::string("SELECT key, matches, inliers, similarity, CASE WHEN length(record) <= ? THEN "
+                                        "record END, ") + (v4 ? "crc" : "0") + ", length(record) FROM links ORDER BY key",
                             "read the links");
+      q.bind(1, static_cast<std::int64_t>(detail::small_record_limit));
       while (q.step()) {
         expect_index(q.integer(0), r.links.size() + 1, "link");
         const std::string row = "the link into key image " + std::to_string(r.links.size() + 1);
+        if (q.is_null(4)) too_long(row, q.integer(6), detail::small_record_limit);
         check_crc(detail::row_crc(q.blob(4)), q.integer(5), row);
         detail::BinaryReader rec(q.blob(4), db().what() + " " + row);
         KeyPair p = detail::read_key_pair(rec, "verification status");
@@ -1158,12 +1290,14 @@ class MemoryStore {
       }
     }
     {
-      auto q = db().prepare(v4 ? "SELECT id, from_key, to_key, inliers, confidence, record, crc FROM loops ORDER BY id"
-                               : "SELECT id, from_key, to_key, inliers, confidence, record, 0 FROM loops ORDER BY id",
+      auto q = db().prepare(std::string("SELECT id, from_key, to_key, inliers, confidence, CASE WHEN length(record) <= ? "
+                                        "THEN record END, ") + (v4 ? "crc" : "0") + ", length(record) FROM loops ORDER BY id",
                             "read the loop edges");
+      q.bind(1, static_cast<std::int64_t>(detail::small_record_limit));
       while (q.step()) {
         expect_index(q.integer(0), r.loops.size(), "loop edge");
         const std::string row = "loop edge " + std::to_string(r.loops.size());
+        if (q.is_null(5)) too_long(row, q.integer(7), detail::small_record_limit);
         check_crc(detail::row_crc(q.blob(5)), q.integer(6), row);
         detail::BinaryReader rec(q.blob(5), db().what() + " " + row);
         LoopEdge e = detail::read_loop_record(rec, format, m);
@@ -1181,21 +1315,21 @@ class MemoryStore {
       }
     }
     {
-      const std::string bytes = meta("selector");
+      const std::string bytes = meta("selector", large);
       auto s = state_reader(bytes, "selector");
       r.selector = detail::read_selector_record(
           s, format, {limits, total_pixels, pixels_skipped, true},
           m > 0 ? std::optional<std::size_t>(r.keys.back().key.frame_index) : std::nullopt);
     }
     {
-      const std::string bytes = meta("labels");
+      const std::string bytes = meta("labels", large);
       auto l = state_reader(bytes, "labels");
       if (!v4) detail::read_options_v4_labels(l, r.options);
       detail::read_labels_record(l, r.options, r.labelled, r.schema);
       l.expect_end("the labels");
     }
     {
-      const std::string bytes = meta("previous_detections");
+      const std::string bytes = meta("previous_detections", large);
       auto p = state_reader(bytes, "previous_detections");
       std::vector<Detection> previous = detail::memory_read_detections(p);
       p.expect_end("the detections");
@@ -1203,7 +1337,7 @@ class MemoryStore {
       if (r.selector.previous) r.selector.previous->detections = std::move(previous);
     }
     {
-      const std::string bytes = meta("decision");
+      const std::string bytes = meta("decision", large);
       auto d = state_reader(bytes, "decision");
       if (!v4) detail::read_options_v4_decision(d, r.options);
       r.engine = LoopEngineState::read(d, r.bows.size());
@@ -1214,7 +1348,7 @@ class MemoryStore {
       r.options = detail::checked_or_corrupt(o, r.options);
     }
     {
-      const std::string bytes = meta("gcs");
+      const std::string bytes = meta("gcs", large);
       auto g = state_reader(bytes, "gcs");
       std::vector<OdometryPose> poses;
       for (const KeyImageRecord& k : r.keys) poses.push_back(k.pose);
@@ -1229,8 +1363,29 @@ class MemoryStore {
       }
     }
     if (r.sessions.empty()) r.sessions.push_back({});
+    // The sessions table's plain columns against the state that repeats them (a store
+    // written before that state was kept has none: its rows are checked by the memory's
+    // own rules, VisualMemory::from_records).
+    if (const auto bytes = meta_if("sessions", 8 + 16 * static_cast<std::uint64_t>(r.sessions.size()))) {
+      auto s = state_reader(*bytes, "sessions");
+      const std::uint64_t n = s.u64("session count");
+      if (n != r.sessions.size())
+        db().fail("is corrupt: its sessions table holds " + std::to_string(r.sessions.size()) + " sessions, its state " +
+                      std::to_string(n),
+                  ErrorKind::corrupt);
+      for (std::size_t i = 0; i < r.sessions.size(); ++i) {
+        const std::uint64_t first_key = s.u64("first key image"), first_frame = s.u64("first frame");
+        if (first_key != r.sessions[i].first_key || first_frame != r.sessions[i].first_frame)
+          db().fail("is corrupt: session " + std::to_string(i) + " starts at key image " +
+                        std::to_string(r.sessions[i].first_key) + " and frame " + std::to_string(r.sessions[i].first_frame) +
+                        " in its sessions table, at key image " + std::to_string(first_key) + " and frame " +
+                        std::to_string(first_frame) + " in its state",
+                    ErrorKind::corrupt);
+      }
+      s.expect_end("the sessions");
+    }
     if (v4) {
-      const std::string bytes = meta("counts");
+      const std::string bytes = meta("counts", large);
       auto c = state_reader(bytes, "counts");
       const std::uint64_t keys = c.u64("key images"), loops = c.u64("loop edges"), bows = c.u64("bags of words"),
                           sessions = c.u64("sessions");
@@ -1251,7 +1406,7 @@ class MemoryStore {
     MapLoadOptions keep;
     keep.decode_images = false;
     MemoryRecords r = read_records(0, keep, nullptr);
-    detail::MemoryStoreRows rows = detail::store_rows(r);
+    detail::MemoryStoreRows rows = detail::store_rows(r, r.sessions);
     // The pixels: the old key records' image bytes, spliced into the new records.
     auto q = db().prepare("SELECT record FROM key_images ORDER BY id", "read the key images' pixels");
     for (auto& row : rows.keys) {

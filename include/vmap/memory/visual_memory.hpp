@@ -416,9 +416,10 @@ class VisualMemory {
   }
 
   /// Writes the memory atomically (temporary file, fsync, rename, fsync of the folder):
-  /// a crash during save leaves the previous file as it was.
+  /// a crash during save leaves the previous file as it was. An existing file is replaced
+  /// only when it is a .vmem memory file (detail::save_vmem).
   void save(const std::filesystem::path& path, std::optional<ImageStorage> images = {}) const {
-    write_file_atomically(path, serialize(images));
+    detail::save_vmem(path, serialize(images));
   }
 
   /// Parses a .vmem file's bytes; the policies are the caller's (their options are not

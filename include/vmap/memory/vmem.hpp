@@ -49,7 +49,9 @@
 // load) is VisualMemory::from_records's to check, as it is for a store's records.
 
 #include <vmap/core/error.hpp>
+#include <vmap/io/atomic_file.hpp>
 #include <vmap/io/binary.hpp>
+#include <vmap/io/database_files.hpp>
 #include <vmap/keyframe/map_io.hpp>
 #include <vmap/memory/detail/format.hpp>
 #include <vmap/memory/detail/record_codecs.hpp>
@@ -59,8 +61,10 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <filesystem>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <vector>
 
 namespace vmap::detail {
@@ -152,6 +156,32 @@ namespace vmap::detail {
   h.u32(memory_sections);
   h.bytes(s.out_.data());
   return std::move(h).take();
+}
+
+/// Writes the bytes of a .vmem file (vmem_file_bytes) at `path`, atomically
+/// (io/atomic_file.hpp). An existing file there is replaced only when it is a .vmem
+/// memory file, known by its first bytes: a memory store (this program's own memory
+/// included: a save over it would turn it into a file that its next syncs no longer
+/// reach), any other file, a folder or a device are refused, naming the path.
+inline void save_vmem(const std::filesystem::path& path, std::string_view bytes) {
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec)) {
+    // Read through io/database_files.hpp: the file may be a store this process has open.
+    if (const auto head = read_head(path, 100)) {
+      const std::string_view h = *head;
+      const bool store = h.size() == 100 && h.starts_with(std::string_view("SQLite format 3\0", 16)) &&
+                         h.substr(68, 4) == std::string_view("VMAP", 4);
+      if (store)
+        fail("'" + path.string() + "' is a memory store; a save writes a single-file memory (.vmem) and never replaces "
+             "a store: give another path (a store is written by its syncs, and copied by vmap memory convert)");
+      if (!h.starts_with(std::string_view(memory_magic, 8)))
+        fail("'" + path.string() + "' exists and is not a .vmem memory file; refusing to replace it with a saved memory");
+    } else {
+      fail("'" + path.string() + "' exists and is not a regular file (a folder, a device, or unreadable); refusing to "
+           "replace it with a saved memory");
+    }
+  }
+  write_file_atomically(path, bytes);
 }
 
 /// The records of a .vmem file of any version (1 to memory_format_version), parsed

@@ -160,4 +160,17 @@ std::vector<std::string> export_memory(const Memory& memory, const std::filesyst
   return written;
 }
 
+/// export_memory() into the folder `dir` as a whole (io/atomic_file.hpp's
+/// AtomicDirectory): the files appear together, and `dir` must be new, empty or an
+/// earlier vmap output holding only its own files, so that an export never replaces a
+/// file of anyone else's (`vmap memory export --out` writes its folder so). Returns the
+/// names written.
+template <class Memory>
+std::vector<std::string> export_memory_folder(const Memory& memory, const std::filesystem::path& dir) {
+  AtomicDirectory out(dir);
+  std::vector<std::string> written = export_memory(memory, out.path());
+  out.commit();
+  return written;
+}
+
 }  // namespace vmap

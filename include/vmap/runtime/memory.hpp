@@ -112,14 +112,16 @@ struct MemoryCreateOptions {
   std::string robot = {};
   std::size_t working_memory = 0;  ///< as MemoryOpenOptions::working_memory
   SyncPolicy sync{};
-  /// Replace an existing memory at the path (a store or a .vmem file; any other file is
-  /// refused): the new store is built under another name and renamed over it by close(),
-  /// holding the old one's writer lock meanwhile (refused while another program writes
-  /// it). false: an existing file is refused. A path with no file gets a new store there
-  /// either way, written in place so that readers can follow it.
+  /// Replace an existing memory at the path (a store or a .vmem file, known by their own
+  /// records: memory_kind; any other file, an SQLite database of another program
+  /// included, is refused): the new store is built under another name and renamed over it
+  /// by close(), holding the old one's writer lock meanwhile (refused while another
+  /// program writes it). false: an existing file is refused. A path with no file gets a
+  /// new store there either way: an empty store made whole (MemoryStore::create), then
+  /// written in place so that readers can follow it.
   bool replace = false;
   /// A new store where no file is appears there only when closed, whole: it is built under
-  /// another name as a replacement is (a killed run leaves no partial memory there; a file
+  /// another name as a replacement is (a killed run leaves no memory there; a file
   /// another program made there meanwhile is not replaced). false: written in place.
   bool whole_at_close = false;
 };
@@ -158,8 +160,10 @@ class AnyMemory {
 
   /// A memory store at `path` holding `source`'s memory (its records written whole into
   /// a new store): a .vmem file made a store, a store copied. An existing file is refused,
-  /// or with `how.replace` replaced by close() when it is a memory (`how`'s other fields
-  /// are not used). The memory must have been opened with its pixels when it keeps them.
+  /// or with `how.replace` replaced by close() when it is a memory; with
+  /// `how.whole_at_close` a new one appears at close() only (`how.robot` names a fleet's
+  /// robot; the other fields are not used). The memory must have been opened with its
+  /// pixels when it keeps them.
   [[nodiscard]] static AnyMemory copy_into_store(AnyMemory&& source, const std::filesystem::path& path,
                                                  const MemoryCreateOptions& how = {});
 

@@ -11,6 +11,7 @@
 #include "support/shared_data.hpp"
 
 #include <vmap/io/postgres.hpp>
+#include <vmap/memory/detail/fleet_schema.hpp>
 #include <vmap/memory/fleet.hpp>
 #include <vmap/memory/stacks.hpp>
 #include <vmap/memory/store.hpp>
@@ -18,9 +19,11 @@
 #include <doctest/doctest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <set>
 #include <string>
 #include <thread>
@@ -404,4 +407,133 @@ TEST_CASE("fleet loops: robots mapping at the same time meet: every pair is cons
   for (std::size_t i = 1; i < stored.size(); ++i)
     CHECK(!(stored[i].from_robot == stored[i - 1].from_robot && stored[i].from_key == stored[i - 1].from_key &&
             stored[i].to_robot == stored[i - 1].to_robot && stored[i].to_key == stored[i - 1].to_key));
+}
+
+TEST_CASE("fleet store: a password with '/', '?' or '@' unescaped is removed whole from what is shown") {
+  for (const char* uri : {"postgresql://fleet:se/cret@db/vmap", "postgresql://fleet:se?cret@db/vmap",
+                          "postgresql://fleet:se@cret@db/vmap"}) {
+    CAPTURE(uri);
+    CHECK(vmap::pg::redacted(uri) == "postgresql://fleet@db/vmap");
+  }
+  // A password that looks like a query's password: more than the password goes, none of it stays.
+  const std::string looks = vmap::pg::redacted("postgresql://fleet:a?password=se@cret@db/vmap");
+  CHECK(looks.starts_with("postgresql://fleet"));
+  for (const char* part : {":a", "se", "cret"}) CHECK(looks.find(part) == std::string::npos);
+  CHECK(vmap::pg::redacted("postgresql://fleet:secretpw@/vmap?host=/tmp/s") == "postgresql://fleet@/vmap?host=/tmp/s");
+  CHECK(vmap::pg::redacted("postgresql://db/vmap?password=se/c?ret") == "postgresql://db/vmap");
+  CHECK(vmap::pg::redacted("postgresql://db/vmap?password=s&sslmode=disable&password=t") ==
+        "postgresql://db/vmap?sslmode=disable");
+  // An '@' of the query is no user part: the port and the query stay.
+  CHECK(vmap::pg::redacted("postgresql://u@db:5433/vmap?application_name=a@b") ==
+        "postgresql://u@db:5433/vmap?application_name=a@b");
+  // A password parameter holding an '@' after a port: nothing of it is left.
+  const std::string shown = vmap::pg::redacted("postgresql://db:5433/vmap?password=se@cret");
+  CHECK(shown.find("se") == std::string::npos);
+  CHECK(shown.find("cret") == std::string::npos);
+}
+
+TEST_CASE("fleet store: a robot added is locked before another program sees it, so it is never removed as unsynced") {
+  auto* server = vmap::test::test_server();
+  if (!server) return;
+  const std::string uri = server->uri("add_remove");
+  std::optional<vmap::detail::StoreDb> adding;
+  adding.emplace(vmap::pg::Connection(uri, "robot 'r' of the test"));
+  vmap::detail::ensure_fleet(*adding, vmap::detail::fleet_version);
+  // Committed, not yet synced: another program's clean-up of robots that hold nothing
+  // finds it locked and keeps it.
+  const std::int64_t id = vmap::detail::add_fleet_robot(*adding, "r");
+  CHECK(!vmap::MemoryStore::remove_unsynced_robot(uri, "r"));
+  CHECK(vmap::MemoryStore::robots(uri) == std::vector<std::string>{"r"});
+  CHECK(error_seen([&] { (void)vmap::MemoryStore::open(uri, vmap::sqlite::Access::write, "r"); }).kind ==
+        vmap::ErrorKind::busy);
+  // Its writer goes on into its tables.
+  vmap::detail::enter_fleet_robot(*adding, id, false);
+  adding->exec("INSERT INTO notes(name, value) VALUES('k', 'v')", "write a note");
+  // Once its writer is gone, a robot that holds nothing may be removed.
+  adding.reset();
+  CHECK(vmap::MemoryStore::remove_unsynced_robot(uri, "r"));
+  CHECK(vmap::MemoryStore::robots(uri).empty());
+}
+
+TEST_CASE("fleet store: a new robot's name neither begins nor ends with a space") {
+  auto* server = vmap::test::test_server();
+  if (!server) return;
+  const std::string uri = server->uri("names");
+  for (const char* name : {"r1 ", " r1", " "}) {
+    CAPTURE(name);
+    const auto e = error_seen([&] { (void)vmap::MemoryStore::create(uri, {}, name); });
+    CHECK(e.kind == vmap::ErrorKind::invalid_argument);
+    CHECK(e.message.find("a robot's name begins or ends with a space") != std::string::npos);
+  }
+  { auto s = vmap::MemoryStore::create(uri, {}, "r 1"); }
+  CHECK(vmap::MemoryStore::robots(uri) == std::vector<std::string>{"r 1"});
+}
+
+TEST_CASE("fleet store: a server that stops answering ends a sync and a connection as `unavailable`, within the timeouts") {
+  auto* server = vmap::test::test_server();
+  if (!server) return;
+  const std::string uri = server->uri("hung");
+  // Short timeouts for the test (the defaults: 30 s an answer, 10 s a connection).
+  ::setenv("VMAP_PG_QUERY_TIMEOUT", "2", 1);
+  ::setenv("PGCONNECT_TIMEOUT", "2", 1);
+  struct Restore {
+    ~Restore() {
+      ::unsetenv("VMAP_PG_QUERY_TIMEOUT");
+      ::unsetenv("PGCONNECT_TIMEOUT");
+    }
+  } restore;
+  auto store = vmap::MemoryStore::create(uri, {}, "a");
+  auto memory = fleet_memory();
+  const auto& frames = sample_frames();
+  std::size_t i = 0;
+  for (; i < 20; ++i) {
+    memory.push(frames[i]);
+    store.sync(memory);
+  }
+  store.flush();
+  const std::size_t synced = store.key_images();
+  server->pause();
+  struct Resume {
+    vmap::test::TestPostgres* server;
+    bool done = false;
+    ~Resume() {
+      if (!done) server->resume();
+    }
+  } resume{server};
+  for (; i < 30; ++i) memory.push(frames[i]);
+  using clock = std::chrono::steady_clock;
+  auto t0 = clock::now();
+  const auto sync = error_seen([&] {
+    store.sync(memory);
+    store.flush();
+  });
+  const double sync_seconds = std::chrono::duration<double>(clock::now() - t0).count();
+  CHECK(sync.kind == vmap::ErrorKind::unavailable);
+  CHECK(sync.message.find("robot 'a' of memory '" + uri + "'") != std::string::npos);
+  CHECK(sync.message.find("did not answer within 2 s") != std::string::npos);
+  CHECK(sync_seconds >= 1.9);
+  CHECK(sync_seconds < 10.0);
+  t0 = clock::now();
+  const auto open = error_seen([&] { (void)vmap::MemoryStore::open(uri, vmap::sqlite::Access::read, "a"); });
+  const double open_seconds = std::chrono::duration<double>(clock::now() - t0).count();
+  CHECK(open.kind == vmap::ErrorKind::unavailable);
+  CHECK(open_seconds >= 1.9);
+  CHECK(open_seconds < 10.0);
+  server->resume();
+  resume.done = true;
+  // Back: the next sync connects again and writes the rows (the closed connection's
+  // session, and the robot's lock with it, ends once the server runs again).
+  for (int attempt = 0;; ++attempt) {
+    try {
+      store.sync(memory);
+      store.flush();
+      break;
+    } catch (const vmap::Error& e) {
+      if (e.kind() != vmap::ErrorKind::busy || attempt >= 50) throw;
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+  }
+  CHECK(store.key_images() == memory.key_images());
+  CHECK(store.key_images() > synced);
+  CHECK(load_small_memory(store).serialize() == memory.serialize());
 }

@@ -4,9 +4,11 @@
 // destroyed unclosed leaves the old memory as it was, a file that is no memory is never
 // replaced, and a FIFO is refused as an output or an input without being opened.
 #include "support/errors.hpp"
+#include "support/raw_sql.hpp"
 #include "support/sample_memory.hpp"
 #include "support/shared_data.hpp"
 
+#include <vmap/io/database_files.hpp>
 #include <vmap/io/sqlite.hpp>
 #include <vmap/memory/replace.hpp>
 #include <vmap/memory/store.hpp>
@@ -15,7 +17,10 @@
 #include <doctest/doctest.h>
 
 #include <fcntl.h>
+#include <sqlite3.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstdint>
@@ -252,7 +257,7 @@ TEST_CASE("replace: a FIFO is refused as an output and as an input without being
         }) == not_regular);
   CHECK(within_seconds(fifo, [&] {
           return error_of([&] { (void)vmap::AnyMemory::create(fifo, vmap::PolicyStack{}); });
-        }).find("exists already") != std::string::npos);
+        }) == "'" + fifo.string() + "' exists and is not a vmap memory; refusing to replace it");
   CHECK(within_seconds(fifo, [&] { return error_of([&] { (void)vmap::AnyMemory::open(fifo); }); })
             .find("is not a regular file") != std::string::npos);
   CHECK(within_seconds(fifo, [&] {
@@ -287,4 +292,100 @@ TEST_CASE("replace: a new memory made whole at close appears only then, and neve
         "replace it");
   CHECK(bytes_of(late) == "made meanwhile");
   CHECK(files_in(dir) == std::set<std::string>{"a.vmdb", "c.vmdb", "d.vmdb"});
+}
+
+TEST_CASE("replace: an SQLite database that is no memory is never replaced, with or without replace") {
+  const fs::path dir = folder("sqlite");
+  const fs::path user = dir / "p.db";
+  vmap::test::raw_sql(user, "CREATE TABLE t(x); INSERT INTO t VALUES('mine')");
+  // A rosbag2 file being recorded: SQLite in WAL mode, its recorder's connection open and
+  // its log not yet moved into it (read through SQLite to learn what it is).
+  const fs::path bag = dir / "bag.db3";
+  sqlite3* recorder = nullptr;
+  REQUIRE(sqlite3_open(bag.c_str(), &recorder) == SQLITE_OK);
+  REQUIRE(sqlite3_exec(recorder, "PRAGMA journal_mode=WAL; PRAGMA wal_autocheckpoint=0; CREATE TABLE messages(data BLOB);"
+                                 "INSERT INTO messages VALUES(x'00')",
+                       nullptr, nullptr, nullptr) == SQLITE_OK);
+  REQUIRE(fs::file_size(bag.string() + "-wal") > 0);
+  const fs::path empty = dir / "empty.vmdb";
+  { std::ofstream(empty).close(); }
+  make_memory(dir / "m.vmdb", 5);
+  for (const fs::path& other : {user, bag, empty}) {
+    CAPTURE(other);
+    const std::string before = bytes_of(other);
+    CHECK(vmap::memory_kind(other) == vmap::MemoryKind::other);
+    CHECK(error_of([&] { (void)replacing(other, 5); }) ==
+          "'" + other.string() + "' is not a vmap memory (neither a memory store nor a .vmem memory file); refusing to "
+          "replace it");
+    CHECK(error_of([&] {
+            (void)vmap::AnyMemory::copy_into_store(vmap::AnyMemory::open(dir / "m.vmdb"), other, {.replace = true});
+          }).find("is not a vmap memory") != std::string::npos);
+    // Without replace the refusal does not call it a memory.
+    const std::string refused = error_of([&] { (void)vmap::AnyMemory::create(other, vmap::PolicyStack{}); });
+    CHECK(refused == "'" + other.string() + "' exists and is not a vmap memory; refusing to replace it");
+    CHECK(error_of([&] { (void)vmap::AnyMemory::open(other); }).find("is not a vmap memory") != std::string::npos);
+    CHECK(bytes_of(other) == before);
+  }
+  CHECK(vmap::test::sql_integer(user, "SELECT count(*) FROM t WHERE x = 'mine'") == 1);
+  sqlite3_close(recorder);
+  CHECK(vmap::test::sql_integer(bag, "SELECT count(*) FROM messages") == 1);
+  // A memory without replace is refused as one.
+  CHECK(error_of([&] { (void)vmap::AnyMemory::create(dir / "m.vmdb", vmap::PolicyStack{}); }) ==
+        "memory '" + (dir / "m.vmdb").string() + "' exists already");
+}
+
+TEST_CASE("replace: a store is known by its application id, also while its first transaction is in its log") {
+  const fs::path dir = folder("kind");
+  // A store made now holds its id in the file from the moment it is there.
+  auto mem = vmap::AnyMemory::create(dir / "new.vmdb", vmap::PolicyStack{}, options());
+  const auto head = vmap::detail::read_head(dir / "new.vmdb", 100);
+  REQUIRE(head);
+  REQUIRE(head->size() == 100);
+  CHECK(head->substr(68, 4) == "VMAP");
+  CHECK(vmap::memory_kind(dir / "new.vmdb") == vmap::MemoryKind::store);
+  mem.close();
+  // A store an older vmap made in place, its writer still running: the id is in its log.
+  const fs::path old = dir / "old.vmdb";
+  sqlite3* db = nullptr;
+  REQUIRE(sqlite3_open(old.c_str(), &db) == SQLITE_OK);
+  REQUIRE(sqlite3_exec(db, "PRAGMA journal_mode=WAL; PRAGMA wal_autocheckpoint=0; PRAGMA application_id = 1447903568;"
+                           "CREATE TABLE meta(name TEXT PRIMARY KEY, value BLOB, crc INTEGER)",
+                       nullptr, nullptr, nullptr) == SQLITE_OK);
+  REQUIRE(vmap::detail::read_head(old, 100)->substr(68, 4) == std::string(4, '\0'));
+  CHECK(vmap::memory_kind(old) == vmap::MemoryKind::store);
+  sqlite3_close(db);
+  CHECK(vmap::memory_kind(old) == vmap::MemoryKind::store);
+  CHECK(vmap::memory_kind(dir / "none.vmdb") == vmap::MemoryKind::other);
+}
+
+TEST_CASE("replace: the files of new stores that dead runs left are removed by the next one; a live run's are kept") {
+  const fs::path dir = folder("leftovers");
+  const fs::path path = dir / "m.vmdb";
+  make_memory(path, 8);
+  // A process that has ended (its PID is free until reused), and one that runs (ours' parent).
+  const pid_t child = ::fork();
+  REQUIRE(child >= 0);
+  if (child == 0) ::_exit(0);
+  REQUIRE(::waitpid(child, nullptr, 0) == child);
+  const std::string dead = std::to_string(child), alive = std::to_string(::getppid());
+  const auto touch = [&](const std::string& name) { std::ofstream(dir / name) << "x"; };
+  for (const std::string& name :
+       {".m.vmdb.vmap-new-" + dead + "-0", ".m.vmdb.vmap-new-" + dead + "-0-wal", ".m.vmdb.vmap-new-" + dead + "-0-shm",
+        ".m.vmdb.vmap-new-" + dead + "-7-journal",  // a log whose store is gone
+        ".m.vmdb.vmap-new-" + alive + "-0",         // a run still going
+        ".m.vmdb.vmap-new-" + dead + "-1",          // one being written (locked) by another namespace's run
+        ".m.vmdb.vmap-new-" + dead + "-x",          // not a name vmap makes
+        ".m.vmdb.vmap-new-" + dead + "-2.txt",      // nor this
+        ".n.vmdb.vmap-new-" + dead + "-0"})         // another memory's
+    touch(name);
+  vmap::sqlite::WriterLock held(dir / (".m.vmdb.vmap-new-" + dead + "-1"), false, "a new store");
+  replacing(path, 12).close();
+  CHECK(files_in(dir) == std::set<std::string>{"m.vmdb", ".m.vmdb.vmap-new-" + alive + "-0",
+                                               ".m.vmdb.vmap-new-" + dead + "-1", ".m.vmdb.vmap-new-" + dead + "-x",
+                                               ".m.vmdb.vmap-new-" + dead + "-2.txt", ".n.vmdb.vmap-new-" + dead + "-0"});
+  CHECK(frames_of(path) == 12);
+  // A new store made there removes its own name's leftovers too.
+  auto n = vmap::AnyMemory::create(dir / "n.vmdb", vmap::PolicyStack{}, options());
+  n.close();
+  CHECK(!fs::exists(dir / (".n.vmdb.vmap-new-" + dead + "-0")));
 }

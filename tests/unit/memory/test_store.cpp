@@ -691,3 +691,82 @@ TEST_CASE("store: a key image record with bytes after its contents is refused na
   // The other rows read as they were written.
   CHECK(store.features()(0).keypoints.size() == memory.map().keys[0].features.keypoints.size());
 }
+
+TEST_CASE("store: a row longer than it can be is refused by its length, before it is read") {
+  const fs::path file = store_path("long_rows.vmdb");
+  auto memory = make(options(vmap::ImageStorage::none));
+  for (std::size_t i = 0; i < 30; ++i) memory.push(sample_frames()[i]);
+  {
+    auto store = vmap::MemoryStore::create(file);
+    store.sync(memory);
+  }
+  const auto refused = [&](const std::string& damage, const std::string& said, const vmap::MapLoadOptions& limits = {}) {
+    CAPTURE(damage);
+    const fs::path copy = store_path("long_rows_copy.vmdb");
+    fs::copy_file(file, copy);
+    raw_sql(copy, damage);
+    auto store = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read);
+    const auto e = vmap::test::error_seen([&] { (void)store.records(0, limits); });
+    INFO(e.message);
+    CHECK(e.kind == vmap::ErrorKind::corrupt);
+    CHECK(e.message.find("memory '" + copy.string() + "' is corrupt: ") != std::string::npos);
+    CHECK(e.message.find(said) != std::string::npos);
+  };
+  // The 32 bytes of the counts, padded: refused at 32 (the 950 MB of the issue cost only
+  // their length).
+  refused("UPDATE meta SET value = zeroblob(100032) WHERE name = 'counts'",
+          "its 'counts' state is 100032 bytes long, more than the 32 it can hold");
+  refused("UPDATE meta SET value = zeroblob(24) WHERE name = 'frames'",
+          "its 'frames' state is 24 bytes long, more than the 8 it can hold");
+  refused("UPDATE key_images SET detections = zeroblob(2000000) WHERE id = 2",
+          "key image 2's detections is 2000000 bytes long, more than the 1572868 it can hold");
+  refused("UPDATE links SET record = zeroblob(5000) WHERE key = 1",
+          "the link into key image 1 is 5000 bytes long, more than the 4096 it can hold");
+  refused("UPDATE key_images SET bow = zeroblob(1000000) WHERE id = 0",
+          "key image 0's bag of words is 1000000 bytes long, more than the ");
+  // The rows of features, pixels and the vocabulary are bounded as a memory file is
+  // (MapLoadOptions::max_file_bytes).
+  vmap::MapLoadOptions small;
+  small.max_file_bytes = 1000;
+  refused("SELECT 1", "bytes long, more than the 1000 it can hold", small);
+}
+
+TEST_CASE("store: the sessions table is checked against the state that repeats it") {
+  const fs::path file = store_path("sessions_checked.vmdb");
+  auto memory = make(options(vmap::ImageStorage::none));
+  {
+    auto store = vmap::MemoryStore::create(file);
+    for (std::size_t i = 0; i < 30; ++i) {
+      memory.push(sample_frames()[i]);
+      store.sync(memory);
+    }
+    memory.start_session();
+    for (std::size_t i = 30; i < 60; ++i) {
+      memory.push(sample_frames()[i]);
+      store.sync(memory);
+    }
+  }
+  REQUIRE(memory.sessions().size() == 2);
+  REQUIRE(memory.sessions()[1].first_frame == 30);
+  for (const std::string& damage : {std::string("UPDATE sessions SET first_frame = 35 WHERE id = 1"),
+                                    std::string("UPDATE sessions SET first_frame = 35"),
+                                    std::string("UPDATE sessions SET first_key = first_key - 1 WHERE id = 1")}) {
+    CAPTURE(damage);
+    const fs::path copy = store_path("sessions_copy.vmdb");
+    fs::copy_file(file, copy);
+    raw_sql(copy, damage);
+    auto store = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read);
+    const auto e = vmap::test::error_seen([&] { (void)load_small_memory(store); });
+    CHECK(e.kind == vmap::ErrorKind::corrupt);
+    CHECK(e.message.find("memory '" + copy.string() + "' is corrupt") != std::string::npos);
+    CHECK(e.message.find("in its sessions table") != std::string::npos);
+  }
+  const fs::path copy = store_path("sessions_copy.vmdb");
+  fs::copy_file(file, copy);
+  raw_sql(copy, "DELETE FROM sessions WHERE id = 1");
+  auto store = vmap::MemoryStore::open(copy, vmap::sqlite::Access::read);
+  CHECK(vmap::test::error_seen([&] { (void)load_small_memory(store); }).kind == vmap::ErrorKind::corrupt);
+  // Undamaged, it loads as the memory.
+  auto whole = vmap::MemoryStore::open(file, vmap::sqlite::Access::read);
+  CHECK(load_small_memory(whole).serialize() == memory.serialize());
+}

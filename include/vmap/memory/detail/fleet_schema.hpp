@@ -77,8 +77,10 @@ inline std::pair<std::vector<std::int64_t>, std::vector<std::int64_t>> heavy_pos
   return out;
 }
 
-/// `name` checked as a robot's name: 1 to 128 bytes of printable text.
-inline void check_robot_name(std::string_view name, const std::string& who) {
+/// `name` checked as a robot's name: 1 to 128 bytes of printable text. A new robot's
+/// name (`new_robot`) neither begins nor ends with a space, so that no two robots' names
+/// look alike in a listing ("r1" and "r1 "); robots named so before stay reachable.
+inline void check_robot_name(std::string_view name, const std::string& who, bool new_robot = false) {
   if (name.empty())
     fail(who + ": a fleet's memory holds one memory per robot: name the robot (--robot NAME, or the robot option)");
   if (name.size() > fleet_max_robot_name)
@@ -86,6 +88,9 @@ inline void check_robot_name(std::string_view name, const std::string& who) {
          std::to_string(name.size()) + ")");
   for (const unsigned char c : name)
     if (c < 0x20 || c == 0x7f) fail(who + ": a robot's name holds a control character");
+  if (new_robot && (name.front() == ' ' || name.back() == ' '))
+    fail(who + ": a robot's name begins or ends with a space ('" + std::string(name) +
+         "'); names that differ in spaces alone look alike in listings: give it without them");
 }
 
 /// The schema of robot number `id`.
@@ -187,8 +192,21 @@ inline void ensure_fleet(StoreDb& db, std::int64_t version) {
   return out;
 }
 
+/// Takes robot `id`'s writer lock for the connection's session (released when it ends):
+/// busy when another program holds it.
+inline void lock_fleet_robot(StoreDb& db, std::int64_t id) {
+  auto lock = db.prepare("SELECT pg_try_advisory_lock(CAST(? AS integer), CAST(? AS integer))", "lock the robot");
+  lock.bind(1, fleet_application_id).bind(2, id);
+  if (!lock.step() || lock.integer(0) == 0)
+    db.fail("is being written by another program (one writer per robot; open it read-only to localize while it maps)",
+            ErrorKind::busy);
+}
+
 /// Adds robot `name` and its empty memory (one transaction); an Error when it exists.
-/// The connection's name (StoreDb::what) is the robot's.
+/// The connection's name (StoreDb::what) is the robot's. The connection holds the robot's
+/// writer lock (enter_fleet_robot) from inside that transaction on: another program sees
+/// the robot only once it is locked, so remove_unsynced_robot (memory/store.hpp) never
+/// takes a robot whose writer has not locked it yet.
 [[nodiscard]] inline std::int64_t add_fleet_robot(StoreDb& db, std::string_view name) {
   StoreTransaction t(db, "add the robot");
   auto q = db.prepare("INSERT INTO vmap.robots(name) VALUES(?) ON CONFLICT(name) DO NOTHING RETURNING id", "add the robot");
@@ -197,24 +215,21 @@ inline void ensure_fleet(StoreDb& db, std::int64_t version) {
     db.fail("exists already: open it to add a session to its memory, or name another robot");
   const std::int64_t id = q.integer(0);
   q.reset();
+  lock_fleet_robot(db, id);
   db.exec("CREATE SCHEMA " + robot_schema(id) + ";" + robot_tables_sql(robot_schema(id)), "create the robot's tables");
   t.commit();
   return id;
 }
 
 /// Makes robot `id`'s memory the connection's tables (its search path), and for a
-/// writer takes the robot's writer lock: busy when another program holds it.
-inline void enter_fleet_robot(StoreDb& db, std::int64_t id, bool write) {
+/// writer that does not hold it yet (`lock`) takes the robot's writer lock: busy when
+/// another program holds it.
+inline void enter_fleet_robot(StoreDb& db, std::int64_t id, bool lock) {
   auto path = db.prepare("SELECT set_config('search_path', ?, false)", "use the robot's tables");
   path.bind_text(1, robot_schema(id));
   (void)path.step();
   path.reset();
-  if (!write) return;
-  auto lock = db.prepare("SELECT pg_try_advisory_lock(CAST(? AS integer), CAST(? AS integer))", "lock the robot");
-  lock.bind(1, fleet_application_id).bind(2, id);
-  if (!lock.step() || lock.integer(0) == 0)
-    db.fail("is being written by another program (one writer per robot; open it read-only to localize while it maps)",
-            ErrorKind::busy);
+  if (lock) lock_fleet_robot(db, id);
 }
 
 }  // namespace vmap::detail

@@ -35,6 +35,9 @@ namespace vmap {
 namespace detail {
 
 inline constexpr char memory_magic[8] = {'V', 'M', 'A', 'P', 'M', 'E', 'M', 'O'};
+/// The application id a memory store's creation writes into its SQLite header (PRAGMA
+/// application_id, "VMAP"): what memory_kind (memory/replace.hpp) knows a store by.
+inline constexpr std::uint32_t memory_application_id = 0x564D4150;
 inline constexpr std::uint32_t memory_sections_v1 = 7;
 inline constexpr std::uint32_t memory_sections_v2 = 10;
 inline constexpr std::uint32_t memory_sections_v3 = 11;

@@ -47,6 +47,9 @@ VMAP_INLINE std::unique_ptr<MemoryReplacement> memory_replacement_of(const std::
   }
   std::error_code ec;
   const bool exists = std::filesystem::exists(std::filesystem::symlink_status(path, ec));
+  // A file that is not a memory is never one to replace, nor called a memory.
+  if (exists && !how.replace && memory_kind(path) == MemoryKind::other)
+    fail("'" + path.string() + "' exists and is not a vmap memory; refusing to replace it");
   if (!(exists ? how.replace : how.whole_at_close)) return nullptr;
   return std::make_unique<MemoryReplacement>(path, !exists);
 }
@@ -56,7 +59,7 @@ VMAP_INLINE std::unique_ptr<MemoryReplacement> memory_replacement_of(const std::
 VMAP_INLINE MemoryStore new_memory_store(const std::filesystem::path& path, const MemoryReplacement* replacement,
                                          const std::string& robot) {
   if (!replacement) return MemoryStore::create(path, {}, robot);
-  return MemoryStore::create(replacement->path(), "memory '" + path.string() + "'");
+  return MemoryStore::create(*replacement, "memory '" + path.string() + "'");
 }
 
 VMAP_INLINE void check_memory_input(const std::filesystem::path& path) {
@@ -193,7 +196,7 @@ VMAP_INLINE AnyMemory AnyMemory::create(const std::filesystem::path& path, const
   if (!server && path.has_parent_path()) {
     std::error_code ec;
     std::filesystem::create_directories(path.parent_path(), ec);
-    if (ec) detail::fail("memory '" + path.string() + "': cannot create its folder: " + ec.message());
+    if (ec) detail::fail(ErrorKind::io, "memory '" + path.string() + "': cannot create its folder: " + ec.message());
   }
   out.replacement_ = detail::memory_replacement_of(path, how);
   out.impl_ = detail::new_any_memory(stack, options, std::move(vocabulary));
@@ -346,7 +349,7 @@ VMAP_INLINE void AnyMemory::abandon() {
 }
 
 VMAP_INLINE void AnyMemory::save(const std::filesystem::path& file, std::optional<ImageStorage> images) const {
-  write_file_atomically(file, impl_->serialize(images));
+  detail::save_vmem(file, impl_->serialize(images));
 }
 
 VMAP_INLINE MemoryLocalization AnyMemory::localize(const cv::Mat& image, const PlaceDecisionOptions* decision) {
