@@ -73,14 +73,17 @@ struct SequenceOptions {
   SequenceLine line{};
   /// The least margin (significance over the image's most significant other place) at
   /// which a line places an image, and at which an image off a line ends it: 2, the
-  /// image sees this place with a hundred times the significance of any other it
-  /// verified. At 1, rtabmap_loop's second lap at 160 pixels took look-alike key images
-  /// of its first (examples/results/localize.md, "Sequences that hold"; bench_places
-  /// section 11). >= 0.
+  /// image's fit to this place is a hundred times less likely by chance than its fit to
+  /// any other it verified. Keep it above 0: at 0 a line can place an image at a
+  /// candidate it verified with no evidence. On the shared sequences 1 and 2 answer alike, 3
+  /// places one frame fewer, and none of 0-3 places a foreign image (bench_places
+  /// section 12; examples/results/localize.md, "Sequences that hold"). >= 0.
   double min_margin = 2.0;
   /// The other images, at key images other than the image's own, that a line needs: 2.
   /// Through one neighbour a line can be drawn at some speed through almost any
-  /// candidate. >= 1.
+  /// candidate, and a window of 2 stays the image alone. On the shared sequences 1
+  /// places no foreign image either and one more held-out cabinet frame (trailing 8;
+  /// section 12). >= 1.
   std::size_t min_support = 2;
 };
 
