@@ -955,7 +955,8 @@ void rules_section(const std::vector<Sequence>& sequences, const fs::path& share
 
 // ---- 7. the chance rate of each stack ------------------------------------------------
 
-void calibration_section(const std::vector<Sequence>& sequences, const fs::path& shared, int small_width) {
+void calibration_section(const std::vector<Sequence>& sequences, const fs::path& shared, int small_width,
+                         const std::string& which) {
   std::printf("\n## 7. The chance rate of each stack (200 foreign pairs, seed 1: rtabmap_loop, tum_fr3_cabinet_kf, "
               "every 10th frame of tum_fr1_rpy, every 3rd of kitti07_160), at full size and at %d pixels wide\n\n",
               small_width);
@@ -965,6 +966,7 @@ void calibration_section(const std::vector<Sequence>& sequences, const fs::path&
   const auto small = shrink(sequences, small_width);
   const std::size_t steps[4] = {1, 1, 10, 3};  // rtabmap_loop, cabinet, tum_fr1_rpy, kitti07_160
   for (const auto& stack : named_stacks(shared)) {
+    if (which != "all" && which != std::string(vmap::to_string(stack.descriptor))) continue;
     for (const auto* at : {&sequences, &small}) {
       // The same function as `vmap calibrate`, on the frames already read.
       std::vector<vmap::SequenceFeatures> places;
@@ -1031,7 +1033,7 @@ int main(int argc, char** argv) {
                  "stack), small-sequences: section 11 only, rules: section 12 only")
       ->check(CLI::IsMember({"all", "loops", "localize", "calibrate", "sequences", "small", "trust", "small-sequences", "rules"}));
   std::string trust_stack = "all";
-  app.add_option("--trust-stack", trust_stack, "Section 10: one stack (orb, akaze, sift, xfeat, xfeat-dense, xfeat-star) or all");
+  app.add_option("--trust-stack", trust_stack, "Sections 7 and 10: one stack (orb, akaze, sift, xfeat, xfeat-dense, xfeat-star) or all");
   CLI11_PARSE(app, argc, argv);
 
   const auto sequences = load_sequences(shared);
@@ -1040,7 +1042,7 @@ int main(int argc, char** argv) {
     return 0;
   }
   if (part == "calibrate") {
-    calibration_section(sequences, shared, small_width);
+    calibration_section(sequences, shared, small_width, trust_stack);
     return 0;
   }
   if (part == "sequences") {
@@ -1213,7 +1215,7 @@ int main(int argc, char** argv) {
     std::printf("\n- memory: %zu key images, %zu loop edges\n", mem.key_images(), mem.loops().size());
   }
   localization_section(sequences, shared);
-  calibration_section(sequences, shared, small_width);
+  calibration_section(sequences, shared, small_width, trust_stack);
   sequence_section(sequences, shared, max_speed);
   small_section(sequences, shared, small_width);
   trust_section(sequences, shared, trust_stack);

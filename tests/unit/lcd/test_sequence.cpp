@@ -440,11 +440,12 @@ TEST_SUITE("data") {
     for (const auto& a : vmap::localize_sequence(memory, std::span<const cv::Mat>(theirs))) CHECK_FALSE(a.ok());
   }
   TEST_CASE("sequence evidence: foreign sequences are placed nowhere, at any window") {
-    // Section 10 of bench_places on ORB for the pairs that placed most before margins:
-    // a memory of kitti07_160's frames 0-79 with the cabinet as the query sequence (1, 6
-    // and 13 of 58 accepted at windows 8, 16 and 30), and a memory of the cabinet with
-    // every 2nd frame of rtabmap_loop (20 of 42 at window 30) and every 4th of kitti07_160
-    // (12 of 40) as query sequences; at every window, centred and trailing.
+    // The pairs that placed most before margins (ORB): a memory of kitti07_160's frames
+    // 0-79 with the cabinet as the query sequence (`vmap localize --sequence`: 1, 6 and 13
+    // of 58 accepted at windows 8, 16 and 30), and a memory of the cabinet with every 2nd
+    // frame of rtabmap_loop and every 4th of kitti07_160 as query sequences (bench_places
+    // section 10: 5 of 42 and 23 of 40 at window 30, centred); at every window, centred
+    // and trailing.
     const auto cabinet = vmap::test::grey_frames(vmap::test::data_path("tum_fr3_cabinet_kf/rgb.txt"));
     const auto kitti = vmap::test::grey_frames(vmap::test::data_path("kitti07_160/image_0"));
     const auto rtabmap = vmap::test::grey_frames(vmap::test::data_path("rtabmap_loop/images"), 2);
