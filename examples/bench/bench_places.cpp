@@ -27,19 +27,34 @@
 //
 //   7. The chance rate of each named stack (lcd/calibration.hpp): 200 pairs of images of
 //      two different shared sequences, verified with the stack's own matcher and
-//      estimator; the rate runtime/policy_stack.hpp's measured_chance_rate holds.
+//      estimator, at full size and with the sequences resized to --small-width; the rate
+//      runtime/policy_stack.hpp's measured_chance_rate holds.
 //
 //   8. Sequences as evidence (memory/sequence.hpp): each sequence's memory without every
-//      5th frame, the held-out frames localized in order alone and with windows of 5, 8
-//      and 10 of them (centred, and 8 trailing); every 10th frame of the other sequences
-//      as foreign sequences; the time per answer.
+//      5th frame, the held-out frames localized in order alone and with windows of 2, 4,
+//      8, 16 and 30 of them (centred, and 8 trailing); every 10th frame of the other
+//      sequences as foreign sequences; the time per answer.
 //
 //   9. Small images: every sequence resized to 160 (or --small-width) pixels wide; ORB
 //      with and without its small-image rule (features/orb.hpp), and variants: loops,
 //      held-out frames and foreign frames as in sections 1 and 8.
 //
+//  10. Foreign sequences on every named stack: a memory of each of four shared sequences,
+//      each other sequence localized in it in order and answered alone and as sequences
+//      (windows 1, 2, 4, 8, 16, 30, centred and trailing): accepted answers, the strongest
+//      confidence, the time per single localization and per sequence answer.
+//
+//  11. Small images as sequences: every sequence resized to 160 (--small-width) pixels
+//      wide, ORB's defaults: held-out frames (section 8's protocol), two traverses of one
+//      place (rtabmap_loop's second lap in a memory of its first; tum_fr1_rpy's second half
+//      in a memory of its first) alone and as sequences, and section 10's foreign matrix.
+//
+//  12. The sequence rules' values (SequenceOptions::min_margin and min_support): sections
+//      10's (ORB) and 11's foreign matrices, section 8's held-out frames and section 11's
+//      two traverses of rtabmap_loop, decided with each value from one set of answers.
+//
 //   bench_places [--shared DIR] [--static-frames 120] [--seed 1] [--max-speed 5] [--small-width 160]
-//                [--part all|loops|localize|calibrate|sequences|small]
+//                [--part all|loops|localize|calibrate|sequences|small|trust|small-sequences|rules] [--trust-stack all]
 #include <vmap/features/orb.hpp>
 #include <vmap/features/sift.hpp>
 #include <vmap/geometry/fundamental.hpp>
@@ -57,6 +72,7 @@
 #include <vmap/memory/stacks.hpp>
 #include <vmap/memory/visual_memory.hpp>
 #include <vmap/runtime/calibration.hpp>
+#include <vmap/runtime/memory.hpp>
 
 #include <CLI/CLI.hpp>
 
@@ -66,6 +82,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <memory>
 #include <random>
@@ -156,6 +173,8 @@ struct LoopRow {
   // The same stream decided by temporal consistency (2 earlier queries) and by the
   // sequence's evidence (the trailing 8 queries), from the same verifications.
   std::size_t tc_tp = 0, tc_fp = 0, seq_tp = 0, seq_fp = 0;
+  // The same with candidates older than the loop window of the sequence's first query.
+  std::size_t beyond_tp = 0, beyond_fp = 0;
   double seq_recall_full = 0.0;
 };
 
@@ -173,7 +192,7 @@ LoopRow run_loops(const Sequence& s, const std::vector<vmap::Features>& features
   const auto& gt = *s.gt;
   row.loops_gt = gt.loop_frames();
   std::vector<vmap::LoopScore> now, before;
-  std::vector<vmap::SequenceQuery> seq_queries;
+  std::vector<vmap::SequenceQuery> seq_queries, beyond_queries;
   std::vector<vmap::PlaceStatus> single_status;
   const vmap::PlaceDecisionOptions dec;
   vmap::TemporalConsistency<std::size_t> consistency({.required = 3});
@@ -189,14 +208,21 @@ LoopRow run_loops(const Sequence& s, const std::vector<vmap::Features>& features
     now.push_back({r.frame, r.best, by_threshold ? r.confidence : 0.0});
     if (r.loop()) (gt(r.frame, *r.best) ? row.tp : row.fp) += 1;
     if (consistency.update(r.loop() ? r.best : std::nullopt).accepted) (gt(r.frame, *r.best) ? row.tc_tp : row.tc_fp) += 1;
-    vmap::SequenceQuery sq;
+    vmap::SequenceQuery sq, beyond;
     if (r.status != vmap::PlaceStatus::not_a_revisit)  // the revisit rule stands for sequences too
       for (const auto& c : r.considered) {
         if (c.stage != vmap::CandidateStage::chosen && c.stage != vmap::CandidateStage::weaker) continue;
         if (r.loop() && c.stage == vmap::CandidateStage::chosen) sq.accepted = sq.candidates.size();
         sq.candidates.push_back({c.frame, vmap::weighed_significance(c.evidence, dec)});
+        // A line of the recent past is the robot's own trajectory: only candidates older
+        // than the loop window of the sequence's first query (10 + 7 frames back).
+        if (c.frame + 17 < r.frame) {
+          if (r.loop() && c.stage == vmap::CandidateStage::chosen) beyond.accepted = beyond.candidates.size();
+          beyond.candidates.push_back(sq.candidates.back());
+        }
       }
     seq_queries.push_back(std::move(sq));
+    beyond_queries.push_back(std::move(beyond));
     single_status.push_back(r.status);
     if (r.best && by_threshold) {
       const bool t = gt(r.frame, *r.best);
@@ -232,6 +258,17 @@ LoopRow run_loops(const Sequence& s, const std::vector<vmap::Features>& features
     }
   }
   row.seq_recall_full = vmap::recall_at_full_precision(vmap::precision_recall_curve(seq_scores, gt)).recall;
+  const auto beyond = vmap::sequence_evidence(
+      beyond_queries, [](std::size_t) { return 0; }, {.window = 8}, dec, vmap::SequencePlacement::trailing);
+  for (std::size_t i = 0; i < beyond.size(); ++i) {
+    const auto& a = beyond[i];
+    if (!a.candidate || vmap::sequence_reason(a, single_status[i], dec) != vmap::DecisionReason::confident) continue;
+    const std::size_t match = beyond_queries[i].candidates[*a.candidate].key;
+    (gt(i, match) ? row.beyond_tp : row.beyond_fp) += 1;
+    if (!gt(i, match))
+      std::fprintf(stderr, "%s, a false loop of the sequence of 8 beyond its window: frame %zu -> frame %zu\n",
+                   s.name.c_str(), i, match);
+  }
   row.verifications = det.verifications();
   row.recall_full = vmap::recall_at_full_precision(vmap::precision_recall_curve(now, gt)).recall;
   row.before_recall_full = vmap::recall_at_full_precision(vmap::precision_recall_curve(before, gt)).recall;
@@ -423,7 +460,7 @@ std::vector<SamePlace> same_places(const std::vector<Sequence>& sequences, const
 
 void sequence_section(const std::vector<Sequence>& sequences, const fs::path& shared, double max_speed) {
   const std::vector<SamePlace> same = same_places(sequences, shared);
-  const std::vector<std::size_t> windows{5, 8, 10};
+  const std::vector<std::size_t> windows{2, 4, 8, 16, 30};
   std::printf("\n## 8. Sequences as evidence (ORB defaults; memory without every 5th frame; the held-out frames "
               "localized in order, alone and with the window of held-out frames around each (centred) or ending at "
               "each (trailing), lines of at most %.1f key images per query; foreign: every 10th frame of each other sequence, in order)\n\n", max_speed);
@@ -592,14 +629,13 @@ void small_section(const std::vector<Sequence>& sequences, const fs::path& share
   small_row("upsampled x2, border 31, FAST 20", UpsampledOrb{vmap::OrbDescriptor({.small = none}), 2.0}, small, same);
 }
 
-// ---- 7. the chance rate of each stack ------------------------------------------------
+// ---- 10. sequences that hold ------------------------------------------------------------
 
-void calibration_section(const std::vector<Sequence>& sequences, const fs::path& shared) {
-  std::printf("\n## 7. The chance rate of each stack (200 foreign pairs, seed 1: rtabmap_loop, tum_fr3_cabinet_kf, "
-              "every 10th frame of tum_fr1_rpy, every 3rd of kitti07_160)\n\n");
-  std::printf("| stack | rate | pairs | weighed (>= 12 inliers) | strongest foreign significance at the rate | "
-              "measured_chance_rate |\n|---|---|---|---|---|---|\n");
-  std::fflush(stdout);
+/// The windows of section 10, each answered centred and trailing.
+const std::vector<std::size_t> trust_windows{1, 2, 4, 8, 16, 30};
+
+/// The stacks of section 7, their models from `shared`/models.
+std::vector<vmap::PolicyStack> named_stacks(const fs::path& shared) {
   const fs::path models = shared / "models";
   std::vector<vmap::PolicyStack> stacks(6);
   stacks[1].descriptor = vmap::DescriptorKind::akaze;
@@ -611,19 +647,345 @@ void calibration_section(const std::vector<Sequence>& sequences, const fs::path&
   stacks[5].descriptor = vmap::DescriptorKind::xfeat_star;
   stacks[5].model = stacks[4].model;
   stacks[5].refine_model = (models / "xfeat_fine.onnx").string();
-  const std::size_t steps[4] = {1, 1, 10, 3};  // rtabmap_loop, cabinet, tum_fr1_rpy, kitti07_160
-  for (const auto& stack : stacks) {
-    // The same function as `vmap calibrate`, on the frames already read.
-    std::vector<vmap::SequenceFeatures> places;
-    for (std::size_t p = 0; p < 4; ++p) {
-      std::vector<cv::Mat> images;
-      for (std::size_t i = 0; i < sequences[p].frames.size(); i += steps[p]) images.push_back(sequences[p].frames[i].image);
-      places.push_back(vmap::extract_features(images, stack));
+  return stacks;
+}
+
+/// A memory of `stack` in RAM with the decision's chance rate measured for it, as the
+/// command line's and the Python module's memories have.
+vmap::AnyMemory stack_memory(const vmap::PolicyStack& stack) {
+  vmap::MemoryOptions o;
+  o.loops.decision.chance_inlier_rate = vmap::measured_chance_rate(stack);
+  return vmap::AnyMemory::in_ram(stack, o);
+}
+
+/// Accepted answers of `singles` as a sequence of `window` (centred, trailing).
+std::pair<std::size_t, std::size_t> accepted_as_sequence(const std::vector<vmap::MemoryLocalization>& singles,
+                                                         const std::vector<vmap::MemorySession>& sessions,
+                                                         std::size_t window, const vmap::PlaceDecisionOptions& d,
+                                                         double* strongest) {
+  std::pair<std::size_t, std::size_t> n{0, 0};
+  for (const auto placement : {vmap::SequencePlacement::centred, vmap::SequencePlacement::trailing}) {
+    const auto answers = vmap::with_sequence_evidence(singles, sessions, {.window = window}, d, placement);
+    for (const auto& a : answers) {
+      (placement == vmap::SequencePlacement::centred ? n.first : n.second) += a.ok() ? 1 : 0;
+      if (strongest && !a.matches.empty()) *strongest = std::max(*strongest, a.confidence);
     }
-    const vmap::ChanceCalibration c = vmap::calibrate_chance_rate(stack, std::move(places));
-    std::printf("| %s | %.4f | %zu | %zu | %.1f | %.4f |\n", vmap::summary(stack).c_str(), c.rate, c.pairs, c.weighed,
-                c.strongest, vmap::measured_chance_rate(stack));
+  }
+  return n;
+}
+
+/// Section 10's foreign matrix for one stack: a memory of each of rtabmap_loop, the
+/// cabinet, every 2nd frame of tum_fr1_rpy and kitti07_160; each other sequence (every
+/// 2nd frame of rtabmap_loop, every cabinet frame, every 12th of tum_fr1_rpy, every 4th
+/// of kitti07_160) localized in it in order, and answered alone and as sequences.
+void foreign_matrix(const std::vector<Sequence>& sequences, const vmap::PolicyStack& stack, const char* label) {
+  const std::size_t memory_step[4] = {1, 1, 2, 1}, query_step[4] = {2, 1, 12, 4};
+  std::printf("\n%s (%s): images accepted, centred / trailing\n\n| memory | query sequence | queries |", label,
+              vmap::summary(stack).c_str());
+  for (std::size_t w : trust_windows) std::printf(" window %zu |", w);
+  std::printf(" strongest confidence |\n|---|---|---|");
+  for (std::size_t i = 0; i < trust_windows.size(); ++i) std::printf("---|");
+  std::printf("---|\n");
+  std::fflush(stdout);
+  std::vector<std::pair<std::size_t, std::size_t>> total(trust_windows.size(), {0, 0});
+  std::size_t queries = 0;
+  double single_ms = 0.0, answer_ms = 0.0;
+  std::size_t answers = 0;
+  double strongest_all = 0.0;
+  for (std::size_t m = 0; m < 4; ++m) {
+    vmap::AnyMemory mem = stack_memory(stack);
+    std::size_t index = 0;
+    for (std::size_t i = 0; i < sequences[m].frames.size(); i += memory_step[m]) {
+      vmap::Frame g = sequences[m].frames[i];
+      g.index = index++;
+      (void)mem.push(g);
+    }
+    const vmap::PlaceDecisionOptions& d = mem.options().loops.decision;
+    for (std::size_t q = 0; q < 4; ++q) {
+      if (q == m) continue;
+      std::vector<vmap::MemoryLocalization> singles;
+      const auto t0 = std::chrono::steady_clock::now();
+      for (std::size_t i = 0; i < sequences[q].frames.size(); i += query_step[q])
+        singles.push_back(mem.localize(sequences[q].frames[i].image));
+      single_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+      queries += singles.size();
+      std::printf("| %s | %s | %zu |", sequences[m].name.c_str(), sequences[q].name.c_str(), singles.size());
+      double strongest = 0.0;
+      for (std::size_t k = 0; k < trust_windows.size(); ++k) {
+        const auto t1 = std::chrono::steady_clock::now();
+        const auto n = accepted_as_sequence(singles, mem.sessions(), trust_windows[k], d, &strongest);
+        answer_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count();
+        answers += 2 * singles.size();
+        total[k].first += n.first;
+        total[k].second += n.second;
+        std::printf(" %zu / %zu |", n.first, n.second);
+      }
+      strongest_all = std::max(strongest_all, strongest);
+      std::printf(" %.2f |\n", strongest);
+      std::fflush(stdout);
+    }
+  }
+  std::printf("| all | | %zu |", queries);
+  for (const auto& t : total) std::printf(" **%zu / %zu** |", t.first, t.second);
+  std::printf(" %.2f |\n\nms per single localization %.1f; ms per sequence answer (every window, centred and trailing) "
+              "%.3f\n",
+              strongest_all, single_ms / static_cast<double>(queries), answer_ms / static_cast<double>(answers));
+  std::fflush(stdout);
+}
+
+void trust_section(const std::vector<Sequence>& sequences, const fs::path& shared, const std::string& which) {
+  std::printf("\n## 10. Foreign sequences on every stack (the decision's defaults, the stack's measured chance rate; "
+              "windows of queries centred and trailing)\n");
+  for (const auto& stack : named_stacks(shared)) {
+    if (which != "all" && which != std::string(vmap::to_string(stack.descriptor))) continue;
+    foreign_matrix(sequences, stack, "Full size");
+  }
+}
+
+/// Section 11's two traverses: rtabmap_loop's second lap (frames 40-83) in a memory of
+/// its first (frames 0-39, every `step`-th), the ground truth its matrix; tum_fr1_rpy's
+/// second half (every 3rd frame) in a memory of its first half (every `step`-th), the
+/// ground truth its poses (0.5 m, 30 degrees).
+void traverse_rows(const std::vector<Sequence>& small, const std::vector<SamePlace>& same, std::size_t step) {
+  struct Traverse {
+    std::size_t seq, memory_end, query_begin, query_step;
+  };
+  const std::size_t half = small[2].frames.size() / 2;
+  for (const Traverse t : {Traverse{0, 40, 40, 1}, Traverse{2, half, half, 3}}) {
+    const Sequence& s = small[t.seq];
+    vmap::OrbVisualMemory mem;
+    for (std::size_t i = 0; i < t.memory_end; i += step) mem.push(s.frames[i]);
+    std::vector<vmap::MemoryLocalization> singles;
+    std::vector<std::size_t> frames;
+    const auto t0 = std::chrono::steady_clock::now();
+    for (std::size_t i = t.query_begin; i < s.frames.size(); i += t.query_step) {
+      singles.push_back(mem.localize(s.frames[i].image));
+      frames.push_back(i);
+    }
+    const double single_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() /
+                             static_cast<double>(singles.size());
+    // rtabmap_loop's second lap: right only by the matrix (its band is +-2 frames), not
+    // by section 8's 10 frames, which would count the lap's own frames.
+    const auto right = [&](std::size_t f, std::size_t k) {
+      return t.seq == 0 ? (*s.gt)(std::max(f, k), std::min(f, k)) : same[t.seq](f, k);
+    };
+    std::size_t top_right = 0;
+    for (std::size_t i = 0; i < singles.size(); ++i)
+      top_right += !singles[i].matches.empty() && right(frames[i], mem.map().keys[singles[i].matches.front().key].frame_index);
+    std::printf("| %s, memory every %zu%s | %zu | %zu | %zu |", s.name.c_str(), step, step == 1 ? "st" : "th",
+                mem.key_images(), singles.size(), top_right);
+    double answer_ms = 0.0;
+    for (const std::size_t w : {std::size_t{1}, std::size_t{4}, std::size_t{8}, std::size_t{16}}) {
+      const auto ts = std::chrono::steady_clock::now();
+      const auto answers = vmap::with_sequence_evidence(singles, mem.sessions(), {.window = w},
+                                                        mem.options().loops.decision);
+      if (w == 8)
+        answer_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - ts).count() /
+                    static_cast<double>(singles.size());
+      std::size_t accepted = 0, good = 0;
+      for (std::size_t i = 0; i < answers.size(); ++i) {
+        if (!answers[i].ok()) continue;
+        ++accepted;
+        good += right(frames[i], mem.map().keys[answers[i].best()->key].frame_index) ? 1 : 0;
+      }
+      std::printf(" %zu, %zu |", accepted, good);
+    }
+    std::printf(" %.1f | %.3f |\n", single_ms, answer_ms);
     std::fflush(stdout);
+  }
+}
+
+/// Section 11: small images, alone and as sequences, with ORB's defaults.
+void small_sequence_section(const std::vector<Sequence>& sequences, const fs::path& shared, int width) {
+  const auto small = shrink(sequences, width);
+  const auto same = same_places(sequences, shared);
+  std::printf("\n## 11. Small images as sequences (every sequence resized to %d pixels wide; ORB defaults)\n\n", width);
+  std::printf("Held out (section 8's protocol): accepted, right\n\n| sequence | key images | held out | alone | window 4 "
+              "| window 8 | window 16 | trailing 8 |\n|---|---|---|---|---|---|---|---|\n");
+  std::fflush(stdout);
+  for (std::size_t si = 0; si < small.size(); ++si) {
+    const Sequence& home = small[si];
+    vmap::OrbVisualMemory mem;
+    const std::vector<const vmap::Frame*> held = hold_out(mem, home);
+    std::vector<vmap::MemoryLocalization> singles;
+    for (const vmap::Frame* f : held) singles.push_back(mem.localize(f->image));
+    const vmap::PlaceDecisionOptions& dec = mem.options().loops.decision;
+    std::printf("| %s %dx%d | %zu | %zu |", home.name.c_str(), home.frames[0].image.cols, home.frames[0].image.rows,
+                mem.key_images(), held.size());
+    const auto count = [&](const std::vector<vmap::MemoryLocalization>& answers) {
+      SequenceCount c;
+      for (std::size_t i = 0; i < held.size(); ++i) c.add(answers[i], mem, held[i]->index, same[si]);
+      std::printf(" %zu, %zu |", c.accepted, c.right);
+    };
+    count(singles);
+    for (const std::size_t w : {std::size_t{4}, std::size_t{8}, std::size_t{16}})
+      count(vmap::with_sequence_evidence(singles, mem.sessions(), {.window = w}, dec));
+    count(vmap::with_sequence_evidence(singles, mem.sessions(), {.window = 8}, dec, vmap::SequencePlacement::trailing));
+    std::printf("\n");
+    std::fflush(stdout);
+  }
+  std::printf("\nTwo traverses (a reference and a query run through the same places): key images, queries, queries "
+              "whose best verified candidate is right; accepted, right alone and as sequences (centred); ms per "
+              "query alone and per answer of a window of 8\n\n| traverses | key images | queries | best candidate "
+              "right | alone | window 4 | window 8 | window 16 | ms per query | ms per answer |\n"
+              "|---|---|---|---|---|---|---|---|---|---|\n");
+  std::fflush(stdout);
+  for (const std::size_t step : {std::size_t{1}, std::size_t{3}}) traverse_rows(small, same, step);
+  vmap::PolicyStack orb;
+  foreign_matrix(small, orb, "Foreign sequences at this width");
+}
+
+// ---- 12. the rules' values ----------------------------------------------------------------
+
+/// One sequence of single answers with what makes an answer right.
+struct AnsweredRun {
+  std::string name;
+  std::vector<vmap::MemoryLocalization> singles;
+  std::vector<vmap::MemorySession> sessions;
+  vmap::PlaceDecisionOptions decision;
+  std::function<bool(std::size_t, std::uint32_t)> right;  ///< query index, key image: the same place
+};
+
+/// The foreign runs of section 10's matrix (ORB defaults) for `sequences`.
+std::vector<AnsweredRun> foreign_runs(const std::vector<Sequence>& sequences) {
+  const std::size_t memory_step[4] = {1, 1, 2, 1}, query_step[4] = {2, 1, 12, 4};
+  std::vector<AnsweredRun> out;
+  for (std::size_t m = 0; m < 4; ++m) {
+    vmap::OrbVisualMemory mem;
+    std::size_t index = 0;
+    for (std::size_t i = 0; i < sequences[m].frames.size(); i += memory_step[m]) {
+      vmap::Frame g = sequences[m].frames[i];
+      g.index = index++;
+      (void)mem.push(g);
+    }
+    for (std::size_t q = 0; q < 4; ++q) {
+      if (q == m) continue;
+      AnsweredRun r{sequences[m].name + " <- " + sequences[q].name, {}, mem.sessions(), mem.options().loops.decision,
+                    [](std::size_t, std::uint32_t) { return false; }};
+      for (std::size_t i = 0; i < sequences[q].frames.size(); i += query_step[q])
+        r.singles.push_back(mem.localize(sequences[q].frames[i].image));
+      out.push_back(std::move(r));
+    }
+  }
+  return out;
+}
+
+/// Section 12: the sequence rules' values (SequenceOptions::min_margin, min_support) on
+/// the foreign matrices at full size and at `width`, the held-out frames of section 8
+/// and the two traverses of section 11, from one set of single answers.
+void rules_section(const std::vector<Sequence>& sequences, const fs::path& shared, int width) {
+  const auto small = shrink(sequences, width);
+  const auto same = same_places(sequences, shared);
+  std::printf("\n## 12. The sequence rules' values (ORB defaults; one set of single answers, decided with each value)\n\n");
+  std::fflush(stdout);
+  std::vector<AnsweredRun> foreign = foreign_runs(sequences), foreign_small = foreign_runs(small);
+  std::vector<AnsweredRun> held;
+  for (std::size_t si = 0; si < 4; ++si) {
+    vmap::OrbVisualMemory mem;
+    const std::vector<const vmap::Frame*> out = hold_out(mem, sequences[si]);
+    AnsweredRun r{sequences[si].name, {}, mem.sessions(), mem.options().loops.decision, {}};
+    std::vector<std::size_t> frames, keys;
+    for (const vmap::Frame* f : out) {
+      r.singles.push_back(mem.localize(f->image));
+      frames.push_back(f->index);
+    }
+    for (const auto& k : mem.map().keys) keys.push_back(k.frame_index);
+    r.right = [frames, keys, s = same[si]](std::size_t q, std::uint32_t key) { return s(frames[q], keys[key]); };
+    held.push_back(std::move(r));
+  }
+  std::vector<AnsweredRun> traverses;
+  for (const std::size_t step : {std::size_t{1}, std::size_t{3}}) {
+    const Sequence& s = small[0];
+    vmap::OrbVisualMemory mem;
+    for (std::size_t i = 0; i < 40; i += step) (void)mem.push(s.frames[i]);
+    AnsweredRun r{"rtabmap_loop's laps at " + std::to_string(width) + " px, memory every " + std::to_string(step),
+                  {}, mem.sessions(), mem.options().loops.decision, {}};
+    for (std::size_t i = 40; i < s.frames.size(); ++i) r.singles.push_back(mem.localize(s.frames[i].image));
+    std::vector<std::size_t> keys;
+    for (const auto& k : mem.map().keys) keys.push_back(k.frame_index);
+    r.right = [keys, gt = *s.gt](std::size_t q, std::uint32_t key) { return gt(40 + q, keys[key]); };
+    traverses.push_back(std::move(r));
+  }
+  struct Rule {
+    const char* name;
+    double min_margin;
+    std::size_t min_support;
+  };
+  const Rule rules[] = {{"defaults: min_margin 2, min_support 2", 2.0, 2}, {"min_margin 0", 0.0, 2}, {"min_margin 1", 1.0, 2},
+                        {"min_margin 3", 3.0, 2}, {"min_support 1", 2.0, 1}};
+  std::printf("Foreign: images accepted over every pair, windows 2-30, centred + trailing. Own: accepted, right at "
+              "window 8 (centred / trailing).\n\n| rule | foreign, full size | foreign, %d px |", width);
+  for (const auto& r : held) std::printf(" %s held out |", r.name.c_str());
+  for (const auto& r : traverses) std::printf(" %s |", r.name.c_str());
+  std::printf("\n|---|---|---|");
+  for (std::size_t i = 0; i < held.size() + traverses.size(); ++i) std::printf("---|");
+  std::printf("\n");
+  for (const Rule& rule : rules) {
+    const auto options = [&](std::size_t w) {
+      return vmap::SequenceOptions{.window = w, .line = {}, .min_margin = rule.min_margin, .min_support = rule.min_support};
+    };
+    const auto foreign_count = [&](const std::vector<AnsweredRun>& runs) {
+      std::size_t n = 0;
+      for (const auto& r : runs)
+        for (const std::size_t w : {std::size_t{2}, std::size_t{4}, std::size_t{8}, std::size_t{16}, std::size_t{30}})
+          for (const auto placement : {vmap::SequencePlacement::centred, vmap::SequencePlacement::trailing})
+            for (const auto& a : vmap::with_sequence_evidence(r.singles, r.sessions, options(w), r.decision, placement))
+              n += a.ok() ? 1 : 0;
+      return n;
+    };
+    std::printf("| %s | %zu | %zu |", rule.name, foreign_count(foreign), foreign_count(foreign_small));
+    for (const auto* runs : {&held, &traverses})
+      for (const auto& r : *runs) {
+        std::printf(" ");
+        for (const auto placement : {vmap::SequencePlacement::centred, vmap::SequencePlacement::trailing}) {
+          std::size_t accepted = 0, right = 0;
+          const auto answers = vmap::with_sequence_evidence(r.singles, r.sessions, options(8), r.decision, placement);
+          for (std::size_t i = 0; i < answers.size(); ++i) {
+            if (!answers[i].ok()) continue;
+            ++accepted;
+            right += r.right(i, answers[i].best()->key) ? 1 : 0;
+          }
+          std::printf("%zu, %zu%s", accepted, right, placement == vmap::SequencePlacement::centred ? " / " : " |");
+        }
+      }
+    std::printf("\n");
+    std::fflush(stdout);
+  }
+}
+
+// ---- 7. the chance rate of each stack ------------------------------------------------
+
+void calibration_section(const std::vector<Sequence>& sequences, const fs::path& shared, int small_width,
+                         const std::string& which) {
+  std::printf("\n## 7. The chance rate of each stack (200 foreign pairs, seed 1: rtabmap_loop, tum_fr3_cabinet_kf, "
+              "every 10th frame of tum_fr1_rpy, every 3rd of kitti07_160), at full size and at %d pixels wide\n\n",
+              small_width);
+  std::printf("| stack | size | rate | pairs | weighed (>= 12 inliers) | strongest foreign significance at the rate | "
+              "measured_chance_rate |\n|---|---|---|---|---|---|---|\n");
+  std::fflush(stdout);
+  const auto small = shrink(sequences, small_width);
+  const std::size_t steps[4] = {1, 1, 10, 3};  // rtabmap_loop, cabinet, tum_fr1_rpy, kitti07_160
+  for (const auto& stack : named_stacks(shared)) {
+    if (which != "all" && which != std::string(vmap::to_string(stack.descriptor))) continue;
+    for (const auto* at : {&sequences, &small}) {
+      // The same function as `vmap calibrate`, on the frames already read.
+      std::vector<vmap::SequenceFeatures> places;
+      for (std::size_t p = 0; p < 4; ++p) {
+        std::vector<cv::Mat> images;
+        for (std::size_t i = 0; i < (*at)[p].frames.size(); i += steps[p]) images.push_back((*at)[p].frames[i].image);
+        places.push_back(vmap::extract_features(images, stack));
+      }
+      const std::string size = at == &sequences ? "full" : std::to_string(small_width) + " px wide";
+      try {
+        const vmap::ChanceCalibration c = vmap::calibrate_chance_rate(stack, std::move(places));
+        std::printf("| %s | %s | %.4f | %zu | %zu | %.1f | %.4f |\n", vmap::summary(stack).c_str(), size.c_str(), c.rate,
+                    c.pairs, c.weighed, c.strongest, vmap::measured_chance_rate(stack));
+      } catch (const vmap::Error& e) {  // e.g. no foreign pair makes a model the decision weighs
+        std::printf("| %s | %s | %s | | | | %.4f |\n", vmap::summary(stack).c_str(), size.c_str(), e.what(),
+                    vmap::measured_chance_rate(stack));
+      }
+      std::fflush(stdout);
+    }
   }
 }
 
@@ -666,9 +1028,12 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(32, 4096));
   std::string part = "all";
   app.add_option("--part", part,
-                 "all: sections 1-9; loops: section 1's tables; localize: section 6 only, calibrate: section 7 only (minutes each: XFeat* verifies "
-                 "on the CPU), sequences: section 8 only, small: section 9 only")
-      ->check(CLI::IsMember({"all", "loops", "localize", "calibrate", "sequences", "small"}));
+                 "all: sections 1-11; loops: section 1's tables; localize: section 6 only, calibrate: section 7 only (minutes each: XFeat* verifies "
+                 "on the CPU), sequences: section 8 only, small: section 9 only, trust: section 10 only (tens of minutes: every "
+                 "stack), small-sequences: section 11 only, rules: section 12 only")
+      ->check(CLI::IsMember({"all", "loops", "localize", "calibrate", "sequences", "small", "trust", "small-sequences", "rules"}));
+  std::string trust_stack = "all";
+  app.add_option("--trust-stack", trust_stack, "Sections 7 and 10: one stack (orb, akaze, sift, xfeat, xfeat-dense, xfeat-star) or all");
   CLI11_PARSE(app, argc, argv);
 
   const auto sequences = load_sequences(shared);
@@ -677,7 +1042,7 @@ int main(int argc, char** argv) {
     return 0;
   }
   if (part == "calibrate") {
-    calibration_section(sequences, shared);
+    calibration_section(sequences, shared, small_width, trust_stack);
     return 0;
   }
   if (part == "sequences") {
@@ -686,6 +1051,18 @@ int main(int argc, char** argv) {
   }
   if (part == "small") {
     small_section(sequences, shared, small_width);
+    return 0;
+  }
+  if (part == "trust") {
+    trust_section(sequences, shared, trust_stack);
+    return 0;
+  }
+  if (part == "small-sequences") {
+    small_sequence_section(sequences, shared, small_width);
+    return 0;
+  }
+  if (part == "rules") {
+    rules_section(sequences, shared, small_width);
     return 0;
   }
   vmap::OrbDescriptor orb;
@@ -711,12 +1088,14 @@ int main(int argc, char** argv) {
               "accepted within 3 frames of it) and by the sequence's evidence (lcd/sequence.hpp: the trailing 8 "
               "queries, lines of at most 5 frames per query), from the same verifications:\n\n");
   std::printf("| sequence | loop queries | alone: TP / FP, recall | temporal consistency 2: TP / FP, recall | sequence "
-              "of 8: TP / FP, recall | alone: recall@100%%P | sequence of 8: recall@100%%P |\n|---|---|---|---|---|---|---|\n");
+              "of 8: TP / FP, recall | alone: recall@100%%P | sequence of 8: recall@100%%P | sequence of 8, candidates "
+              "older than its first query's window: TP / FP, recall |\n|---|---|---|---|---|---|---|---|\n");
   for (const auto& r : rows) {
     const auto recall = [&](std::size_t tp) { return r.loops_gt ? static_cast<double>(tp) / static_cast<double>(r.loops_gt) : 0.0; };
-    std::printf("| %s | %zu | %zu / %zu, %.3f | %zu / %zu, %.3f | %zu / %zu, %.3f | %.3f | %.3f |\n", r.name.c_str(),
-                r.loops_gt, r.tp, r.fp, recall(r.tp), r.tc_tp, r.tc_fp, recall(r.tc_tp), r.seq_tp, r.seq_fp,
-                recall(r.seq_tp), r.recall_full, r.seq_recall_full);
+    std::printf("| %s | %zu | %zu / %zu, %.3f | %zu / %zu, %.3f | %zu / %zu, %.3f | %.3f | %.3f | %zu / %zu, %.3f |\n",
+                r.name.c_str(), r.loops_gt, r.tp, r.fp, recall(r.tp), r.tc_tp, r.tc_fp, recall(r.tc_tp), r.seq_tp,
+                r.seq_fp, recall(r.seq_tp), r.recall_full, r.seq_recall_full, r.beyond_tp, r.beyond_fp,
+                recall(r.beyond_tp));
   }
   if (part == "loops") return 0;
   std::printf("\nEvidence of the best candidate of each query the threshold decides (accepted or unknown place):\n\n");
@@ -836,8 +1215,11 @@ int main(int argc, char** argv) {
     std::printf("\n- memory: %zu key images, %zu loop edges\n", mem.key_images(), mem.loops().size());
   }
   localization_section(sequences, shared);
-  calibration_section(sequences, shared);
+  calibration_section(sequences, shared, small_width, trust_stack);
   sequence_section(sequences, shared, max_speed);
   small_section(sequences, shared, small_width);
+  trust_section(sequences, shared, trust_stack);
+  small_sequence_section(sequences, shared, small_width);
+  rules_section(sequences, shared, small_width);
   return 0;
 }

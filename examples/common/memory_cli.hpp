@@ -597,7 +597,7 @@ inline void print_localizations(const AnyMemory& mem, const std::vector<MemoryQu
                   q.answer.reason.c_str(), q.ms);
     }
     if (const auto& s = q.answer.sequence)
-      std::printf("  sequence: %zu of %zu images with evidence on the line (window %zu); alone: confidence %.2f\n",
+      std::printf("  sequence: %zu of %zu images that see a place on the line (window %zu); alone: confidence %.2f\n",
                   s->on_line, s->weighed, s->window, s->single_confidence);
     if (q.answer.best() && q.answer.relative_pose) {
       const RelativePose& p = *q.answer.relative_pose;

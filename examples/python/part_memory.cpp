@@ -360,9 +360,12 @@ void bind(py::module_& m) {
                               "What the neighbours of an image in a sequence added to its answer (localize_sequence,\n"
                               "localize_window).")
       .def_readonly("window", &SequenceSupport::window, "images weighed, this one included")
-      .def_readonly("weighed", &SequenceSupport::weighed, "of those, the images that verified a candidate with evidence")
-      .def_readonly("on_line", &SequenceSupport::on_line, "of those, the images whose candidate lies on the answer's line")
-      .def_readonly("significance", &SequenceSupport::significance, "the line's combined significance (Fisher's method)")
+      .def_readonly("weighed", &SequenceSupport::weighed,
+                    "of those, the images that see a place (a candidate better than any other place they verified)")
+      .def_readonly("on_line", &SequenceSupport::on_line,
+                    "of those, the images on the answer's line, each at a key image of its own (1: no line)")
+      .def_readonly("significance", &SequenceSupport::significance,
+                    "the line's combined significance (Fisher's method less the choice of line), or the image's own")
       .def_readonly("single_confidence", &SequenceSupport::single_confidence, "the image's own answer, alone")
       .def_readonly("single_key", &SequenceSupport::single_key, "the key image the image alone chose, or None")
       .def("__repr__", [](const SequenceSupport& s) {
@@ -610,9 +613,10 @@ void bind(py::module_& m) {
           py::arg("max_speed") = SequenceLine{}.max_speed, py::arg("tolerance") = SequenceLine{}.tolerance,
           py::arg("min_confidence") = py::none(),
           "Each of a sequence of images (consecutive, in order) localized with the evidence of the `window` images\n"
-          "around it: images that agree on consecutive key images of one place raise each other's confidence, one\n"
-          "that contradicts its neighbours is lowered (a list of Localization, each with .sequence). max_speed: the\n"
-          "fastest the images move along the key images, per image; tolerance: key images off the line.")
+          "around it: an image not placed alone is placed at the key image it sees best when at least two other\n"
+          "images see key images on one line with it and their margins, combined, reach the threshold; an image\n"
+          "placed alone keeps its answer (a list of Localization, each with .sequence). max_speed: the fastest the\n"
+          "images move along the key images, per image; tolerance: key images off the line.")
       .def(
           "localize_window",
           [](PyMemory& self, const py::list& recent, double max_speed, std::size_t tolerance,

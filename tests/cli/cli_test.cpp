@@ -680,7 +680,7 @@ TEST_CASE("cli: localize --memory --sequence answers each query with its neighbo
   const Run text = run_vmap({"memory", "localize", file.string(), sample, "--sequence", "4", "--max-speed", "2"});
   INFO(text.err);
   REQUIRE(text.code == 0);
-  CHECK(text.out.find("  sequence: 4 of 4 images with evidence on the line (window 4); alone: confidence 1.00") !=
+  CHECK(text.out.find("  sequence: 4 of 4 images that see a place on the line (window 4); alone: confidence 1.00") !=
         std::string::npos);
   usage_error({"localize", "--memory", file.string(), sample, "--max-speed", "2"}, "--max-speed needs --sequence N with N > 1");
   usage_error({"localize", "--memory", file.string(), sample, "--sequence", "0"}, "--sequence");

@@ -131,11 +131,14 @@ class SequenceSupport:
     @property
     def window(self) -> int: ...
     @property
-    def weighed(self) -> int: ...
+    def weighed(self) -> int:
+        """The images of the window that see a place, this one included."""
     @property
-    def on_line(self) -> int: ...
+    def on_line(self) -> int:
+        """The images on the answer's line, each at a key image of its own (1: no line)."""
     @property
-    def significance(self) -> float: ...
+    def significance(self) -> float:
+        """The line's combined significance (Fisher's method less the choice of line), or the image's own."""
     @property
     def single_confidence(self) -> float: ...
     @property

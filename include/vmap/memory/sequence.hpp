@@ -2,8 +2,11 @@
 
 // Localizing a sequence of images in a visual memory (lcd/sequence.hpp gives the
 // evidence): each image is localized alone (VisualMemory::localize, or AnyMemory's),
-// then answered with the line its neighbours draw through the memory's key images. A
-// session is one chain: consecutive key images of a session are neighbours on a line.
+// then answered with the line its neighbours draw through the memory's key images: an
+// image not accepted alone is placed at the key image it sees best when at least two
+// other images see the key images of one line around it and their evidence, combined,
+// reaches the decision's threshold. A session is one chain: consecutive key images of a
+// session are neighbours on a line.
 //
 //   // a recorded sequence, each image answered with the 8 around it
 //   std::vector<vmap::MemoryLocalization> answers = vmap::localize_sequence(memory, images);
@@ -65,7 +68,7 @@ inline void apply_sequence_answer(MemoryLocalization& a, const SequenceAnswer& s
   a.evidence = a.match_evidence.front();
   a.confidence = s.confidence;
   char buf[160];
-  const int lead = std::snprintf(buf, sizeof buf, "%zu of %zu images with evidence on the line: ", s.on_line, s.weighed);
+  const int lead = std::snprintf(buf, sizeof buf, "%zu of %zu images that see a place on the line: ", s.on_line, s.weighed);
   const std::size_t at = static_cast<std::size_t>(std::max(lead, 0));
   a.reason_code = sequence_reason(s, a.status, d);
   a.status = status_of(a.reason_code);

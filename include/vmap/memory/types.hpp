@@ -84,9 +84,9 @@ struct MemoryStep {
 /// (memory/sequence.hpp, lcd/sequence.hpp).
 struct SequenceSupport {
   std::size_t window = 0;   ///< images weighed, this one included
-  std::size_t weighed = 0;  ///< of those, the images that verified a candidate with evidence
-  std::size_t on_line = 0;  ///< of those, the images whose candidate lies on the answer's line
-  double significance = 0.0;       ///< the line's combined significance (Fisher's method)
+  std::size_t weighed = 0;  ///< of those, the images that see a place (a candidate with a positive margin)
+  std::size_t on_line = 0;  ///< of those, the images on the answer's line, each at a key image of its own (1: no line)
+  double significance = 0.0;       ///< the line's combined significance (lcd/sequence.hpp) or the image's own, the larger
   double single_confidence = 0.0;  ///< the image's own answer, alone
   /// The key image the image alone chose (accepted or not), if it verified one.
   std::optional<std::uint32_t> single_key;
