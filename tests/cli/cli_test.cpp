@@ -1099,6 +1099,32 @@ TEST_SUITE("data") {
     }
     usage_error({"localize", "--train", sample, "--poses", gt, "--every-other", "--trajectory", trajectory},
                 "--trajectory is an option of --memory");
+    // A fleet's robot built from the same frames answers the same poses: the metric pose is
+    // the memory's, whichever store holds it.
+    if (auto* server = vmap::test::test_server()) {
+      const std::string uri = server->uri("cli_metric_pose");
+      const Run fb = run_vmap({"build", (dir / "kept_rgb.txt").string(), "--memory", uri, "--robot", "r", "--poses", gt,
+                               "--camera", "examples/data/tum_fr1_camera.yaml"});
+      INFO(fb.err);
+      REQUIRE(fb.code == 0);
+      std::vector<std::string> fleet_args{"localize", "--memory", uri, "--robot", "r", "--json"};
+      fleet_args.insert(fleet_args.end(), queries.begin(), queries.end());
+      const Run fl = run_vmap(fleet_args);
+      INFO(fl.err);
+      REQUIRE(fl.code == 0);
+      const auto fj = nlohmann::json::parse(fl.out);
+      CHECK(fj["posed"] == posed);
+      REQUIRE(fj["queries"].size() == j["queries"].size());
+      for (std::size_t i = 0; i < queries.size(); ++i) {
+        const auto& in_file = j["queries"][i];
+        const auto& in_fleet = fj["queries"][i];
+        CHECK(in_fleet["pose_reason_code"] == in_file["pose_reason_code"]);
+        if (in_file["pose"].is_null() || in_fleet["pose"].is_null()) continue;
+        for (int c = 0; c < 3; ++c)
+          CHECK(in_fleet["pose"]["position"][c].get<double>() ==
+                doctest::Approx(in_file["pose"]["position"][c].get<double>()).epsilon(1e-6));
+      }
+    }
   }
 
   TEST_CASE("cli: build --memory --poses --gcs keeps floor poses and trains the GCS; localize answers a position") {
