@@ -64,10 +64,12 @@ inline constexpr double max_time_seconds = 9.2e9;
 }
 
 /// "time 1e+12 s is beyond +-9.2e9 s, the range of nanosecond times (the year 2262)": the
-/// words of every refusal of a time out of range.
+/// words of every refusal of a time out of range ("time nan s is not finite" for a NaN or
+/// an infinity, which no range holds).
 [[nodiscard]] inline std::string time_out_of_range(double seconds) {
   char text[40];
   std::snprintf(text, sizeof text, "%.17g", seconds);
+  if (!std::isfinite(seconds)) return std::string("time ") + text + " s is not finite";
   return std::string("time ") + text + " s is beyond +-9.2e9 s, the range of nanosecond times (the year 2262)";
 }
 

@@ -7,6 +7,7 @@
 #include <vmap/io/files.hpp>
 #include <vmap/io/frame_source.hpp>
 #include <vmap/io/image.hpp>
+#include <vmap/io/timestamps.hpp>
 
 #include "support/errors.hpp"
 #include "support/fifo.hpp"
@@ -23,6 +24,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <fstream>
 #include <stdexcept>
@@ -194,6 +196,11 @@ TEST_CASE("frame source: times beyond +-9.2e9 s are refused by name, never clamp
   write_bytes(dir / "decimal.txt", "-99999999999.5 a.png\n");
   CHECK(error_of([&] { (void)vmap::FrameSource::open(dir / "decimal.txt"); }) ==
         "frame source: " + (dir / "decimal.txt").string() + ":1: time -99999999999.5" + beyond);
+  // A time no range holds is called what it is.
+  CHECK(error_of([] { (void)vmap::frame_time_ns(std::nan(""), "push: timestamp"); }) ==
+        "push: timestamp: time nan s is not finite");
+  CHECK(error_of([] { (void)vmap::frame_time_ns(-HUGE_VAL, "push: timestamp"); }) ==
+        "push: timestamp: time -inf s is not finite");
   // Image names that are times: seconds (below 1e11), and nanoseconds past INT64_MAX.
   for (const std::string name : {"10000000000", "10000000000000000000"}) {
     const auto folder = dir / ("names_" + std::to_string(name.size()));
